@@ -1,0 +1,5 @@
+import sys
+
+from fricenv.cli import main
+
+sys.exit(main())

@@ -1,0 +1,245 @@
+"""Log files of the sim-to-real gap tool (DESIGN.md, "Log file"): the one reader and writer.
+
+CSV in SI units: optional leading ``#`` lines, one header row, then rows. Quarter car: required ``t`` [s],
+``T_b`` [N m] (commanded torque), ``omega`` [rad/s]; optional ``v`` [m/s], ``a_x`` [m/s^2]. Payload: ``t``,
+``M``, ``f_x``, ``f_y`` (raw sensor readings), ``theta``, ``X``, ``Y`` (vision). Unknown extra columns are ignored
+with a warning. Every error names the file, and where it can the line and the column.
+"""
+
+from __future__ import annotations
+
+import os
+import warnings
+from dataclasses import dataclass, field, fields
+from pathlib import Path
+
+import numpy as np
+
+from fricenv.utils import atomic_write
+
+__all__ = [
+    "LogFormatError",
+    "QuarterCarLog",
+    "PayloadLog",
+    "read_log",
+    "write_log",
+    "PLANTS",
+]
+
+# Relative jitter allowed in the time step before the log counts as non-uniform.
+_DT_REL_TOL = 1e-3
+# Plausibility limits, chosen to catch a wrong unit (rpm for rad/s, km/h for m/s, degrees for rad), not noise.
+_MAX_WHEEL_SURFACE_SPEED = 100.0  # |omega| r above this [m/s] (360 km/h) means omega is not in rad/s
+_MAX_SPEED = 100.0  # [m/s]
+_MAX_ACCEL = 30.0  # |a_x| [m/s^2], about 3 g
+_MAX_TORQUE = 2.0e4  # |T_b| [N m]
+_OMEGA_R_OVER_V = (0.5, 1.5)  # median omega r / v while free rolling, if v is logged
+_MAX_POSITION = 10.0  # |X|, |Y| [m] of the payload
+_MAX_ANGLE = 4 * np.pi  # |theta| [rad]
+_NOMINAL_RADIUS = 0.345  # [m], Table I; only used for the unit checks
+
+
+class LogFormatError(ValueError):
+    """A log file that does not follow the DESIGN.md contract."""
+
+
+@dataclass(frozen=True)
+class QuarterCarLog:
+    """A quarter-car braking log; arrays share one length."""
+
+    t: np.ndarray  # time [s], uniform step
+    T_b: np.ndarray  # commanded brake torque [N m]
+    omega: np.ndarray  # measured wheel speed [rad/s]
+    v: np.ndarray | None = None  # reference ground speed [m/s]
+    a_x: np.ndarray | None = None  # longitudinal acceleration [m/s^2], negative when braking
+    comments: tuple[str, ...] = field(default=(), compare=False)  # the leading '#' lines, without '#'
+    source: str = field(default="<memory>", compare=False)
+
+    REQUIRED = ("t", "T_b", "omega")
+    OPTIONAL = ("v", "a_x")
+
+    @property
+    def dt(self) -> float:
+        """Sample time [s]."""
+        return float(self.t[1] - self.t[0])
+
+    def __len__(self) -> int:
+        return len(self.t)
+
+
+@dataclass(frozen=True)
+class PayloadLog:
+    """A planar-payload log (raw force-moment sensor readings and vision pose)."""
+
+    t: np.ndarray  # time [s], uniform step
+    M: np.ndarray  # raw moment reading [N m]
+    f_x: np.ndarray  # raw force reading, x [N]
+    f_y: np.ndarray  # raw force reading, y [N]
+    theta: np.ndarray  # vision orientation [rad]
+    X: np.ndarray  # vision position, x [m]
+    Y: np.ndarray  # vision position, y [m]
+    comments: tuple[str, ...] = field(default=(), compare=False)
+    source: str = field(default="<memory>", compare=False)
+
+    REQUIRED = ("t", "M", "f_x", "f_y", "theta", "X", "Y")
+    OPTIONAL = ()
+
+    @property
+    def dt(self) -> float:
+        """Sample time [s]."""
+        return float(self.t[1] - self.t[0])
+
+    def __len__(self) -> int:
+        return len(self.t)
+
+
+PLANTS: dict[str, type] = {"quarter-car": QuarterCarLog, "payload": PayloadLog}
+
+
+def _log_class(plant: str) -> type:
+    try:
+        return PLANTS[plant]
+    except KeyError:
+        raise ValueError(f"unknown plant {plant!r}; valid plants: {', '.join(PLANTS)}") from None
+
+
+def _parse(path: Path):
+    """Comments, header and a float table with the file line number of each row."""
+    try:
+        text = path.read_text()
+    except FileNotFoundError:
+        raise LogFormatError(f"{path}: no such file") from None
+    except UnicodeDecodeError:
+        raise LogFormatError(f"{path}: not a text (CSV) file") from None
+    comments: list[str] = []
+    header: list[str] | None = None
+    rows: list[list[float]] = []
+    line_numbers: list[int] = []
+    for lineno, raw in enumerate(text.splitlines(), start=1):
+        line = raw.strip()
+        if not line:
+            continue
+        if header is None:
+            if line.startswith("#"):
+                comments.append(line[1:].strip())
+                continue
+            header = [name.strip() for name in line.split(",")]
+            if len(set(header)) != len(header):
+                dup = sorted({h for h in header if header.count(h) > 1})
+                raise LogFormatError(f"{path}:{lineno}: duplicate column(s) {', '.join(dup)} in header")
+            continue
+        cells = line.split(",")
+        if len(cells) != len(header):
+            raise LogFormatError(f"{path}:{lineno}: {len(cells)} values, the header has {len(header)} columns")
+        row = []
+        for name, cell in zip(header, cells):
+            try:
+                row.append(float(cell))
+            except ValueError:
+                raise LogFormatError(f"{path}:{lineno}: column {name!r}: {cell.strip()!r} is not a number") from None
+        rows.append(row)
+        line_numbers.append(lineno)
+    if header is None:
+        raise LogFormatError(f"{path}: no header row")
+    if len(rows) < 3:
+        raise LogFormatError(f"{path}: needs at least 3 data rows, found {len(rows)}")
+    return comments, header, np.array(rows, dtype=float), np.array(line_numbers)
+
+
+def _check_time(path: Path, t: np.ndarray, lines: np.ndarray) -> None:
+    dt = np.diff(t)
+    bad = np.flatnonzero(dt <= 0)
+    if bad.size:
+        i = bad[0] + 1
+        raise LogFormatError(f"{path}:{lines[i]}: column 't' is not increasing ({t[i - 1]!r} then {t[i]!r})")
+    step = float(np.median(dt))
+    off = np.flatnonzero(np.abs(dt - step) > _DT_REL_TOL * step)
+    if off.size:
+        i = off[0] + 1
+        raise LogFormatError(
+            f"{path}:{lines[i]}: column 't' has a non-uniform step ({dt[i - 1]:.6g} s where the log's step is "
+            f"{step:.6g} s); resample the log to a uniform step"
+        )
+
+
+def _check_range(path: Path, name: str, x: np.ndarray, lines: np.ndarray, limit: float, hint: str) -> None:
+    bad = np.flatnonzero(np.abs(x) > limit)
+    if bad.size:
+        i = bad[0]
+        raise LogFormatError(
+            f"{path}:{lines[i]}: column {name!r}: value {x[i]:.6g} is implausible ({hint}, limit {limit:g})"
+        )
+
+
+def _check_quarter_car(path: Path, cols: dict[str, np.ndarray], lines: np.ndarray) -> None:
+    r = _NOMINAL_RADIUS
+    _check_range(path, "omega", cols["omega"], lines, _MAX_WHEEL_SURFACE_SPEED / r,
+                 "expected rad/s; is it in rpm?")
+    _check_range(path, "T_b", cols["T_b"], lines, _MAX_TORQUE, "expected N m")
+    if "v" in cols:
+        _check_range(path, "v", cols["v"], lines, _MAX_SPEED, "expected m/s; is it in km/h?")
+        moving = cols["v"] > 1.0
+        if np.count_nonzero(moving) >= 3:
+            ratio = float(np.median(cols["omega"][moving] * r / cols["v"][moving]))
+            lo, hi = _OMEGA_R_OVER_V
+            if not lo <= ratio <= hi:
+                raise LogFormatError(
+                    f"{path}: columns 'omega' and 'v' disagree: median omega*r/v = {ratio:.3g} with r = {r} m "
+                    f"(expected near 1); check the units (rad/s and m/s)"
+                )
+    if "a_x" in cols:
+        _check_range(path, "a_x", cols["a_x"], lines, _MAX_ACCEL, "expected m/s^2")
+
+
+def _check_payload(path: Path, cols: dict[str, np.ndarray], lines: np.ndarray) -> None:
+    _check_range(path, "theta", cols["theta"], lines, _MAX_ANGLE, "expected rad; is it in degrees?")
+    for name in ("X", "Y"):
+        _check_range(path, name, cols[name], lines, _MAX_POSITION, "expected m; is it in mm?")
+
+
+def read_log(path: str | os.PathLike, plant: str = "quarter-car") -> QuarterCarLog | PayloadLog:
+    """Read and validate a log file.
+
+    :param path: CSV file in the DESIGN.md format.
+    :param plant: ``"quarter-car"`` or ``"payload"``.
+    :return: a :class:`QuarterCarLog` or :class:`PayloadLog`.
+    :raises LogFormatError: naming the file, line and column of the first problem.
+    """
+    cls = _log_class(plant)
+    path = Path(path)
+    comments, header, table, lines = _parse(path)
+    missing = [name for name in cls.REQUIRED if name not in header]
+    if missing:
+        raise LogFormatError(
+            f"{path}: missing required column(s) {', '.join(missing)} for a {plant} log "
+            f"(required: {', '.join(cls.REQUIRED)}; optional: {', '.join(cls.OPTIONAL) or 'none'})"
+        )
+    known = set(cls.REQUIRED) | set(cls.OPTIONAL)
+    extra = [name for name in header if name not in known]
+    if extra:
+        warnings.warn(f"{path}: ignoring unknown column(s) {', '.join(extra)}", stacklevel=2)
+    cols = {name: table[:, header.index(name)] for name in header if name in known}
+    for name, x in cols.items():
+        bad = np.flatnonzero(~np.isfinite(x))
+        if bad.size:
+            raise LogFormatError(f"{path}:{lines[bad[0]]}: column {name!r} is NaN or infinite")
+    _check_time(path, cols["t"], lines)
+    (_check_quarter_car if plant == "quarter-car" else _check_payload)(path, cols, lines)
+    return cls(**cols, comments=tuple(comments), source=str(path))
+
+
+def write_log(path: str | os.PathLike, log: QuarterCarLog | PayloadLog, comments: tuple[str, ...] = ()) -> None:
+    """Write a log atomically in the DESIGN.md format; optional columns that are ``None`` are left out.
+
+    :param path: destination CSV.
+    :param log: the log to write.
+    :param comments: lines written first, each behind ``# `` (defaults to ``log.comments``).
+    """
+    names = [f.name for f in fields(log) if f.name not in ("comments", "source")]
+    names = [name for name in names if getattr(log, name) is not None]
+    table = np.column_stack([np.asarray(getattr(log, name), dtype=float) for name in names])
+    with atomic_write(path) as fh:
+        for line in comments or log.comments:
+            fh.write(f"# {line}\n")
+        fh.write(",".join(names) + "\n")
+        np.savetxt(fh, table, delimiter=",", fmt="%.10g")

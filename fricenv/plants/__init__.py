@@ -1,0 +1,1 @@
+"""Plant models: plain numpy, batched over a leading dimension, no Gymnasium."""
