@@ -31,6 +31,10 @@ def stopping_distance_radau(road: MagicFormula, torque, v0: float = 20.0, v_stop
             def switch(t, y):
                 return y[1]
 
+            def jac(t, y):  # only steers Radau's Newton iterations; the solution is set by rhs
+                a11, a12, a21, a22 = qc.jacobian(y[0], y[1], R, p)
+                return [[a11, a12, 0.0], [a21, a22, 0.0], [1.0, 0.0, 0.0]]
+
             switch.direction = -1
         else:
             f_slide = p.Fz * road.mu(1.0)
@@ -41,10 +45,13 @@ def stopping_distance_radau(road: MagicFormula, torque, v0: float = 20.0, v_stop
             def switch(t, y):
                 return p.r * f_slide - torque(t)
 
+            def jac(t, y):
+                return [[0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [1.0, 0.0, 0.0]]
+
             switch.direction = 1
         switch.terminal = True
         sol = solve_ivp(rhs, (t, t_max), x, method="Radau", rtol=1e-9, atol=1e-9,
-                        events=[stop, switch], max_step=0.002)
+                        events=[stop, switch], max_step=0.002, jac=jac)
         t, x = sol.t[-1], sol.y[:, -1].copy()
         if sol.t_events[0].size:
             return float(x[2]), float(t)

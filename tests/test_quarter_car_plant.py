@@ -28,8 +28,13 @@ def _stop_distance_ros2(road, torque_fn, substeps, v0=20.0, v_stop=2.0):
         t += DT
 
 
-@pytest.mark.parametrize("road", [DRY, WET, SNOW, ICE], ids=lambda r: r.name)
-@pytest.mark.parametrize("profile", ["below_peak", "lock_up", "modulated"])
+CASES = [(road, profile) for road in (DRY, WET, SNOW, ICE) for profile in ("below_peak", "lock_up")]
+# The modulated torque changes every control step, so its Radau reference restarts ~100 times per second of
+# braking; it is kept on the two short stops, where it adds coverage of the peak region.
+CASES += [(DRY, "modulated"), (WET, "modulated")]
+
+
+@pytest.mark.parametrize("road, profile", CASES, ids=lambda x: getattr(x, "name", x))
 def test_stopping_distance_matches_radau(road, profile):
     t_safe = 0.8 * road.mu_max * P.Fz * P.r
     torque = {
