@@ -151,7 +151,7 @@ def _check_time(path: Path, t: np.ndarray, lines: np.ndarray) -> None:
     bad = np.flatnonzero(dt <= 0)
     if bad.size:
         i = bad[0] + 1
-        raise LogFormatError(f"{path}:{lines[i]}: column 't' is not increasing ({t[i - 1]!r} then {t[i]!r})")
+        raise LogFormatError(f"{path}:{lines[i]}: column 't' is not increasing ({t[i - 1]:.6g} then {t[i]:.6g})")
     step = float(np.median(dt))
     off = np.flatnonzero(np.abs(dt - step) > _DT_REL_TOL * step)
     if off.size:
