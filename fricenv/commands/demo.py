@@ -1,0 +1,105 @@
+"""Brake from 20 m/s on dry, wet, snow and ice with every classical controller; print and plot the results.
+
+For each road and controller the table gives the stopping distance to v_stop = 2 m/s, the physical limit
+(v0^2 - v_stop^2) / (2 g mu_max), their ratio, and whether the wheel locked (omega r < 0.05 v for > 0.1 s).
+A PNG of speed, slip and brake torque against time for all controllers on one road goes to --out.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+DEFAULT_ROADS = ("dry", "wet", "snow", "ice")
+DEFAULT_V0 = 20.0  # [m/s]
+PLOT_FILE = "demo_{road}.png"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--out", default="runs/demo", help="output directory for the PNG (default: runs/demo)")
+    parser.add_argument("--json", metavar="PATH", default=None, help="also write the results as JSON")
+    parser.add_argument("--seed", type=int, default=0, help="reset seed of every episode (default: 0)")
+    parser.add_argument("--v0", type=float, default=DEFAULT_V0, help="initial speed [m/s] (default: 20)")
+    parser.add_argument("--roads", nargs="+", default=list(DEFAULT_ROADS),
+                        help="roads to brake on: presets or scenarios like dry->ice (default: dry wet snow ice)")
+    parser.add_argument("--plot-road", default="dry", help="road whose traces are plotted (default: dry)")
+
+
+def run_demo(roads, v0: float, seed: int) -> tuple[list[dict], dict]:
+    """Every controller on every road: (result rows, {road: {controller: Rollout}})."""
+    from agents.controllers import CONTROLLERS, make_controller, rollout
+    from fricenv.envs.braking import BrakingEnv
+
+    results, traces = [], {}
+    for road in roads:
+        env = BrakingEnv(road=road, v0=v0, observation="oracle")
+        traces[road] = {}
+        for name in CONTROLLERS:
+            ro = rollout(env, make_controller(name, env), seed=seed)
+            traces[road][name] = ro
+            info = ro.info
+            results.append({"road": road, "controller": name, "distance_m": info["stopping_distance"],
+                            "limit_m": info["limit_distance"], "ratio": info["ratio"],
+                            "locked": info["lock_seen"]})
+        env.close()
+    return results, traces
+
+
+def plot_traces(traces: dict, road: str, path: Path) -> None:
+    """Speed, slip and torque against time for every controller on ``road``, saved as a PNG."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(9, 8), dpi=100)
+    FigureCanvasAgg(fig)
+    ax_v, ax_s, ax_t = fig.subplots(3, 1, sharex=True)
+    for name, ro in traces.items():
+        (line,) = ax_v.plot(ro.t, ro.v, label=f"{name}: {ro.info['ratio']:.3f}x")
+        ax_v.plot(ro.t, ro.wheel, color=line.get_color(), alpha=0.35, lw=0.8)
+        ax_s.plot(ro.t, ro.slip, color=line.get_color(), lw=1.0)
+        ax_t.plot(ro.t, ro.torque, color=line.get_color(), lw=1.0)
+    ax_v.set_ylabel("speed [m/s]\n(thin: wheel omega r)")
+    ax_v.legend(loc="upper right", fontsize="small")
+    ax_s.set_ylabel("slip [-]")
+    ax_s.set_ylim(-0.02, 1.02)
+    ax_t.set_ylabel("brake torque [N m]")
+    ax_t.set_xlabel("time [s]")
+    fig.suptitle(f"Braking from {traces[next(iter(traces))].v[0]:.0f} m/s on {road}")
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path)
+
+
+def format_table(results: list[dict]) -> str:
+    """The results as a plain-text table, one block per road."""
+    lines = [f"{'road':<10} {'controller':<12} {'distance [m]':>12} {'limit [m]':>10} {'ratio':>7} {'locked':>7}"]
+    last_road = None
+    for row in results:
+        if last_road is not None and row["road"] != last_road:
+            lines.append("")
+        last_road = row["road"]
+        lines.append(f"{row['road']:<10} {row['controller']:<12} {row['distance_m']:>12.2f} "
+                     f"{row['limit_m']:>10.2f} {row['ratio']:>7.3f} {('yes' if row['locked'] else 'no'):>7}")
+    return "\n".join(lines)
+
+
+def run(args) -> int:
+    from fricenv.envs.braking_core import valid_road_names
+    from fricenv.utils import write_json
+
+    valid = valid_road_names()
+    for road in [*args.roads, args.plot_road]:
+        if road not in valid or road.startswith("random"):
+            raise SystemExit(f"fricenv demo: unknown road {road!r}; valid: "
+                             f"{', '.join(r for r in valid if not r.startswith('random'))}")
+    roads = list(dict.fromkeys([*args.roads, args.plot_road]))
+    results, traces = run_demo(roads, args.v0, args.seed)
+    shown = [r for r in results if r["road"] in args.roads]
+    print(format_table(shown))
+    png = Path(args.out) / PLOT_FILE.format(road=args.plot_road.replace(">", ""))
+    plot_traces(traces[args.plot_road], args.plot_road, png)
+    print(f"\nplot: {png}")
+    if args.json:
+        write_json(args.json, {"results": shown})
+        print(f"json: {args.json}")
+    return 0

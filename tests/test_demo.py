@@ -1,0 +1,37 @@
+"""`fricenv demo` and `fricenv bench env`: output files and schemas."""
+
+import json
+
+import pytest
+
+from fricenv.cli import main
+
+
+def test_demo_writes_table_json_and_png(tmp_path, capsys):
+    out_json = tmp_path / "demo.json"
+    assert main(["demo", "--roads", "dry", "wet", "--out", str(tmp_path / "demo"), "--json", str(out_json)]) == 0
+    data = json.loads(out_json.read_text())
+    rows = data["results"]
+    assert {(r["road"], r["controller"]) for r in rows} == {
+        (road, c) for road in ("dry", "wet") for c in ("oracle-slip", "slip-pi", "rule-abs", "locked")}
+    for r in rows:
+        assert set(r) == {"road", "controller", "distance_m", "limit_m", "ratio", "locked"}
+        assert r["ratio"] == pytest.approx(r["distance_m"] / r["limit_m"], rel=1e-9)
+        assert isinstance(r["locked"], bool)
+    assert all(r["limit_m"] == pytest.approx(20.18, abs=0.01) for r in rows if r["road"] == "dry")
+    assert (tmp_path / "demo" / "demo_dry.png").stat().st_size > 10_000
+    printed = capsys.readouterr().out
+    assert "rule-abs" in printed and "limit [m]" in printed
+
+
+def test_demo_rejects_unknown_road(tmp_path):
+    with pytest.raises(SystemExit, match="valid"):
+        main(["demo", "--roads", "gravel", "--out", str(tmp_path)])
+
+
+def test_bench_env_writes_medians_and_ratio(tmp_path):
+    out_json = tmp_path / "bench.json"
+    assert main(["bench", "env", "--repeats", "1", "--steps", "50", "--json", str(out_json)]) == 0
+    data = json.loads(out_json.read_text())
+    assert data["single_steps_per_s"] > 0 and data["pendulum_steps_per_s"] > 0
+    assert data["single_vs_pendulum"] == pytest.approx(data["single_steps_per_s"] / data["pendulum_steps_per_s"])
