@@ -1,0 +1,182 @@
+"""Extended Kalman filter: a generic predict/update pair and the quarter-car augmented EKF baseline.
+
+The generic steps follow the numerically careful form used by dynamax and filterpy: the gain comes from a linear
+solve with the innovation covariance (no explicit inverse), the covariance update is Joseph's form
+``(I - K H) P (I - K H)^T + K R K^T``, and every covariance is symmetrized, so P stays symmetric positive
+semi-definite over long runs. On a linear model they reduce exactly to the Kalman filter (tested).
+
+:class:`QuarterCarEKF` runs them on the augmented quarter-car model of
+:mod:`estimators.quarter_car_model` (state (v, lambda) plus any subset of theta, B, C, E), with the paper's
+initial prior (v = 19, lambda = 0, eq. (18) parameters) and bounds (projection after each update). It is the
+baseline the MHE must beat.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+
+from estimators.base import Estimate, Estimator, EstimatorConfigError, Health, check_dt
+from estimators.quarter_car_model import PARAM_NAMES, AugmentedModel
+
+__all__ = ["DEFAULT_EKF_TUNING", "ExtendedKalmanFilter", "QuarterCarEKF", "ekf_predict", "ekf_update"]
+
+
+def _sym(P: np.ndarray) -> np.ndarray:
+    return 0.5 * (P + P.T)
+
+
+def ekf_predict(x_next: np.ndarray, F: np.ndarray, P: np.ndarray, Q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Time update: ``x+ = f(x, u)`` (given), ``P+ = F P F^T + Q``.
+
+    :param x_next: the propagated mean f(x, u), shape (n,).
+    :param F: Jacobian d f / d x at the previous mean, (n, n).
+    :param P: previous covariance, (n, n).
+    :param Q: process noise covariance, (n, n).
+    :return: (x+, P+).
+    """
+    return x_next, _sym(F @ P @ F.T + Q)
+
+
+def ekf_update(x: np.ndarray, P: np.ndarray, y: np.ndarray, y_pred: np.ndarray, H: np.ndarray,
+               R: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Measurement update with Joseph's covariance form.
+
+    :param x: prior mean, (n,).
+    :param P: prior covariance, (n, n).
+    :param y: measurement, (m,).
+    :param y_pred: predicted measurement h(x), (m,).
+    :param H: Jacobian d h / d x, (m, n).
+    :param R: measurement noise covariance, (m, m).
+    :return: (posterior mean, posterior covariance, innovation).
+    """
+    innov = np.atleast_1d(y - y_pred)
+    PHt = P @ H.T
+    S = _sym(H @ PHt + R)
+    if S.shape == (1, 1):  # scalar measurement: the solve is a division
+        K = PHt / S[0, 0]
+    else:
+        # K = P H^T S^-1  <=>  S K^T = H P  (S and P symmetric)
+        K = np.linalg.solve(S, PHt.T).T
+    IKH = np.eye(P.shape[0]) - K @ H
+    P_post = _sym(IKH @ P @ IKH.T + K @ R @ K.T)
+    return x + K @ innov, P_post, innov
+
+
+class ExtendedKalmanFilter:
+    """A generic discrete EKF ``x+ = f(x, u) + w``, ``y = h(x) + v``, ``w ~ N(0, Q)``, ``v ~ N(0, R)``.
+
+    :param f_and_jacobian: ``(x, u) -> (f(x, u), d f / d x)``.
+    :param h_and_jacobian: ``x -> (h(x), d h / d x)``.
+    :param Q: process noise covariance (n, n).
+    :param R: measurement noise covariance (m, m).
+    """
+
+    def __init__(self, f_and_jacobian: Callable, h_and_jacobian: Callable, Q, R):
+        self.f_and_jacobian = f_and_jacobian
+        self.h_and_jacobian = h_and_jacobian
+        self.Q = np.atleast_2d(np.asarray(Q, dtype=float))
+        self.R = np.atleast_2d(np.asarray(R, dtype=float))
+        for name, M in (("Q", self.Q), ("R", self.R)):
+            if M.shape[0] != M.shape[1] or not np.all(np.isfinite(M)):
+                raise EstimatorConfigError(f"{name} must be a finite square matrix, got shape {M.shape}")
+
+    def predict(self, x, P, u):
+        """Time update from (x, P) under input u."""
+        xn, F = self.f_and_jacobian(x, u)
+        return ekf_predict(np.asarray(xn, dtype=float), np.asarray(F, dtype=float), P, self.Q)
+
+    def update(self, x, P, y):
+        """Measurement update with y; returns (x, P, innovation)."""
+        yp, H = self.h_and_jacobian(x)
+        return ekf_update(x, P, np.atleast_1d(y), np.atleast_1d(yp), np.atleast_2d(H), self.R)
+
+
+# Default tuning of the quarter-car EKF (standard deviations).
+DEFAULT_EKF_TUNING = {
+    # initial prior spread, per state
+    "P0_std": {"v": 1.0, "slip": 0.05, "theta": 0.4, "B": 3.0, "C": 0.5, "E": 3.0},
+    # process noise per 10 ms sample: model error on v and slip, random walk on the parameters
+    "Q_std": {"v": 0.01, "slip": 0.01, "theta": 0.002, "B": 0.02, "C": 0.005, "E": 0.02},
+    "R": 0.2,  # wheel-speed noise variance [(rad/s)^2], Section IV
+}
+V_PRIOR = 19.0  # a priori initial speed [m/s], Section IV
+SLIP_PRIOR = 0.0  # a priori initial slip [-]
+
+
+class QuarterCarEKF(Estimator):
+    """EKF on the augmented quarter-car model (the MHE's baseline).
+
+    ``update(omega, T_b)``: measurement update with the wheel speed at time k, returns x(k|k), then predicts to
+    k+1 with the torque held over the sample. Values: ``v``, ``slip``, the four curve parameters (estimated or fixed) and
+    ``mu``, the friction in use, mu(slip) on the estimated curve.
+
+    :param estimated: parameters augmented to the state (subset of theta, B, C, E).
+    :param dt: sample time [s].
+    :param P0_std: initial standard deviations per state name (overrides defaults).
+    :param Q_std: process noise standard deviations per sample, per state name (overrides defaults).
+    :param R: measurement noise variance [(rad/s)^2].
+    :param model: a prebuilt :class:`AugmentedModel` (else one is built from ``estimated`` and ``dt``).
+    """
+
+    measurement_columns = ("omega",)
+    input_columns = ("T_b",)
+    names = ("v", "slip", "theta", "B", "C", "E", "mu")
+
+    def __init__(self, estimated: tuple[str, ...] = ("theta",), dt: float = 0.01, P0_std: dict | None = None,
+                 Q_std: dict | None = None, R: float = DEFAULT_EKF_TUNING["R"],
+                 model: AugmentedModel | None = None):
+        dt = check_dt(dt)
+        try:
+            self.model = model or AugmentedModel(estimated=tuple(estimated), dt=dt)
+        except ValueError as exc:
+            raise EstimatorConfigError(str(exc)) from None
+        for label, given in (("P0_std", P0_std), ("Q_std", Q_std)):
+            bad = [k for k in (given or {}) if k not in ("v", "slip") + PARAM_NAMES]
+            if bad:
+                raise EstimatorConfigError(f"{label} keys {bad} unknown; valid: v, slip, {', '.join(PARAM_NAMES)}")
+        p0 = {**DEFAULT_EKF_TUNING["P0_std"], **(P0_std or {})}
+        q = {**DEFAULT_EKF_TUNING["Q_std"], **(Q_std or {})}
+        names = self.model.names
+        self.P0 = np.diag([p0[n] ** 2 for n in names])
+        self.filter = ExtendedKalmanFilter(
+            self.model.f_and_jacobian,
+            lambda x: (np.array([self.model.h(x)]), self.model.h_jacobian(x)),
+            np.diag([q[n] ** 2 for n in names]),
+            np.array([[float(R)]]),
+        )
+        self.lower, self.upper = self.model.lower(), self.model.upper()
+        self.reset()
+
+    def reset(self, v: float = V_PRIOR, slip: float = SLIP_PRIOR, params: dict | None = None) -> Estimate:
+        """Start from the a priori state (Section IV) with covariance P0."""
+        self.x = self.model.nominal_state(v, slip, params)
+        self.P = self.P0.copy()
+        return self._estimate(self.x, Health.OK)
+
+    def _estimate(self, x: np.ndarray, health: Health, info: dict | None = None) -> Estimate:
+        B, C, E, theta = self.model.road(x)
+        values = {"v": float(x[0]), "slip": float(x[1]), "theta": float(theta), "B": float(B), "C": float(C),
+                  "E": float(E), "mu": self.model.mu(x)}
+        return Estimate(values, health, info or {})
+
+    def update(self, measurement, u) -> Estimate:
+        sample = self._validated_sample(measurement, u)
+        if sample is None:
+            return self._estimate(self.x, Health.INVALID_INPUT, {"reason": "NaN or wrong shape; sample skipped"})
+        y, uu = sample
+        x_post, P_post, innov = self.filter.update(self.x, self.P, y)
+        x_post = np.clip(x_post, self.lower, self.upper)
+        x_next, P_next = self.filter.predict(x_post, P_post, float(uu[0]))
+        if not (np.all(np.isfinite(x_next)) and np.all(np.isfinite(P_next))):
+            # keep the last good state; restart the covariance
+            self.P = self.P0.copy()
+            return self._estimate(self.x, Health.SOLVER_FAILED, {"reason": "non-finite EKF step"})
+        self.x, self.P = np.clip(x_next, self.lower, self.upper), P_next
+        return self._estimate(x_post, Health.OK, {"innovation": float(innov[0])})
+
+    @property
+    def covariance(self) -> np.ndarray:
+        """Current (predicted) covariance."""
+        return self.P.copy()

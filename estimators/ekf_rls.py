@@ -1,0 +1,312 @@
+"""Friction from wheel speed, torque and a_x: the EKF/RLS method of Li, Du & Li, for the quarter car and two axles.
+
+Steps per sample (Section III of the paper), for n wheels (quarter car n = 1, two-axle model n = 2):
+
+1. Vehicle speed, nonlinear filter eqs. (4)-(6): ``y' = -R Sat(y - x)`` with x the reference wheel surface speed
+   (the quarter car's only wheel; on two axles the slowest wheel in traction, the fastest in braking), ``Sat``
+   eq. (6) with width ``d``, and the rate R the torque feedforward of eq. (5), ``R_g = |sum T| / (m_eff R_w)``
+   (``m_eff = m + n I_w / R_w^2``; the paper's 466.5 is this number for its Table I), corrected by the a_x loop of
+   Fig. 2: ``c' = K (|a_x| - R_g - c)``, ``R = max(R_g + c, 0)`` with the paper's K = 100 1/s (discretized
+   exactly, trapezoid over each sample). Whenever the wheel slips by more than d the filter integrates the (filtered) measured acceleration,
+   and it follows the wheel when it rolls freely.
+2. Slip per wheel, eq. (3): ``S = (omega R_w - y) / max(y, omega R_w)`` (positive in traction).
+3. Tire force, EKF of eqs. (7)-(8) on ``(a_x, a_omega_i, F_i)`` with the tire stiffness prediction
+   ``F_i(k+1) = C_s S_i(k)`` and the measurement ``z = a_x = sum F_i / m`` (generic steps from
+   :mod:`estimators.ekf`, Joseph form).
+4. Slip slope, RLS with forgetting, eqs. (10)-(14): ``y = sum F_i``, ``phi = sum F_zi S_i``; skipped (health
+   ``NOT_EXCITED``, k_s held) while ``|phi|`` is below ``PHI_MIN_SLIP`` times the total load.
+5. Friction. The paper's map ``mu = 0.1 k_s + 0.02`` was fitted to its tire. For this project's Magic Formula
+   roads we use the family relation instead: with the tire's shape (B, C, E) fixed and the road scaling theta
+   (the curve family mu = theta g(S), g the Magic Formula with theta = 1), the regression
+   ``F / F_z = k_s S`` at the data's load-weighted slip S_bar gives ``theta = k_s S_bar / g(S_bar)`` and the
+   peak friction ``mu = theta max g``. As S_bar -> 0, ``g(S)/S -> B C`` and the map is linear,
+   ``mu = k_s max(g) / (B C)`` (dry shape: mu = 0.0584 k_s, the project's counterpart of 0.1 k_s + 0.02). It is
+   exact for any slip on the family, so it does not drift down when braking moves the slip into the curved part
+   (the paper's Fig. 11 shows that drift with a linear map). :class:`MagicFormulaFamilyMap` implements it;
+   :class:`LinearMap` is the paper's form, used on the paper's own two-axle set-up (:class:`TwoAxleEkfRls`):
+   there the Dugoff tire's force is ``C_s S / (1 - S)`` whatever mu is until the slip reaches about
+   ``mu F_z / (2 C_s)`` (6.8 % on the front axle at mu = 0.9), so below that the slip slope carries no
+   information on mu and no map can recover it; the paper's empirical map is reported as is.
+   Also reported: ``mu_peak``, the largest ``|sum F| / sum F_z`` seen so far, which equals the peak friction once
+   the data reach the peak of the curve (and is a lower bound before).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from estimators.base import Estimate, Estimator, EstimatorConfigError, Health, check_dt
+from estimators.ekf import ekf_predict, ekf_update
+from fricenv.plants.quarter_car import PAPER_PARAMS, QuarterCarParams
+from fricenv.plants.tire import DRY, MagicFormula, magic_formula
+
+__all__ = [
+    "PAPER_MAP",
+    "EkfRlsConfig",
+    "EkfRlsCore",
+    "LinearMap",
+    "MagicFormulaFamilyMap",
+    "QuarterCarEkfRls",
+    "TwoAxleEkfRls",
+]
+
+SAT_WIDTH = 0.01  # d of eq. (6) [m/s]
+CORRECTION_GAIN = 100.0  # K of Fig. 2 / Table I [1/s]
+FORGETTING = 0.99  # RLS forgetting factor, in (0.9, 1) as the paper asks
+C_S = 50000.0  # tire stiffness of eq. (7) [N/unit slip], Table I
+PHI_MIN_SLIP = 1e-3  # RLS update only when the load-weighted |slip| exceeds this [-]
+RLS_P0 = 10.0  # initial RLS covariance [(1/unit slip)^2]
+KS0 = 10.0  # initial slip slope [1/unit slip]
+Q_STD = {"a_x": 0.5, "a_w": 50.0, "F": 300.0}  # EKF process noise per sample [m/s^2, rad/s^2, N]
+AX_STD_MIN = 0.01  # floor of the a_x noise standard deviation in the EKF [m/s^2]
+SLIP_SMALL = 1e-4  # below this slip the family maps use their linear limit [-]
+
+
+class LinearMap:
+    """``mu = a k_s + b`` (the paper's eq. (15) form)."""
+
+    def __init__(self, a: float = 0.1, b: float = 0.02):
+        self.a, self.b = float(a), float(b)
+
+    def __call__(self, k_s: float, s_bar: float) -> float:
+        return self.a * k_s + self.b
+
+
+PAPER_MAP = LinearMap(0.1, 0.02)  # eq. (15), for the paper's tire
+
+
+class MagicFormulaFamilyMap:
+    """Peak friction from the slip slope on the family mu = theta g(S) of one tire shape (module docstring).
+
+    :param shape: Magic Formula whose B, C, E give the shape (theta ignored).
+    """
+
+    def __init__(self, shape: MagicFormula = DRY):
+        self.B, self.C, self.E = shape.B, shape.C, shape.E
+        unit = MagicFormula(self.B, self.C, self.E, 1.0)
+        self.g_max = unit.mu_max
+        self.linear_factor = self.g_max / (self.B * self.C)  # mu per unit k_s as S -> 0
+
+    def __call__(self, k_s: float, s_bar: float) -> float:
+        if s_bar < SLIP_SMALL:
+            return k_s * self.linear_factor
+        g = float(magic_formula(s_bar, self.B, self.C, self.E, 1.0))
+        return k_s * s_bar / g * self.g_max
+
+
+@dataclass(frozen=True)
+class EkfRlsConfig:
+    """Vehicle and tuning constants of the EKF/RLS estimator."""
+
+    m: float  # mass whose acceleration a_x measures [kg]
+    I_w: float  # wheel inertia [kg m^2]
+    R_w: float  # wheel radius [m]
+    Fz: tuple  # vertical load per wheel [N]
+    C_s: float = C_S  # tire stiffness of eq. (7) [N/unit slip]
+    d: float = SAT_WIDTH  # Sat width of eq. (6) [m/s]
+    K: float = CORRECTION_GAIN  # a_x correction gain of Fig. 2 [1/s]; 0 disables the loop
+    forgetting: float = FORGETTING  # RLS forgetting factor [-]
+    ax_std: float = AX_STD_MIN  # a_x noise standard deviation assumed by the EKF [m/s^2]
+
+    def __post_init__(self):
+        for name in ("m", "I_w", "R_w", "C_s", "d", "ax_std"):
+            value = getattr(self, name)
+            if not (np.isfinite(value) and value > 0):
+                raise EstimatorConfigError(f"EkfRlsConfig.{name} must be finite and > 0, got {value!r}")
+        if not (np.isfinite(self.K) and self.K >= 0):
+            raise EstimatorConfigError(f"EkfRlsConfig.K must be finite and >= 0 (0: no a_x loop), got {self.K!r}")
+        if not 0.9 <= self.forgetting <= 1.0:
+            raise EstimatorConfigError(f"forgetting must be in [0.9, 1] (paper: (0.9, 1)), got {self.forgetting}")
+        if len(self.Fz) < 1 or not all(np.isfinite(f) and f > 0 for f in self.Fz):
+            raise EstimatorConfigError(f"Fz must be one positive load per wheel, got {self.Fz!r}")
+
+    @property
+    def m_eff(self) -> float:
+        """Mass of eq. (5)'s 466.5 = m_eff R_w: the car plus the wheels' rotary inertia [kg]."""
+        return self.m + len(self.Fz) * self.I_w / self.R_w**2
+
+
+class EkfRlsCore:
+    """The four steps on traction-positive quantities (torques, forces, slips); see the module docstring."""
+
+    def __init__(self, cfg: EkfRlsConfig, dt: float, mu_map):
+        self.cfg = cfg
+        self.dt = check_dt(dt)
+        self.mu_map = mu_map
+        n = len(cfg.Fz)
+        self.n = n
+        self.Fz = np.asarray(cfg.Fz, dtype=float)
+        self.Fz_total = float(self.Fz.sum())
+        self.corr_factor = 1.0 - np.exp(-cfg.K * self.dt)  # exact discretization of c' = K (target - c)
+        nx = 1 + 2 * n
+        self.Q = np.diag([Q_STD["a_x"] ** 2] + [Q_STD["a_w"] ** 2] * n + [Q_STD["F"] ** 2] * n)
+        self.R = np.array([[cfg.ax_std**2]])
+        self.H = np.zeros((1, nx))
+        self.H[0, 1 + n:] = 1.0 / cfg.m  # z = a_x = sum F / m (paper's H)
+        self.A = np.zeros((nx, nx))  # eq. (7) Jacobian
+        self.A[0, 1 + n:] = 1.0 / cfg.m
+        for i in range(n):
+            self.A[1 + i, 1 + n + i] = -cfg.R_w / cfg.I_w
+        self.reset()
+
+    def reset(self, v0: float | None = None) -> None:
+        self.y = v0  # speed estimate [m/s]; None: initialized from the first wheel speed
+        self.c = 0.0  # a_x correction of the rate [m/s^2]
+        self.R_g = 0.0  # eq. (5) for the torque held over the coming sample [m/s^2]
+        n = self.n
+        self.x = np.zeros(1 + 2 * n)
+        self.P = np.diag([1.0] + [100.0] * n + [1e6] * n)
+        self.k_s = KS0
+        self.P_rls = RLS_P0
+        self.s_num = 0.0
+        self.s_den = 0.0
+        self.mu_peak = 0.0
+
+    @staticmethod
+    def sat(e: float, d: float) -> float:
+        """Eq. (6)."""
+        return 1.0 if e > d else (-1.0 if e < -d else e / d)
+
+    def step(self, omega: np.ndarray, a_x: float, torque: np.ndarray) -> dict:
+        cfg, n = self.cfg, self.n
+        wr = omega * cfg.R_w
+        T_total = float(torque.sum())
+        x_ref = float(wr.min() if T_total > 0 else wr.max()) if n > 1 else float(wr[0])
+        # 1. velocity filter, eqs. (4)-(6) with the a_x loop of Fig. 2, advanced from the previous sample to this
+        # one: the rate is the previous torque's feedforward R_g (eq. (5), the torque held over the interval) plus
+        # the a_x correction averaged over the interval (trapezoid), and Sat uses the newest wheel speed. (A
+        # forward Euler step lags one sample behind a wheel that starts to slip, and the filter, moving at the
+        # car's own acceleration, never recovers such a lag.)
+        if self.y is None:
+            y = x_ref
+        else:
+            c_new = self.c + self.corr_factor * (abs(a_x) - self.R_g - self.c)
+            rate = max(self.R_g + 0.5 * (self.c + c_new), 0.0)
+            y = max(self.y - self.dt * rate * self.sat(self.y - x_ref, cfg.d), 0.0)  # eq. (4)
+            self.c = c_new
+        self.y = y
+        self.R_g = abs(T_total) / (cfg.m_eff * cfg.R_w)  # eq. (5)
+        # 2. slip, eq. (3), at the current speed estimate
+        S = (wr - y) / np.maximum(np.maximum(y, wr), 0.1)
+        # 3. force EKF, eqs. (7)-(8): measurement update with a_x, then the prediction F(k+1) = C_s S(k)
+        xk, Pk, _ = ekf_update(self.x, self.P, np.array([a_x]), self.H @ self.x, self.H, self.R)
+        F = xk[1 + n:].copy()
+        x_next = np.empty_like(xk)
+        x_next[0] = F.sum() / cfg.m
+        x_next[1:1 + n] = (-F * cfg.R_w + torque) / cfg.I_w
+        x_next[1 + n:] = cfg.C_s * S
+        self.x, self.P = ekf_predict(x_next, self.A, Pk, self.Q)
+        # 4. RLS on the slip slope, eqs. (10)-(14)
+        F_total = float(F.sum())
+        phi = float(self.Fz @ S)
+        lam = cfg.forgetting
+        excited = abs(phi) > PHI_MIN_SLIP * self.Fz_total
+        if excited:
+            e = F_total - phi * self.k_s  # (11)
+            denom = lam + phi * self.P_rls * phi
+            K = self.P_rls * phi / denom  # (12)
+            self.P_rls = (self.P_rls - K * phi * self.P_rls) / lam  # (13)
+            self.k_s += K * e  # (14)
+            s_eff = abs(phi) / self.Fz_total
+            self.s_num = lam * self.s_num + phi * phi * s_eff
+            self.s_den = lam * self.s_den + phi * phi
+        # 5. friction
+        s_bar = self.s_num / self.s_den if self.s_den > 0 else 0.0
+        mu = self.mu_map(self.k_s, s_bar)
+        mu_util = abs(F_total) / self.Fz_total
+        self.mu_peak = max(self.mu_peak, mu_util)
+        return {"v": y, "S": S, "F": F, "k_s": self.k_s, "mu": mu, "mu_peak": self.mu_peak,
+                "mu_utilized": mu_util, "s_bar": s_bar, "excited": excited}
+
+
+class QuarterCarEkfRls(Estimator):
+    """EKF/RLS on the quarter car: ``update((omega, a_x), T_b)``.
+
+    Quarter-car conventions: ``T_b > 0`` brakes, ``slip`` and ``F_x`` are positive when braking, ``a_x`` is
+    negative when braking. Internally the paper's traction-positive signs are used.
+
+    :param dt: sample time [s].
+    :param p: quarter-car parameters (m, J, r, F_z).
+    :param shape: tire shape (B, C, E) of the friction family map (default: dry asphalt).
+    :param mu_map: a map ``(k_s, s_bar) -> mu`` overriding the family map (e.g. ``PAPER_MAP``).
+    :param ax_std: a_x noise standard deviation assumed by the force EKF [m/s^2].
+    :param forgetting: RLS forgetting factor.
+    :param correction_gain: K of the a_x loop (Fig. 2) [1/s]; 0 runs the filter on the torque feedforward alone.
+    """
+
+    measurement_columns = ("omega", "a_x")
+    input_columns = ("T_b",)
+    names = ("v", "slip", "F_x", "k_s", "mu", "mu_peak", "mu_utilized")
+
+    def __init__(self, dt: float = 0.01, p: QuarterCarParams = PAPER_PARAMS, shape: MagicFormula = DRY,
+                 mu_map=None, ax_std: float = AX_STD_MIN, forgetting: float = FORGETTING,
+                 correction_gain: float = CORRECTION_GAIN):
+        cfg = EkfRlsConfig(m=p.m, I_w=p.J, R_w=p.r, Fz=(p.Fz,), ax_std=ax_std, forgetting=forgetting,
+                           K=correction_gain)
+        self.core = EkfRlsCore(cfg, dt, mu_map or MagicFormulaFamilyMap(shape))
+        self._last = None
+        self.reset()
+
+    def reset(self, v0: float | None = None) -> Estimate:
+        self.core.reset(v0)
+        self._last = {"v": np.nan if v0 is None else float(v0), "slip": 0.0, "F_x": 0.0, "k_s": KS0,
+                      "mu": self.core.mu_map(KS0, 0.0), "mu_peak": 0.0, "mu_utilized": 0.0}
+        return Estimate(dict(self._last), Health.NOT_EXCITED)
+
+    def update(self, measurement, u) -> Estimate:
+        sample = self._validated_sample(measurement, u)
+        if sample is None:
+            return Estimate(dict(self._last), Health.INVALID_INPUT, {"reason": "NaN or wrong shape; skipped"})
+        y, uu = sample
+        out = self.core.step(np.array([y[0]]), float(y[1]), np.array([-uu[0]]))
+        self._last = {"v": out["v"], "slip": float(-out["S"][0]), "F_x": float(-out["F"][0]), "k_s": out["k_s"],
+                      "mu": out["mu"], "mu_peak": out["mu_peak"], "mu_utilized": out["mu_utilized"]}
+        return Estimate(dict(self._last), Health.OK if out["excited"] else Health.NOT_EXCITED,
+                        {"s_bar": out["s_bar"]})
+
+
+class TwoAxleEkfRls(Estimator):
+    """EKF/RLS on the paper's two-axle set-up: ``update((omega_f, omega_r, a_x), (T_f, T_r))``, paper signs.
+
+    :param dt: sample time [s].
+    :param params: :class:`fricenv.plants.two_axle.TwoAxleParams`.
+    :param mu_map: ``(k_s, s_bar) -> mu``; default the paper's eq. (15), ``PAPER_MAP``.
+    :param ax_std: a_x noise standard deviation assumed by the force EKF [m/s^2].
+    :param forgetting: RLS forgetting factor.
+    :param correction_gain: K of the a_x loop (Fig. 2) [1/s].
+    """
+
+    measurement_columns = ("omega_f", "omega_r", "a_x")
+    input_columns = ("T_f", "T_r")
+    names = ("v", "slip_f", "slip_r", "F_xf", "F_xr", "k_s", "mu", "mu_peak", "mu_utilized")
+
+    def __init__(self, dt: float = 0.01, params=None, mu_map=None, ax_std: float = AX_STD_MIN,
+                 forgetting: float = FORGETTING, correction_gain: float = CORRECTION_GAIN):
+        from fricenv.plants.two_axle import TABLE_I, axle_loads
+
+        p = params or TABLE_I
+        Fzf, Fzr = axle_loads(p)
+        cfg = EkfRlsConfig(m=p.m, I_w=p.I_w, R_w=p.R_w, Fz=(Fzf, Fzr), C_s=p.C_s, ax_std=ax_std,
+                           forgetting=forgetting, K=correction_gain)
+        self.core = EkfRlsCore(cfg, dt, mu_map or PAPER_MAP)
+        self.reset()
+
+    def reset(self, v0: float | None = None) -> Estimate:
+        self.core.reset(v0)
+        self._last = {k: 0.0 for k in self.names}
+        self._last["v"] = np.nan if v0 is None else float(v0)
+        return Estimate(dict(self._last), Health.NOT_EXCITED)
+
+    def update(self, measurement, u) -> Estimate:
+        sample = self._validated_sample(measurement, u)
+        if sample is None:
+            return Estimate(dict(self._last), Health.INVALID_INPUT, {"reason": "NaN or wrong shape; skipped"})
+        y, uu = sample
+        out = self.core.step(y[:2], float(y[2]), uu)
+        self._last = {"v": out["v"], "slip_f": float(out["S"][0]), "slip_r": float(out["S"][1]),
+                      "F_xf": float(out["F"][0]), "F_xr": float(out["F"][1]), "k_s": out["k_s"],
+                      "mu": out["mu"], "mu_peak": out["mu_peak"], "mu_utilized": out["mu_utilized"]}
+        return Estimate(dict(self._last), Health.OK if out["excited"] else Health.NOT_EXCITED,
+                        {"s_bar": out["s_bar"]})
