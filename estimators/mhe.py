@@ -42,9 +42,39 @@ Two readings of (16) are offered (``weighting=``):
     Measured (``fricenv paper mhe``): theta converges in cases 1 and 2 and estimating B, C, E improves v and slip on
     dry (case 3 against case 1); the literal reading is kept for comparison.
 
-Beyond the paper: ``arrival="ekf"`` replaces the first prior term beta_0 ||x(t-N) - xbar(t-N)||^2 by
-``||x(t-N) - xbar(t-N)||^2_{P^-1}``, with P the covariance of an EKF run on the samples that leave the window
-(measurement update at the smoothed x(t-N-1|t-1), then prediction), the standard EKF arrival cost of Rao et al.
+Beyond the paper, and the default (``arrival="ekf"``, ``model_error="auto"``, ``gate=GATE_CHI2``). With B, C, E
+fixed at the wrong nominal values (cases 1-2) the nominal curve peaks at 0.89 theta, theta sits at its bound 1,
+and the paper's MHE, whose window follows the model exactly (12b) and whose prior terms pin every window state to
+the a priori trajectory, cannot absorb the model error the way the EKF's process noise does: case 1 rms_v 0.121
+against the EKF's 0.070 (``fricenv paper mhe --seeds 5``, row mhe-paper). The default therefore solves the usual
+MHE with process noise:
+
+    J = ||W_t (Y - H)||^2 + ||x(t-N) - xbar(t-N)||^2_{P^-1} + sum_i ||w_i||^2_{Q_vs^-1},
+    x(i+1) = f(x(i), u(i)) + (w_i, 0),
+
+with w_i per-sample model errors on (v, slip) penalized by the EKF's model-error covariance Q_vs (the same
+``DEFAULT_EKF_TUNING["Q_std"]``, 0.01 m/s and 0.01 per sample), and the arrival cost of an EKF run alongside on
+every sample: xbar(t-N), P are that EKF's prior mean and covariance of x(t-N) given y(..t-N-1) (the "filtering
+update" of Rao, Rawlings & Lee; with N = 0 the estimator is exactly that EKF). The SVD thresholding of the data
+is kept, done in the arrival covariance's units (``Phi_s = Phi L / sigma_y``, P = L L^T), so that directions the
+window does not inform beyond delta^2 times the prior are held by the prior. The paper's later prior terms
+beta_i (i >= 1) are dropped: they would count the prior N + 1 times and pin the trajectory (with process noise and
+the paper's prior terms the estimate diverges in case 1, so that combination is refused). A solution further than
+``gate`` (squared Mahalanobis distance in the EKF's posterior covariance) from the alongside EKF's x(t|t) is
+replaced by the EKF's (info ``gated``): on dry with four parameters an occasional window fits the slip on the
+wrong side of the peak (case 3, seed 1: a single-sample v error of 3.6 m/s); the gate removes these outliers.
+
+An earlier "ekf" arrival took the mean from the MHE's own smoothed x(t-N|t-1) with the EKF covariance: that counts
+the data y(t-N..t-1) twice (once in the mean, once in the window), and the error grew with N (case 2 rms_v 0.073 at
+N = 1 to 0.14 at N = 10, against the EKF's 0.052); using the MHE's own filtered estimates as the arrival mean was
+also worse (case 1 0.070 against 0.064; these two on seeds 0-2). Measured with the current form (``fricenv paper
+mhe --seeds 5``, and seeds 3-7 for checking): with the same model, Q and R a consistent MHE's filtered estimate
+cannot be much better than the EKF's in v (it is within 0.6 % of it, above it in cases 1-3, below in case 4), and
+it is more accurate in slip in every case (1-10 %; the window relinearizes the slip dynamics). The four-parameter
+paper MHE is better than both on seeds 0-4 in cases 3-4 but worse on seeds 3-7 (case 3 rms_v 0.061 against the
+EKF's 0.037), so it is not the default.
+The paper's MHE is ``arrival="paper", model_error=None``; ``arrival="ekf", model_error=None`` gives the EKF arrival
+cost with the paper's hard dynamics.
 
 Solver: a few projected Levenberg-Marquardt (damped Gauss-Newton) iterations on a compiled CasADi SX function
 returning the window outputs, states and their Jacobians (weights applied in numpy), warm-started from the a priori
@@ -52,12 +82,13 @@ returning the window outputs, states and their Jacobians (weights applied in num
 evaluations per update bound the worst-case time. A solve that raises or gives a non-finite result falls back to
 the a priori trajectory and reports ``Health.SOLVER_FAILED``.
 
-Option ``model_error=(std_v, std_slip)`` (beyond the paper, off by default, only with ``arrival="ekf"``) adds
-per-sample additive model-error inputs on v and slip to the window, penalized by those standard deviations, relaxing
-(12b) into the usual MHE with process noise.
+Option ``model_error=(std_v, std_slip)`` sets the process-noise standard deviations explicitly (``"auto"``: the
+EKF's; None: hard dynamics, the paper's).
 """
 
 from __future__ import annotations
+
+from collections import deque
 
 import casadi as ca
 import numpy as np
@@ -66,7 +97,7 @@ from estimators.base import Estimate, Estimator, EstimatorConfigError, Health, c
 from estimators.ekf import DEFAULT_EKF_TUNING, SLIP_PRIOR, V_PRIOR, ekf_predict, ekf_update
 from estimators.quarter_car_model import PARAM_NAMES, AugmentedModel
 
-__all__ = ["PAPER_TUNING", "STATE_SCALES", "RegularizedMHE"]
+__all__ = ["DEFAULT_ARRIVAL", "PAPER_TUNING", "STATE_SCALES", "RegularizedMHE"]
 
 HORIZON = 10  # N, Section IV
 OMEGA_NOISE_STD = float(np.sqrt(0.2))  # [rad/s], Section IV
@@ -82,22 +113,28 @@ STATE_SCALES = {
     "all": {"v": 0.3, "slip": 0.03, "theta": 0.03, "B": 1.0, "C": 0.2, "E": 1.0},
 }
 MAX_ITER = 4  # Gauss-Newton iterations per update
+MAX_ITER_EKF_ARRIVAL = 2  # the same with the EKF arrival cost (a nearly quadratic problem: 2 suffice, measured)
 LM_DAMPING0 = 1e-6  # initial Levenberg-Marquardt damping (relative to diag(J^T J))
 LM_DAMPING_MAX = 1e6  # give up above this damping
 TOL_STEP = 1e-9  # stop when the relative cost decrease is below this
 SV_FLOOR = 1e-12  # relative singular value treated as exactly zero
 MAX_EVALS = 8  # model evaluations per update (bounds the worst-case time)
+GATE_CHI2 = 25.0  # EKF-consistency gate of the arrival="ekf" MHE: squared Mahalanobis distance (module docstring)
+PD_JITTER = 1e-12  # added to the arrival covariance before its Cholesky factor
 BOUND_TOL = 1e-9  # relative distance at which a bound counts as active
 WEIGHTINGS = ("literal", "scaled")
 ARRIVALS = ("paper", "ekf")
+# Default arrival cost per group (module docstring): the EKF arrival cost, with process noise in the window, for
+# both; the paper's prior terms and hard dynamics are arrival="paper", model_error=None.
+DEFAULT_ARRIVAL = {"theta-only": "ekf", "all": "ekf"}
 
 
 class RegularizedMHE(Estimator):
     """The regularized MHE of Sui & Johansen on the augmented quarter-car model.
 
     ``update(omega, T_b)`` takes the wheel speed at time t and the torque held from t to t+1, and returns x(t|t).
-    Until N + 1 samples have arrived, the a priori trajectory is returned (``Health.NOT_EXCITED``, info
-    ``warming_up``). Values: ``v``, ``slip``, the four curve parameters (estimated or fixed) and
+    Until N + 1 samples have arrived, the a priori trajectory is returned (with ``arrival="ekf"``: the alongside
+    EKF's estimate; ``Health.NOT_EXCITED``, info ``warming_up``). Values: ``v``, ``slip``, the four curve parameters (estimated or fixed) and
     ``mu``, the friction in use, mu(slip) on the estimated curve.
 
     :param estimated: parameters augmented to the state (subset of theta, B, C, E).
@@ -107,11 +144,18 @@ class RegularizedMHE(Estimator):
     :param beta: beta_i (one value for all i).
     :param delta: SVD threshold delta; default 0.1 for theta alone, 0.8 otherwise (the paper's).
     :param weighting: ``"scaled"`` or ``"literal"`` (see the module docstring).
-    :param arrival: ``"paper"`` (beta_0 times the prior distance) or ``"ekf"`` (EKF-covariance arrival cost).
+    :param arrival: ``"paper"`` (the prior terms beta_i ||(x_i - xbar_i)/D||^2 of (12a)) or ``"ekf"`` (arrival
+        cost from an EKF run alongside: ||x(t-N) - xbar||^2 in P^-1, beyond the paper); default per group,
+        :data:`DEFAULT_ARRIVAL` ("ekf"; "paper" for the literal weighting).
     :param state_scales: per-state scales of the scaled reading (overrides ``STATE_SCALES``).
     :param noise_std: wheel-speed noise standard deviation [rad/s].
-    :param max_iter: Gauss-Newton iterations per update.
-    :param model_error: (std_v, std_slip) of per-sample model-error inputs (needs ``arrival="ekf"``), or None.
+    :param max_iter: Gauss-Newton iterations per update (default 4, 2 with the EKF arrival cost).
+    :param model_error: process noise in the window (beyond the paper): ``"auto"`` (default: the EKF's model-error
+        standard deviations ``Q_std`` of v and slip when the arrival cost is "ekf", else None), a pair
+        (std_v [m/s], std_slip [-]) per sample, or None for the paper's hard dynamics (12b).
+    :param gate: with ``arrival="ekf"``: when the solution's x(t|t) is further than this squared Mahalanobis
+        distance from the alongside EKF's x(t|t) (in its covariance), the EKF's estimate is returned instead (info
+        ``gated``); None disables the gate (beyond the paper, module docstring).
     :param model: a prebuilt :class:`AugmentedModel`.
     """
 
@@ -121,15 +165,16 @@ class RegularizedMHE(Estimator):
 
     def __init__(self, estimated: tuple[str, ...] = ("theta",), dt: float = 0.01, horizon: int = HORIZON,
                  alpha: float | None = None, beta: float | None = None, delta: float | None = None,
-                 weighting: str = "scaled", arrival: str = "paper", state_scales: dict | None = None,
-                 noise_std: float = OMEGA_NOISE_STD, max_iter: int = MAX_ITER,
-                 model_error: tuple[float, float] | None = None,
+                 weighting: str = "scaled", arrival: str | None = None, state_scales: dict | None = None,
+                 noise_std: float = OMEGA_NOISE_STD, max_iter: int | None = None,
+                 model_error: tuple[float, float] | str | None = "auto", gate: float | None = GATE_CHI2,
                  model: AugmentedModel | None = None):
         dt = check_dt(dt)
         if weighting not in WEIGHTINGS:
             raise EstimatorConfigError(f"weighting must be one of {WEIGHTINGS}, got {weighting!r}")
-        if arrival not in ARRIVALS:
-            raise EstimatorConfigError(f"arrival must be one of {ARRIVALS}, got {arrival!r}")
+        if arrival is not None and arrival not in ARRIVALS:
+            raise EstimatorConfigError(f"arrival must be one of {ARRIVALS} or None (per-group default), "
+                                       f"got {arrival!r}")
         if int(horizon) != horizon or horizon < 1:
             raise EstimatorConfigError(f"horizon must be an integer >= 1, got {horizon!r}")
         try:
@@ -148,26 +193,39 @@ class RegularizedMHE(Estimator):
                                     ("delta", self.delta, False), ("noise_std", noise_std, True)):
             if not np.isfinite(value) or value < 0 or (strict and value == 0):
                 raise EstimatorConfigError(f"{name} must be finite and {'> 0' if strict else '>= 0'}, got {value!r}")
+        if arrival is None:  # the literal reading is a paper comparison: with the paper's prior terms
+            arrival = "paper" if weighting == "literal" else DEFAULT_ARRIVAL[group]
+        self.arrival = arrival
+        if max_iter is None:
+            max_iter = MAX_ITER_EKF_ARRIVAL if self.arrival == "ekf" else MAX_ITER
         if int(max_iter) != max_iter or max_iter < 1:
             raise EstimatorConfigError(f"max_iter must be an integer >= 1, got {max_iter!r}")
         self.N = int(horizon)
         self.weighting = weighting
-        self.arrival = arrival
         self.noise_std = float(noise_std)
         self.max_iter = int(max_iter)
+        ekf_q = DEFAULT_EKF_TUNING["Q_std"]
+        if isinstance(model_error, str):
+            if model_error != "auto":
+                raise EstimatorConfigError(
+                    f"model_error must be 'auto', None or (std_v, std_slip), got {model_error!r}")
+            model_error = (ekf_q["v"], ekf_q["slip"]) if self.arrival == "ekf" else None
         if model_error is not None:
             model_error = np.asarray(model_error, dtype=float)
             if model_error.shape != (2,) or not np.all(np.isfinite(model_error) & (model_error > 0)):
                 raise EstimatorConfigError(f"model_error must be two positive std's (v, slip), got {model_error!r}")
-        if model_error is not None and arrival != "ekf":
-            raise EstimatorConfigError("model_error needs arrival='ekf': the paper's prior terms beta_i on every window "
-                                       "state already pin the trajectory and fight the model-error inputs")
+        if model_error is not None and self.arrival != "ekf":
+            raise EstimatorConfigError("model_error (process noise) needs arrival='ekf': the paper's prior terms "
+                                       "beta_i pin every window state to the a priori trajectory of eq. (11) and "
+                                       "fight the process noise (measured: the estimate diverges in case 1)")
         self.model_error = model_error
+        if gate is not None and not (np.isfinite(gate) and gate > 0):
+            raise EstimatorConfigError(f"gate must be a positive squared distance or None, got {gate!r}")
+        self.gate = None if gate is None else float(gate)
         scales = {**STATE_SCALES[group], **(state_scales or {})}
         names = self.model.names
         self.D = np.array([scales[n] for n in names]) if weighting == "scaled" else np.ones(len(names))
         self.lower, self.upper = self.model.lower(), self.model.upper()
-        ekf_q = DEFAULT_EKF_TUNING["Q_std"]
         ekf_p0 = DEFAULT_EKF_TUNING["P0_std"]
         self._Q = np.diag([ekf_q[n] ** 2 for n in names])
         self._P0 = np.diag([ekf_p0[n] ** 2 for n in names])
@@ -199,9 +257,15 @@ class RegularizedMHE(Estimator):
             xs.append(xn)
         H = ca.vertcat(*[m.measurement_sx(x) for x in xs])  # eq. (9)
         X = ca.horzcat(*xs)
-        out = ca.vertcat(H, ca.vec(X))  # one Jacobian for the data and the prior terms
         self._nz = nx + nw
-        self._fun = ca.Function("mhe_window", [z, U], [out, ca.jacobian(out, z), f0, ca.jacobian(f0, x0)])
+        if self.arrival == "ekf":
+            # only the data depend on the later window states: no derivatives of the trajectory needed
+            out = ca.vertcat(H, ca.vec(X))
+            self._fun = ca.Function("mhe_window", [z, U], [out, ca.jacobian(H, z), f0])
+        else:
+            out = ca.vertcat(H, ca.vec(X))  # one Jacobian for the data and the prior terms
+            self._fun = ca.Function("mhe_window", [z, U], [out, ca.jacobian(out, z), f0])
+        self._devJ0 = np.eye(nx, self._nz)[None]  # d (x(t-N) - xbar) / dz
         # the a priori trajectory of eq. (11): once per update, no derivatives
         xb = [x0]
         for i in range(N):
@@ -216,13 +280,13 @@ class RegularizedMHE(Estimator):
 
     def _evaluate(self, z, Xbar, Y, U) -> dict:
         """Unweighted pieces at z: output error, its Jacobian, prior deviations and theirs, trajectory, f(x0)."""
-        out, J, f0, F0 = self._fun(z, U)
+        out, J, f0 = self._fun(z, U)
         out, J = np.asarray(out).ravel(), np.asarray(J)
         N1, nx = self.N + 1, self.model.nx
         X = out[N1:].reshape(N1, nx)  # row i = x(t-N+i)
-        return {"z": z, "e": Y - out[:N1], "PhiZ": J[:N1], "dev": X - Xbar,
-                "devJ": J[N1:].reshape(N1, nx, self._nz), "X": X.T, "f0": np.asarray(f0).ravel(),
-                "F0": np.asarray(F0)}
+        devJ = J[N1:].reshape(N1, nx, self._nz) if J.shape[0] > N1 else self._devJ0
+        return {"z": z, "e": Y - out[:N1], "PhiZ": J[:N1], "dev": X - Xbar, "devJ": devJ, "X": X.T,
+                "f0": np.asarray(f0).ravel()}
 
     # ------------------------------------------------------------------ interface
     def reset(self, v: float = V_PRIOR, slip: float = SLIP_PRIOR, params: dict | None = None) -> Estimate:
@@ -231,11 +295,14 @@ class RegularizedMHE(Estimator):
         self._y: list[float] = []
         self._u: list[float] = []
         self._x_est0: np.ndarray | None = None  # x(t-N|t) of the last solve
-        self._f_est0: np.ndarray | None = None  # f(x(t-N|t), u(t-N)) and its Jacobian, for the next prior
-        self._F_est0: np.ndarray | None = None
+        self._f_est0: np.ndarray | None = None  # f(x(t-N|t), u(t-N)), for the next prior (eq. (11))
         self._P = self._P0.copy()  # EKF covariance at the window start (arrival="ekf")
         self._last = self.x_prior0.copy()
         self._n_fail = 0
+        self._X_prev: np.ndarray | None = None
+        self._w_prev: np.ndarray | None = None
+        self._ekf_x, self._ekf_P = self.x_prior0.copy(), self._P0.copy()
+        self._arr_hist: deque = deque(maxlen=self.N + 1)
         return self._estimate(self.x_prior0, Health.OK)
 
     def _estimate(self, x: np.ndarray, health: Health, info: dict | None = None) -> Estimate:
@@ -252,22 +319,26 @@ class RegularizedMHE(Estimator):
         self._y.append(float(y[0]))
         self._u.append(float(uu[0]))
         N = self.N
-        if len(self._y) < N + 1:  # warming up: propagate the prior, eq. (11)
-            x = self.x_prior0
-            for k in range(len(self._y) - 1):
-                x = self.model.f(x, self._u[k])
+        if self.arrival == "ekf":
+            self._arr_hist.append((self._ekf_x, self._ekf_P))  # prior of x(t) given y(..t-1)
+            self._ekf_post = ekf_update(self._ekf_x, self._ekf_P, y, np.array([self.model.h(self._ekf_x)]),
+                                        self.model.h_jacobian(self._ekf_x), self._R)[:2]
+        if len(self._y) < N + 1:  # warming up: propagate the prior, eq. (11), or the alongside EKF's estimate
+            if self.arrival == "ekf":
+                x = np.clip(self._ekf_post[0], self.lower, self.upper)
+            else:
+                x = self.x_prior0
+                for k in range(len(self._y) - 1):
+                    x = self.model.f(x, self._u[k])
             self._last = x
+            self._ekf_predict(float(uu[0]))
             return self._estimate(x, Health.NOT_EXCITED, {"warming_up": True})
         if len(self._y) > N + 1:
             # the window slides: the new a priori start is the previous x(t-N-1|t-1) pushed one sample, eq. (11)
-            y_old, _ = self._y.pop(0), self._u.pop(0)
-            base, f_base, F_base = self._x_est0, self._f_est0, self._F_est0
-            if self.arrival == "ekf":
-                _, Pk, _ = ekf_update(base, self._P, np.array([y_old]), np.array([self.model.h(base)]),
-                                      self.model.h_jacobian(base), self._R)
-                # the linearization of f at base, up to the EKF's own update of the mean (second order)
-                _, self._P = ekf_predict(f_base, F_base, Pk, self._Q)
-            self.x_prior0 = np.clip(f_base, self.lower, self.upper)
+            self._y.pop(0), self._u.pop(0)
+            self.x_prior0 = np.clip(self._f_est0, self.lower, self.upper)
+        if self.arrival == "ekf":
+            self.x_prior0, self._P = self._arr_hist[0]
         Y = np.asarray(self._y)
         U = np.asarray(self._u[:N])
         try:
@@ -280,20 +351,47 @@ class RegularizedMHE(Estimator):
             self._n_fail += 1
             try:
                 Xb = np.asarray(self._fun_prior(self.x_prior0, U))
-                f0, F0 = self.model.f_and_jacobian(self.x_prior0, float(U[0]))
-                usable = bool(np.all(np.isfinite(Xb)) and np.all(np.isfinite(F0)))
+                f0 = Xb[:, 1]
+                usable = bool(np.all(np.isfinite(Xb)))
             except Exception:  # noqa: BLE001
                 usable = False
             if not usable:  # even the prior is unusable: hold the last estimate, restart from the prior start
-                self._x_est0, self._f_est0, self._F_est0 = self.x_prior0, self.x_prior0, np.eye(self.model.nx)
+                self._x_est0, self._f_est0 = self.x_prior0, self.x_prior0
+                self._ekf_predict(float(uu[0]))
                 return self._estimate(self._last, Health.SOLVER_FAILED, info)
-            self._x_est0, self._f_est0, self._F_est0 = self.x_prior0, f0, F0
+            self._x_est0, self._f_est0 = self.x_prior0, f0
+            self._X_prev = None
             self._last = Xb[:, -1]
+            self._ekf_predict(float(uu[0]))
             return self._estimate(self._last, Health.SOLVER_FAILED, info)
         self._x_est0 = sol["z"][:self.model.nx]
-        self._f_est0, self._F_est0 = sol["f0"], sol["F0"]
+        self._X_prev, self._w_prev = sol["X"], sol["z"][self.model.nx:]
+        self._f_est0 = sol["f0"]
         self._last = sol["X"][:, -1]
+        gate = self.gate
+        if self.arrival == "ekf" and gate:
+            x_ekf, P_ekf = self._ekf_post
+            d = self._last - x_ekf
+            d2 = float(d @ np.linalg.solve(P_ekf + PD_JITTER * np.eye(len(d)), d))
+            info = {**info, "gate_d2": d2}
+            if d2 > gate:
+                self._last = np.clip(x_ekf, self.lower, self.upper)
+                self._X_prev = None
+                info["gated"] = True
+        self._ekf_predict(float(uu[0]))
         return self._estimate(self._last, health, info)
+
+    def _ekf_predict(self, u: float) -> None:
+        """Arrival cost (arrival="ekf"): the alongside EKF's time update from x(t|t) to the prior of x(t+1)."""
+        if self.arrival != "ekf":
+            return
+        x_post, P_post = self._ekf_post
+        x_post = np.clip(x_post, self.lower, self.upper)
+        xn, F = self.model.f_and_jacobian(x_post, u)
+        if np.all(np.isfinite(xn)) and np.all(np.isfinite(F)):
+            self._ekf_x, self._ekf_P = ekf_predict(np.clip(xn, self.lower, self.upper), F, P_post, self._Q)
+        else:
+            self._ekf_x, self._ekf_P = self._ekf_x, self._P0.copy()
 
     # ------------------------------------------------------------------ weights and solver
     def _weights(self, Phi: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
@@ -307,32 +405,38 @@ class RegularizedMHE(Estimator):
             Wfull = np.zeros((N1, N1))
             Wfull[:nx] = W
             return Wfull, s, int(keep.sum())
-        Phi_s = Phi * self.D / self.noise_std
+        if self.arrival == "ekf":
+            # the prior is the EKF covariance P = L L^T: scale the states by L, so that s_i^2 is the window's
+            # information along v_i relative to the arrival cost's
+            L = np.linalg.cholesky(0.5 * (self._P + self._P.T) + PD_JITTER * np.eye(nx))
+            Phi_s = Phi @ L / self.noise_std
+        else:
+            Phi_s = Phi * self.D / self.noise_std
         Uu, s, _ = np.linalg.svd(Phi_s, full_matrices=False)
         keep = s >= self.delta
         Ud = Uu[:, ~keep]
         return (np.eye(N1) - Ud @ Ud.T) / self.noise_std, s, int(keep.sum())
 
-    def _prior_weights(self) -> tuple[np.ndarray, np.ndarray]:
-        sqb = np.sqrt(self.beta)
-        Wp = np.diag(sqb / self.D)
+    def _prior_weights(self) -> tuple[np.ndarray, np.ndarray | None]:
+        """(weight of x(t-N) - xbar(t-N), weight of the later window states' deviations or None)."""
         if self.arrival == "ekf":
-            # ||L^-1 (x - xbar)||^2 = (x - xbar)^T P^-1 (x - xbar), P = L L^T
-            L = np.linalg.cholesky(0.5 * (self._P + self._P.T) + 1e-12 * np.eye(len(self.D)))
-            Wa = np.linalg.solve(L, np.eye(len(self.D)))
-            Wp = np.zeros_like(Wp)  # the EKF covariance already carries the prior; no double counting
-        else:
-            Wa = Wp
-        return Wa, Wp
+            # ||L^-1 (x - xbar)||^2 = (x - xbar)^T P^-1 (x - xbar), P = L L^T; the EKF covariance carries the whole
+            # prior: no terms on the later window states (no double counting)
+            L = np.linalg.cholesky(0.5 * (self._P + self._P.T) + PD_JITTER * np.eye(len(self.D)))
+            return np.linalg.solve(L, np.eye(len(self.D))), None
+        Wp = np.diag(np.sqrt(self.beta) / self.D)
+        return Wp, Wp
 
     def _residual(self, ev: dict, W, Wa, Wp) -> tuple[np.ndarray, np.ndarray]:
-        """Weighted residual and Jacobian of (12a) from the unweighted pieces."""
+        """Weighted residual and Jacobian of (12a) (plus the process-noise terms) from the unweighted pieces."""
         nx = self.model.nx
-        r = [W @ ev["e"], Wa @ ev["dev"][0], (ev["dev"][1:] @ Wp.T).ravel()]
-        J = [-W @ ev["PhiZ"], Wa @ ev["devJ"][0], np.einsum("ij,kjl->kil", Wp, ev["devJ"][1:]).reshape(-1, self._nz)]
+        r = [W @ ev["e"], Wa @ ev["dev"][0]]
+        J = [-W @ ev["PhiZ"], Wa @ ev["devJ"][0]]
+        if Wp is not None:
+            r.append((ev["dev"][1:] @ Wp.T).ravel())
+            J.append(np.einsum("ij,kjl->kil", Wp, ev["devJ"][1:]).reshape(-1, self._nz))
         if self._nz > nx:
-            zw = ev["z"][nx:]
-            r.append(zw / self._w_scale)
+            r.append(ev["z"][nx:] / self._w_scale)
             Jw = np.zeros((self._nz - nx, self._nz))
             Jw[:, nx:] = np.diag(1.0 / self._w_scale)
             J.append(Jw)
@@ -341,7 +445,12 @@ class RegularizedMHE(Estimator):
     def _solve(self, xb0: np.ndarray, Y: np.ndarray, U: np.ndarray):
         """Projected Levenberg-Marquardt on (12a) from the a priori start; returns (solution or None, health, info)."""
         z = self._z(xb0)
-        Xbar = np.asarray(self._fun_prior(xb0, U)).T  # eq. (11), row i = xbar(t-N+i)
+        # eq. (11), row i = xbar(t-N+i); with the EKF arrival cost only xbar(t-N) enters
+        Xbar = np.asarray(self._fun_prior(xb0, U)).T if self.arrival == "paper" else np.tile(xb0, (self.N + 1, 1))
+        nx = self.model.nx
+        if self._nz > nx and self._X_prev is not None:
+            z[nx:] = np.r_[self._w_prev[2:], 0.0, 0.0]
+
         ev = self._evaluate(z, Xbar, Y, U)
         nx = self.model.nx
         W, s, rank = self._weights(ev["PhiZ"][:, :nx])  # Phi_hat at the a priori state, eq. (14)

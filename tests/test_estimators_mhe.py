@@ -60,8 +60,8 @@ def test_mhe_case1_recovers_v_slip_theta():
     pc = mhe_case(1, seed=0)
     out = run(RegularizedMHE(estimated=pc.estimated), pc.log)
     m = pc.log.t >= 0.5
-    assert _rms(out["v"], pc.v, m) < 0.2  # measured 0.13 (EKF 0.09): see the report
-    assert _rms(out["slip"], pc.slip, m) < 0.012  # measured 0.008
+    assert _rms(out["v"], pc.v, m) < 0.12  # measured 0.091 (EKF 0.090)
+    assert _rms(out["slip"], pc.slip, m) < 0.011  # measured 0.0087
     i05 = int(np.argmax(m))
     assert abs(out["theta"][i05] - 1.0) < 0.02  # paper target: theta within 0.02 on dry by 0.5 s
     assert abs(out["theta"][-1] - 1.0) < 0.03
@@ -99,8 +99,8 @@ def _constant_torque_log(n=301, seed=0):
 def test_no_excitation_thresholding_keeps_bce_near_prior():
     log, start = _constant_torque_log()
     est = ("theta", "B", "C", "E")
-    out = run(RegularizedMHE(estimated=est), log, reset_kwargs=start)
-    # scaled reading: held near the prior (B = 12, C = 1.3, E = 0) and flagged
+    out = run(RegularizedMHE(estimated=est, arrival="paper", model_error=None), log, reset_kwargs=start)
+    # the paper's MHE, scaled reading: held near the prior (B = 12, C = 1.3, E = 0) and flagged
     assert np.max(np.abs(out["B"] - 12.0)) < 0.6
     assert np.max(np.abs(out["C"] - 1.3)) < 0.25
     assert np.max(np.abs(out["E"])) < 0.8
@@ -117,7 +117,7 @@ def test_no_excitation_thresholding_keeps_bce_near_prior():
 
 def test_forced_solver_failure_falls_back_to_prior_and_flags():
     pc = mhe_case(1, seed=0)
-    est = RegularizedMHE(estimated=pc.estimated)
+    est = RegularizedMHE(estimated=pc.estimated, arrival="paper", model_error=None)  # the paper's MHE
     est.reset()
     for k in range(30):
         est.update(pc.log.omega[k], pc.log.T_b[k])
@@ -172,24 +172,92 @@ def test_mhe_config_errors():
         RegularizedMHE(estimated=("mu",))
     with pytest.raises(EstimatorConfigError, match="alpha"):
         RegularizedMHE(alpha=0.0)
+    with pytest.raises(EstimatorConfigError, match="model_error"):
+        RegularizedMHE(model_error="ekf")
+    with pytest.raises(EstimatorConfigError, match="model_error"):
+        RegularizedMHE(model_error=(0.01, -1.0))
+    with pytest.raises(EstimatorConfigError, match="gate"):
+        RegularizedMHE(gate=0.0)
+
+
+def test_forced_solver_failure_default_mhe_flags_and_recovers():
+    pc = mhe_case(1, seed=0)
+    est = RegularizedMHE(estimated=pc.estimated)
+    est.reset()
+    for k in range(30):
+        est.update(pc.log.omega[k], pc.log.T_b[k])
+    good = est._fun
+    est._fun = lambda *a: (_ for _ in ()).throw(RuntimeError("forced failure"))
+    e = est.update(pc.log.omega[30], pc.log.T_b[30])
+    assert e.health == Health.SOLVER_FAILED and "forced failure" in e.info["reason"]
+    assert abs(e["v"] - pc.v[30]) < 0.5  # the a priori trajectory from the EKF arrival prior
+    est._fun = good
+    for k in range(31, 60):
+        e = est.update(pc.log.omega[k], pc.log.T_b[k])
+        assert e.health in (Health.OK, Health.NOT_EXCITED)
+        assert abs(e["v"] - pc.v[k]) < 0.5
+
+
+def test_mhe_defaults_and_paper_option():
+    """Default: EKF arrival cost and process noise with the EKF's Q (beyond the paper); the paper's MHE stays."""
+    from estimators.ekf import DEFAULT_EKF_TUNING
+
+    q = DEFAULT_EKF_TUNING["Q_std"]
+    for est in (("theta",), ("theta", "B", "C", "E")):
+        mhe = RegularizedMHE(estimated=est)
+        assert mhe.arrival == "ekf"
+        np.testing.assert_allclose(mhe.model_error, [q["v"], q["slip"]])
+        paper = RegularizedMHE(estimated=est, arrival="paper", model_error=None)
+        assert paper.model_error is None and paper._nz == paper.model.nx  # hard dynamics (12b)
+    assert RegularizedMHE(weighting="literal").arrival == "paper"
+
+
+def test_mhe_alongside_ekf_is_the_ekf():
+    """With a gate of ~0 every solution is replaced by the alongside EKF's x(t|t) (as is the warm-up output): it
+    must be QuarterCarEKF's."""
+    from estimators.ekf import QuarterCarEKF
+
+    pc = mhe_case(2, seed=1, duration=0.5)
+    gated = run(RegularizedMHE(estimated=pc.estimated, gate=1e-12), pc.log)
+    ekf = run(QuarterCarEKF(estimated=pc.estimated), pc.log)
+    for key in ("v", "slip", "theta"):
+        np.testing.assert_allclose(gated[key], ekf[key], rtol=1e-9, atol=1e-12)
+
+
+def test_mhe_process_noise_case1_within_ekf():
+    """Case 1 (B, C, E fixed at wrong nominal values), seed 0: the default MHE (process noise in the window, EKF
+    arrival cost) is as accurate as the EKF; the paper's hard-dynamics MHE is not."""
+    from estimators.ekf import QuarterCarEKF
+
+    pc = mhe_case(1, seed=0)
+    m = pc.log.t >= 0.5
+    mhe = run(RegularizedMHE(estimated=pc.estimated), pc.log)
+    ekf = run(QuarterCarEKF(estimated=pc.estimated), pc.log)
+    paper = run(RegularizedMHE(estimated=pc.estimated, arrival="paper", model_error=None), pc.log)
+    assert _rms(mhe["v"], pc.v, m) < 1.03 * _rms(ekf["v"], pc.v, m)  # measured 0.0914 vs 0.0898
+    assert _rms(mhe["slip"], pc.slip, m) < _rms(ekf["slip"], pc.slip, m)  # measured 0.00873 vs 0.00889
+    assert _rms(paper["v"], pc.v, m) > 1.3 * _rms(ekf["v"], pc.v, m)  # measured 0.151
 
 
 def test_mhe_ekf_arrival_and_model_error_options_run():
     pc = mhe_case(1, seed=0, duration=0.6)
-    for kw in ({"arrival": "ekf"}, {"arrival": "ekf", "model_error": (0.01, 0.01)}):
+    for kw in ({"arrival": "ekf", "model_error": None, "gate": None}, {"model_error": (0.02, 0.005)}):
         out = run(RegularizedMHE(estimated=pc.estimated, **kw), pc.log)
         m = pc.log.t >= 0.3
         assert _rms(out["v"], pc.v, m) < 0.3
         assert abs(out["theta"][-1] - 1.0) < 0.05
+    with pytest.raises(EstimatorConfigError, match="arrival='ekf'"):
+        RegularizedMHE(arrival="paper", model_error=(0.01, 0.01))
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("case", [1, 2, 3, 4])
-def test_mhe_paper_cases_slip_no_worse_than_ekf(case):
+def test_mhe_paper_cases_no_worse_than_ekf(case):
     from estimators.ekf import QuarterCarEKF
 
     pc = mhe_case(case, seed=0)
     m = pc.log.t >= 0.5
     mhe = run(RegularizedMHE(estimated=pc.estimated), pc.log)
     ekf = run(QuarterCarEKF(estimated=pc.estimated), pc.log)
-    assert _rms(mhe["slip"], pc.slip, m) < 1.5 * _rms(ekf["slip"], pc.slip, m)
+    assert _rms(mhe["slip"], pc.slip, m) < _rms(ekf["slip"], pc.slip, m)
+    assert _rms(mhe["v"], pc.v, m) < 1.03 * _rms(ekf["v"], pc.v, m)
