@@ -156,10 +156,7 @@ class QuarterCarEKF(Estimator):
         return self._estimate(self.x, Health.OK)
 
     def _estimate(self, x: np.ndarray, health: Health, info: dict | None = None) -> Estimate:
-        B, C, E, theta = self.model.road(x)
-        values = {"v": float(x[0]), "slip": float(x[1]), "theta": float(theta), "B": float(B), "C": float(C),
-                  "E": float(E), "mu": self.model.mu(x)}
-        return Estimate(values, health, info or {})
+        return Estimate(self.model.values(x), health, info or {})
 
     def update(self, measurement, u) -> Estimate:
         sample = self._validated_sample(measurement, u)

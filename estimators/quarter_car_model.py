@@ -214,6 +214,12 @@ class AugmentedModel:
         H[0, 1] = -x[0] / self.p.r
         return H
 
+    def values(self, x) -> dict[str, float]:
+        """The named values every quarter-car :class:`~estimators.base.Estimate` carries, from a state."""
+        B, C, E, theta = self.road(x)
+        return {"v": float(x[0]), "slip": float(x[1]), "theta": float(theta), "B": float(B), "C": float(C),
+                "E": float(E), "mu": self.mu(x)}
+
     def mu(self, x, slip: float | None = None) -> float:
         """Friction coefficient of state ``x`` at its own slip (or at ``slip``)."""
         from fricenv.plants.tire import magic_formula
