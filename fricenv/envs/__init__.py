@@ -5,7 +5,7 @@ One ``register`` call per environment, entry points as strings (the env module i
 
 from gymnasium.envs.registration import register, registry
 
-__all__ = ["ENV_IDS"]
+__all__ = ["BRAKING_VARIANTS", "ENV_IDS", "PAYLOAD_VARIANTS"]
 
 ENV_IDS: list[str] = []
 
@@ -17,5 +17,23 @@ def _register(env_id: str, entry_point: str, **kwargs) -> None:
         register(id=env_id, entry_point=entry_point, **kwargs)
 
 
-_register("fricenv/Braking-v0", "fricenv.envs.braking:BrakingEnv")
-_register("fricenv/PayloadExcitation-v0", "fricenv.envs.payload:PayloadExcitationEnv")
+# The factories return the plain env for estimator="none" and wrap it in EstimatorObservation otherwise, so
+# gymnasium.make("fricenv/Braking-v0", estimator="ekf") works.
+_register("fricenv/Braking-v0", "fricenv.envs.factory:make_braking",
+          vector_entry_point="fricenv.envs.braking_vector:BrakingVectorEnv")
+_register("fricenv/PayloadExcitation-v0", "fricenv.envs.factory:make_payload")
+# One id per estimator choice (id -> estimator), for code that can only pass an id.
+BRAKING_VARIANTS: dict[str, str] = {
+    "fricenv/BrakingEKF-v0": "ekf",
+    "fricenv/BrakingMHE-v0": "mhe",
+    "fricenv/BrakingEKFRLS-v0": "ekf-rls",
+    "fricenv/BrakingOracleEstimate-v0": "oracle",
+}
+PAYLOAD_VARIANTS: dict[str, str] = {
+    "fricenv/PayloadExcitationRLS-v0": "rls",
+    "fricenv/PayloadExcitationOracle-v0": "oracle",
+}
+for _env_id, _estimator in BRAKING_VARIANTS.items():
+    _register(_env_id, "fricenv.envs.factory:make_braking", kwargs={"estimator": _estimator})
+for _env_id, _estimator in PAYLOAD_VARIANTS.items():
+    _register(_env_id, "fricenv.envs.factory:make_payload", kwargs={"estimator": _estimator})

@@ -1,0 +1,94 @@
+"""Reproduce the headline table from scratch: PPO with none / EKF-RLS / MHE / oracle observations, the rule ABS
+and estimator + slip controller, on the fixed evaluation scenario set.
+
+Trains one PPO policy per observation estimator (``--steps`` each, ``--workers`` trainings at a time; an existing
+run in ``--out`` is reused with ``--reuse``), then evaluates all rows with ``fricenv evaluate``'s scenario set and
+prints the table, a per-policy summary (mean and worst ratio over the scenarios, lock events) and the training wall
+times. ``--excitation`` also trains excitation policies on PayloadExcitation-v0 with and without the RLS estimate
+S_hat in the observation and compares their time to E < 1e-2 and final E with the multi-sine and PRBS.
+"""
+
+from __future__ import annotations
+
+import argparse
+
+DEFAULT_ESTIMATORS = ("none", "ekf-rls", "mhe", "oracle")
+DEFAULT_STEPS = 500_000
+DEFAULT_PAYLOAD_STEPS = 120_000
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Options of ``fricenv compare``."""
+    parser.add_argument("--estimators", nargs="+", default=list(DEFAULT_ESTIMATORS),
+                        help="observation estimators of the PPO rows (default: %(default)s)")
+    parser.add_argument("--algo", choices=("ppo", "sac"), default="ppo", help="algorithm (default %(default)s)")
+    parser.add_argument("--steps", type=int, default=DEFAULT_STEPS, help="training steps per policy "
+                                                                          "(default %(default)s)")
+    parser.add_argument("--pipeline", default="ekf-rls",
+                        help="estimator of the estimator + slip controller row (default %(default)s)")
+    parser.add_argument("--seed", type=int, default=0, help="training seed (default %(default)s)")
+    parser.add_argument("--seeds", type=int, default=3, help="evaluation seeds (default %(default)s)")
+    parser.add_argument("--workers", type=int, default=2, help="parallel processes (default %(default)s)")
+    parser.add_argument("--out", default="runs/compare", metavar="DIR", help="output directory")
+    parser.add_argument("--reuse", action="store_true", help="reuse finished runs found in --out")
+    parser.add_argument("--excitation", action="store_true",
+                        help="also train and compare excitation policies on PayloadExcitation-v0")
+    parser.add_argument("--payload-steps", type=int, default=DEFAULT_PAYLOAD_STEPS,
+                        help="training steps per excitation policy (default %(default)s)")
+    parser.add_argument("--json", metavar="PATH", help="write {\"rows\": [...], ...} as JSON")
+
+
+def run(args) -> int:
+    """Train, evaluate, print and write the comparison."""
+    import time
+    from pathlib import Path
+
+    from agents.evaluation import (
+        compare_abs,
+        compare_excitation,
+        format_table,
+        summarize_policies,
+        write_outputs,
+    )
+    from fricenv.utils import write_json
+
+    out = Path(args.out)
+    t0 = time.perf_counter()
+    try:
+        abs_result = compare_abs(out, estimators=args.estimators, algo=args.algo, steps=args.steps,
+                                 pipeline=args.pipeline, seed=args.seed, seeds=args.seeds, workers=args.workers,
+                                 reuse=args.reuse)
+    except ValueError as exc:
+        raise SystemExit(f"fricenv compare: {exc}") from None
+    rows = abs_result["rows"]
+    print(format_table(rows))
+    print()
+    summary = summarize_policies(rows)
+    print(f"{'policy':<26} {'mean ratio':>10} {'worst':>7} {'locks':>5}   (over {len(summary[0]['scenarios'])} "
+          f"scenarios x {args.seeds} seeds)" if summary else "no rows")
+    for s in summary:
+        print(f"{s['policy']:<26} {s['ratio_mean']:>10.3f} {s['ratio_worst']:>7.3f} {s['locks']:>5d}")
+    for t in abs_result["training"]:
+        print(f"training {t['estimator']:<8}: {t['steps']} steps, {t['wall_time_s']:.0f} s, "
+              f"{t['steps_per_second']:.0f} steps/s")
+    print(f"evaluation wall time {abs_result['evaluation_time_s']:.0f} s")
+    written = write_outputs(rows, out, None, title="headline comparison")
+    payload = None
+    if args.excitation:
+        payload = compare_excitation(out / "excitation", steps=args.payload_steps, seed=args.seed,
+                                     workers=args.workers, reuse=args.reuse)
+        print()
+        print(f"{'excitation policy':<22} {'t(E<1e-2)':>10} {'E_end':>10} {'effort':>8} {'left ws':>7}")
+        for r in payload["rows"]:
+            tb = "never" if r["t_below_1e-2"] is None else f"{r['t_below_1e-2']:.2f} s"
+            print(f"{r['policy']:<22} {tb:>10} {r['E_end']:>10.2e} {r['effort']:>8.3f} {r['left_workspace']:>7d}")
+    total = time.perf_counter() - t0
+    print(f"total wall time {total:.0f} s")
+    for kind, path in written.items():
+        print(f"wrote {kind}: {path}")
+    if args.json:
+        write_json(args.json, {"rows": rows, "summary": summary, "training": abs_result["training"],
+                               "evaluation_time_s": abs_result["evaluation_time_s"],
+                               "excitation": payload, "total_time_s": total})
+        print(f"wrote json: {args.json}")
+    return 0

@@ -1,0 +1,424 @@
+"""Evaluate ABS policies and classical controllers on one fixed scenario set, over several seeds.
+
+Scenario set (:data:`SCENARIOS`), sensor noise on (the env's defaults): every road preset (dry, wet, snow, ice) at
+20 and 30 m/s, and the friction changes dry->ice and ice->dry (at 15 m) at 20 and 30 m/s. Each (policy, scenario)
+runs over ``seeds`` episodes with ``reset(seed=s)``, ``s = 0..seeds-1``: the same seed gives the same noise to
+every policy, and the whole table is deterministic for a fixed seed list.
+
+Metrics per (policy, scenario): mean and std over seeds of the stopping-distance ratio to the physical limit
+(``info["ratio"]``; an episode that does not stop before the time limit counts with its distance travelled, a
+lower bound, and ``stopped`` says how many did stop), the number of episodes in which the wheel locked, and the
+mean ``|slip - lambda*|`` over the stop (``lambda*`` the peak slip of the road under the car, capped at 0.4 as by
+every slip controller, :func:`agents.controllers.slip_reference`).
+
+Policies are named by a spec string (:func:`parse_policy`):
+
+=========================  ============================================================================
+spec                       policy
+=========================  ============================================================================
+``rule-abs``               :class:`agents.controllers.RuleBasedABS` (measured signals)
+``oracle-slip``            :class:`agents.controllers.OracleSlipController` (true state and road)
+``locked``                 full braking
+``pipeline:EST``           estimator EST + slip controller (:class:`agents.pipeline.EstimatorSlipPipeline`)
+``DIR``                    a trained run directory (``train.json``, ``model.zip``, ``vecnormalize.pkl``)
+=========================  ============================================================================
+
+Jobs (one per policy, scenario and seed) run in ``workers`` processes.
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import os
+from collections.abc import Sequence
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from fricenv.utils import atomic_write, write_json
+
+__all__ = [
+    "CLASSICAL",
+    "ROW_KEYS",
+    "SCENARIOS",
+    "PolicySpec",
+    "Scenario",
+    "evaluate",
+    "format_table",
+    "parse_policy",
+    "run_episode",
+    "summarize",
+    "write_outputs",
+]
+
+CLASSICAL = ("rule-abs", "oracle-slip", "locked")
+PIPELINE_PREFIX = "pipeline:"
+SPEEDS = (20.0, 30.0)  # initial speeds of the scenario set [m/s]
+ROAD_NAMES = ("dry", "wet", "snow", "ice")
+TRANSITIONS = ("dry->ice", "ice->dry")
+CHANGE_DISTANCE = 15.0  # [m]
+DEFAULT_SEEDS = 3
+ROW_KEYS = ("policy", "estimator", "scenario", "ratio_mean", "ratio_std", "locks", "slip_err_mean", "stopped",
+            "episodes")
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """One evaluation scenario."""
+
+    road: str  # road spec of Braking-v0
+    v0: float  # initial speed [m/s]
+
+    @property
+    def name(self) -> str:
+        return f"{self.road}@{self.v0:g}"
+
+
+SCENARIOS: tuple[Scenario, ...] = tuple(Scenario(r, v) for v in SPEEDS for r in ROAD_NAMES) + tuple(
+    Scenario(r, v) for v in SPEEDS for r in TRANSITIONS)
+
+
+@dataclass(frozen=True)
+class PolicySpec:
+    """A policy to evaluate: its label, kind and estimator."""
+
+    label: str  # row label ("rule-abs", "ppo[ekf]", "est+slip-pi[ekf-full]", ...)
+    kind: str  # "classical" | "pipeline" | "trained"
+    estimator: str  # estimator whose outputs the policy sees ("none" for classical)
+    source: str  # the spec string
+
+
+def parse_policy(spec: str) -> PolicySpec:
+    """Parse a policy spec (see the module docstring); ValueError listing the valid forms."""
+    from fricenv.envs.estimator_observation import ESTIMATOR_NAMES
+
+    if spec in CLASSICAL:
+        return PolicySpec(spec, "classical", "none", spec)
+    if spec.startswith(PIPELINE_PREFIX):
+        est = spec[len(PIPELINE_PREFIX):]
+        valid = [n for n in ESTIMATOR_NAMES if n != "none"]
+        if est not in valid:
+            raise ValueError(f"unknown pipeline estimator {est!r}; valid: {', '.join(valid)}")
+        return PolicySpec(f"est+slip-pi[{est}]", "pipeline", est, spec)
+    path = Path(spec)
+    if (path / "train.json").is_file():
+        import json
+
+        meta = json.loads((path / "train.json").read_text())
+        if meta.get("env", "braking") != "braking":
+            raise ValueError(f"{spec} is a {meta.get('env')} policy; evaluate takes braking policies")
+        return PolicySpec(f"{meta.get('algo', 'ppo')}[{meta.get('estimator', 'none')}]", "trained",
+                          meta.get("estimator", "none"), spec)
+    raise ValueError(f"unknown policy {spec!r}; valid: {', '.join(CLASSICAL)}, pipeline:<estimator>, or a "
+                     f"training run directory (with train.json)")
+
+
+_POLICY_CACHE: dict[str, Any] = {}
+
+
+def _controller(spec: PolicySpec, env):
+    from agents.controllers import make_controller
+
+    if spec.kind == "classical":
+        return make_controller(spec.source, env)
+    if spec.kind == "pipeline":
+        from agents.pipeline import EstimatorSlipPipeline
+
+        return EstimatorSlipPipeline(env)
+    if spec.source not in _POLICY_CACHE:
+        from agents.training import load_policy
+
+        _POLICY_CACHE[spec.source] = load_policy(spec.source)
+    return _POLICY_CACHE[spec.source]
+
+
+def run_episode(spec: PolicySpec, scenario: Scenario, seed: int) -> dict[str, Any]:
+    """One episode of a policy on a scenario: ratio, lock, mean |slip - lambda*|, stopped.
+
+    :param spec: the policy.
+    :param scenario: the scenario.
+    :param seed: reset seed (noise).
+    """
+    from agents.controllers import slip_reference
+    from fricenv.envs.factory import make_braking
+
+    observation = "oracle" if spec.source == "oracle-slip" else "default"
+    env = make_braking(spec.estimator, road=scenario.road, v0=scenario.v0, change_distance=CHANGE_DISTANCE,
+                       observation=observation)
+    ctl = _controller(spec, env)
+    obs, info = env.reset(seed=seed)
+    ctl.reset()
+    base = env.unwrapped
+    refs = {}
+    errs = []
+    while True:
+        obs, _, terminated, truncated, info = env.step(ctl.act(obs))
+        road = base.road
+        if road.name not in refs:
+            refs[road.name] = slip_reference(road)[0]
+        if not terminated or info["v"] > base.config.v_stop:
+            errs.append(abs(info["slip"] - refs[road.name]))
+        if terminated or truncated:
+            break
+    stopped = bool(info["stopped"])
+    distance = info["stopping_distance"] if stopped else info["distance"]
+    env.close()
+    return {"ratio": float(distance / info["limit_distance"]), "lock": bool(info["lock_seen"]),
+            "slip_err": float(np.mean(errs)) if errs else float("nan"), "stopped": stopped}
+
+
+def _job(args):
+    spec, scenario, seed = args
+    import torch
+
+    torch.set_num_threads(1)
+    return run_episode(spec, scenario, seed)
+
+
+def evaluate(policies: Sequence[str | PolicySpec], scenarios: Sequence[Scenario] = SCENARIOS,
+             seeds: int | Sequence[int] = DEFAULT_SEEDS, workers: int | None = None,
+             progress: bool = True) -> list[dict[str, Any]]:
+    """Run every policy on every scenario and seed; one summary row per (policy, scenario).
+
+    :param policies: policy specs (strings or :class:`PolicySpec`).
+    :param scenarios: the scenario set.
+    :param seeds: number of seeds (0..n-1) or an explicit list.
+    :param workers: worker processes (default: min(2, CPUs)); 1 runs in this process.
+    :param progress: show a progress bar.
+    :return: rows with :data:`ROW_KEYS`.
+    """
+    from fricenv.utils import progress as progress_bar
+
+    specs = [p if isinstance(p, PolicySpec) else parse_policy(p) for p in policies]
+    labels = [s.label for s in specs]
+    if len(set(labels)) < len(labels):  # e.g. several runs of one algorithm and estimator: name them by directory
+        specs = [dataclasses.replace(s, label=f"{s.label}@{Path(s.source).name}") if labels.count(s.label) > 1
+                 else s for s in specs]
+        if len({s.label for s in specs}) < len(specs):
+            raise ValueError(f"policies must be distinct, got {[s.source for s in specs]}")
+    seed_list = list(range(seeds)) if isinstance(seeds, int) else [int(s) for s in seeds]
+    if not seed_list:
+        raise ValueError("seeds must be a positive number or a non-empty list")
+    jobs = [(spec, sc, s) for spec in specs for sc in scenarios for s in seed_list]
+    workers = workers if workers is not None else min(2, os.cpu_count() or 1)
+    if workers <= 1:
+        it = map(_job, jobs)
+        results = list(progress_bar(it, total=len(jobs), desc="evaluate") if progress else it)
+    else:
+        with ProcessPoolExecutor(max_workers=workers) as pool:
+            it = pool.map(_job, jobs, chunksize=1)
+            results = list(progress_bar(it, total=len(jobs), desc="evaluate") if progress else it)
+    return summarize(jobs, results)
+
+
+def summarize(jobs, results) -> list[dict[str, Any]]:
+    """Group episode results by (policy, scenario) into summary rows."""
+    groups: dict[tuple[str, str], dict[str, Any]] = {}
+    for (spec, sc, _), res in zip(jobs, results):
+        g = groups.setdefault((spec.label, sc.name), {"spec": spec, "res": []})
+        g["res"].append(res)
+    rows = []
+    for (label, scenario), g in groups.items():
+        ratios = np.array([r["ratio"] for r in g["res"]])
+        rows.append({
+            "policy": label,
+            "estimator": g["spec"].estimator,
+            "scenario": scenario,
+            "ratio_mean": float(np.mean(ratios)),
+            "ratio_std": float(np.std(ratios)),
+            "locks": int(sum(r["lock"] for r in g["res"])),
+            "slip_err_mean": float(np.nanmean([r["slip_err"] for r in g["res"]])),
+            "stopped": int(sum(r["stopped"] for r in g["res"])),
+            "episodes": len(g["res"]),
+        })
+    return rows
+
+
+def format_table(rows: Sequence[dict[str, Any]]) -> str:
+    """A plain-text table: one line per (policy, scenario)."""
+    head = f"{'policy':<26} {'scenario':<14} {'ratio':>16} {'locks':>5} {'|slip-l*|':>9} {'stopped':>7}"
+    lines = [head, "-" * len(head)]
+    for r in rows:
+        lines.append(f"{r['policy']:<26} {r['scenario']:<14} {r['ratio_mean']:>8.3f} +- {r['ratio_std']:<5.3f} "
+                     f"{r['locks']:>5d} {r['slip_err_mean']:>9.3f} {r['stopped']:>3d}/{r['episodes']:<3d}")
+    return "\n".join(lines)
+
+
+def write_outputs(rows: Sequence[dict[str, Any]], out_dir: str | Path | None = None,
+                  json_path: str | Path | None = None, title: str = "stopping-distance ratio") -> dict[str, Path]:
+    """Write ``results.csv`` and ``ratios.png`` in ``out_dir`` and ``{"rows": [...]}`` to ``json_path``.
+
+    :return: the written paths by kind.
+    """
+    written: dict[str, Path] = {}
+    if json_path is not None:
+        write_json(json_path, {"rows": list(rows)})
+        written["json"] = Path(json_path)
+    if out_dir is None:
+        return written
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    with atomic_write(out / "results.csv") as fh:
+        w = csv.DictWriter(fh, fieldnames=list(ROW_KEYS), lineterminator="\n")
+        w.writeheader()
+        for r in rows:
+            w.writerow({k: r[k] for k in ROW_KEYS})
+    written["csv"] = out / "results.csv"
+    written["png"] = _bar_chart(rows, out / "ratios.png", title)
+    return written
+
+
+def _bar_chart(rows, path: Path, title: str) -> Path:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    policies = list(dict.fromkeys(r["policy"] for r in rows))
+    scenarios = list(dict.fromkeys(r["scenario"] for r in rows))
+    table = {(r["policy"], r["scenario"]): r for r in rows}
+    width = 0.8 / max(len(policies), 1)
+    fig, ax = plt.subplots(figsize=(max(8.0, 0.9 * len(scenarios) * max(1, len(policies)) / 3), 4.5))
+    x = np.arange(len(scenarios))
+    for i, p in enumerate(policies):
+        means = [table[(p, s)]["ratio_mean"] if (p, s) in table else np.nan for s in scenarios]
+        stds = [table[(p, s)]["ratio_std"] if (p, s) in table else 0.0 for s in scenarios]
+        ax.bar(x + (i - (len(policies) - 1) / 2) * width, np.minimum(means, 2.0), width, yerr=stds, label=p,
+               capsize=2)
+    ax.axhline(1.0, color="k", lw=0.8)
+    ax.set_xticks(x, scenarios, rotation=30, ha="right")
+    ax.set_ylabel("stopping distance / physical limit")
+    ax.set_ylim(0.9, 2.0)
+    ax.set_title(title + " (bars clipped at 2)")
+    ax.legend(fontsize=8, ncol=2)
+    fig.tight_layout()
+    with atomic_write(path, "wb") as fh:
+        fig.savefig(fh, dpi=110, format="png")
+    plt.close(fig)
+    return path
+
+
+# ---------------------------------------------------------------------------------------------- headline comparison
+def summarize_policies(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Per policy over all scenarios: mean and worst ratio, total lock events, and the scenarios covered."""
+    out = []
+    for p in dict.fromkeys(r["policy"] for r in rows):
+        mine = [r for r in rows if r["policy"] == p]
+        out.append({"policy": p, "estimator": mine[0]["estimator"],
+                    "ratio_mean": float(np.mean([r["ratio_mean"] for r in mine])),
+                    "ratio_worst": float(np.max([r["ratio_mean"] for r in mine])),
+                    "locks": int(sum(r["locks"] for r in mine)),
+                    "scenarios": [r["scenario"] for r in mine]})
+    return out
+
+
+def _train_job(kwargs: dict) -> dict:
+    from agents.training import train
+
+    result = train(**kwargs)
+    return result.meta
+
+
+def _run_trainings(jobs: list[dict], workers: int) -> list[dict]:
+    """Run :func:`agents.training.train` jobs, ``workers`` at a time; returns their metadata in order."""
+    if workers <= 1 or len(jobs) <= 1:
+        return [_train_job(j) for j in jobs]
+    with ProcessPoolExecutor(max_workers=workers) as pool:
+        return list(pool.map(_train_job, jobs))
+
+
+def _finished_run(run_dir: Path) -> dict | None:
+    import json
+
+    meta, model = run_dir / "train.json", run_dir / "model.zip"
+    return json.loads(meta.read_text()) if meta.is_file() and model.is_file() else None
+
+
+def compare_abs(out: str | Path, estimators: Sequence[str] = ("none", "ekf-rls", "mhe", "oracle"),
+                algo: str = "ppo", steps: int = 300_000, pipeline: str = "ekf-rls", seed: int = 0,
+                seeds: int = DEFAULT_SEEDS, workers: int = 2, reuse: bool = False) -> dict[str, Any]:
+    """Train one policy per observation estimator, then evaluate them with the rule ABS and the pipeline.
+
+    :param out: directory; runs go to ``out/<algo>-<estimator>``.
+    :param estimators: observation estimators of the trained rows.
+    :param algo: ``ppo`` or ``sac``.
+    :param steps: training steps per policy.
+    :param pipeline: estimator of the estimator + slip controller row.
+    :param seed: training seed.
+    :param seeds: evaluation seeds.
+    :param workers: parallel processes (trainings, then evaluation jobs).
+    :param reuse: reuse finished runs in ``out``.
+    :return: ``rows`` (evaluation), ``training`` (metadata per run), ``evaluation_time_s``.
+    """
+    import time
+
+    from fricenv.envs.estimator_observation import check_estimator_name
+
+    out = Path(out)
+    for est in estimators:
+        check_estimator_name(est)
+    parse_policy(f"{PIPELINE_PREFIX}{pipeline}")
+    run_dirs = {est: out / f"{algo}-{est}" for est in estimators}
+    metas: dict[str, dict] = {}
+    jobs = []
+    for est, d in run_dirs.items():
+        done = _finished_run(d) if reuse else None
+        if done is not None:
+            metas[est] = done
+        else:
+            jobs.append({"out": d, "env": "braking", "estimator": est, "algo": algo, "steps": steps, "seed": seed,
+                         "progress_bar": False})
+    for job, meta in zip(jobs, _run_trainings(jobs, workers)):
+        metas[job["estimator"]] = meta
+    policies = [str(run_dirs[e]) for e in estimators] + ["rule-abs", f"{PIPELINE_PREFIX}{pipeline}"]
+    t0 = time.perf_counter()
+    rows = evaluate(policies, seeds=seeds, workers=workers)
+    return {"rows": rows, "training": [metas[e] for e in estimators], "evaluation_time_s": time.perf_counter() - t0}
+
+
+def compare_excitation(out: str | Path, steps: int = 100_000, seed: int = 0, episodes: int = 3, workers: int = 2,
+                       reuse: bool = False, calibration: str = "paper") -> dict[str, Any]:
+    """Excitation policies on PayloadExcitation-v0: PPO without and with the RLS estimate S_hat in the
+    observation, against the paper's multi-sine and a PRBS (same episodes, workspace and actuator limits).
+
+    :return: ``rows`` (policy, ``t_below_1e-2`` median [s] or None, ``E_end`` median, ``effort`` mean,
+        ``left_workspace``), ``training`` metadata.
+    """
+    from agents.excitation import evaluate as evaluate_excitation
+    from agents.excitation import run_episode as run_excitation
+    from agents.training import load_policy
+    from fricenv.envs.factory import make_payload
+
+    out = Path(out)
+    run_dirs = {est: out / f"ppo-payload-{est}" for est in ("none", "rls")}
+    metas, jobs = {}, []
+    for est, d in run_dirs.items():
+        done = _finished_run(d) if reuse else None
+        if done is not None:
+            metas[est] = done
+        else:
+            jobs.append({"out": d, "env": "payload", "estimator": est, "algo": "ppo", "steps": steps, "seed": seed,
+                         "progress_bar": False})
+    for job, meta in zip(jobs, _run_trainings(jobs, workers)):
+        metas[job["estimator"]] = meta
+    rows = evaluate_excitation(("multisine", "prbs"), episodes=episodes, seed=0,
+                               env_kwargs={"calibration": calibration})
+    for est, d in run_dirs.items():
+        policy = load_policy(d)
+        env = make_payload(est, calibration=calibration)
+        eps = [run_excitation(env, policy, seed=k) for k in range(episodes)]
+        tb = [np.inf if r.t_below is None else r.t_below for r in eps]
+        med = float(np.median(tb))
+        rows.append({"policy": f"ppo[{'S_hat' if est == 'rls' else 'no S_hat'}]",
+                     "t_below_1e-2": med if np.isfinite(med) else None,
+                     "E_end": float(np.median([r.E_end for r in eps])),
+                     "effort": float(np.mean([r.effort for r in eps])),
+                     "return": float(np.mean([r.ret for r in eps])),
+                     "left_workspace": int(sum(r.left_workspace for r in eps))})
+    for r in rows:
+        r.pop("episodes", None)
+    return {"rows": rows, "training": [metas[e] for e in run_dirs]}

@@ -1,0 +1,382 @@
+"""Stable-Baselines3 training of ABS policies (``Braking-v0``) and excitation policies (``PayloadExcitation-v0``).
+
+:func:`train` builds vectorised envs (each with its own seed) over randomised scenarios, trains PPO or SAC with the
+tuned defaults below, and writes to ``out``:
+
+================================  ========================================================================
+file                              content
+================================  ========================================================================
+``model.zip``                     the final policy (SB3 format)
+``vecnormalize.pkl``              observation/reward normalisation statistics (VecNormalize)
+``checkpoints/``                  periodic checkpoints (model and VecNormalize statistics)
+``tb/``                           TensorBoard logs (only if ``tensorboard`` is installed; else a warning)
+``train.json``                    env, estimator, algorithm, seed, steps, hyperparameters, wall time, steps/s
+================================  ========================================================================
+
+Braking scenarios (:class:`ScenarioMix`): each episode draws either a preset road (dry, wet, snow, ice;
+probability ``1 - change_probability``) or a friction change between two different presets at a distance drawn
+on 5..30 m, with roads weighted so that each gets about the same share of env steps, and an initial speed uniform
+on :data:`V0_RANGE`. Payload: a random calibration
+S per episode.
+
+Torch runs one thread per process (``torch.set_num_threads(1)``): on a small machine the env, not the network, is
+the bottleneck, and several threads per process only fight over the cores.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import importlib.util
+import json
+import time
+import warnings
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from fricenv.envs.braking_core import SCENARIO_SEPARATOR
+from fricenv.utils import write_json
+
+__all__ = [
+    "ALGOS",
+    "DEFAULT_CONFIGS",
+    "ENVS",
+    "PPOConfig",
+    "SACConfig",
+    "ScenarioMix",
+    "TrainResult",
+    "TrainedPolicy",
+    "load_policy",
+    "make_env_fn",
+    "train",
+]
+
+ALGOS = ("ppo", "sac")
+ENVS = ("braking", "payload")
+V0_RANGE = (15.0, 32.0)  # initial speeds drawn for training [m/s] (evaluation uses 20 and 30 m/s)
+CHANGE_PROBABILITY = 0.4  # share of training episodes with a friction change during the stop
+CHANGE_RANGE = (5.0, 30.0)  # distance of a training friction change [m]
+CHECKPOINT_EVERY = 50_000  # env steps between checkpoints
+SEED_STRIDE = 1000  # env i of a run with seed s is seeded s * SEED_STRIDE + i
+MODEL_FILE = "model.zip"
+VECNORM_FILE = "vecnormalize.pkl"
+META_FILE = "train.json"
+
+
+@dataclass(frozen=True)
+class PPOConfig:
+    """PPO defaults for the ABS task (tuned on Braking-v0 with randomised roads, 8 envs).
+
+    The reward is dense (braking efficiency per step) and the slip dynamics are fast (tens of ms), so a short
+    horizon (gamma 0.95, i.e. ~0.2 s) is enough and learns faster than the usual 0.99; rewards are normalised by
+    VecNormalize (their raw scale is 1e-4 per step).
+    """
+
+    n_envs: int = 8  # parallel envs
+    n_steps: int = 256  # rollout length per env (2048 transitions per update)
+    batch_size: int = 256  # minibatch [transitions]
+    n_epochs: int = 10  # passes over each rollout
+    learning_rate: float = 3e-4  # Adam step size
+    gamma: float = 0.95  # discount per 10 ms step
+    gae_lambda: float = 0.9  # GAE lambda
+    clip_range: float = 0.2  # PPO ratio clip
+    ent_coef: float = 0.0  # entropy bonus
+    vf_coef: float = 0.5  # value loss weight
+    max_grad_norm: float = 0.5  # gradient clip
+    log_std_init: float = -1.5  # initial action noise std exp(-1.5) = 0.22 of the [-1, 1] range (280 N m)
+    net_arch: tuple[int, ...] = (64, 64)  # policy and value MLP
+    norm_obs: bool = True  # VecNormalize observations
+    norm_reward: bool = True  # VecNormalize rewards
+
+
+@dataclass(frozen=True)
+class SACConfig:
+    """SAC defaults for the ABS task (off-policy; fewer env steps, more compute per step)."""
+
+    n_envs: int = 4  # parallel envs
+    learning_rate: float = 3e-4  # Adam step size
+    buffer_size: int = 300_000  # replay buffer [transitions]
+    batch_size: int = 256  # minibatch [transitions]
+    learning_starts: int = 5_000  # random-action warm-up [transitions]
+    tau: float = 0.005  # target smoothing
+    gamma: float = 0.95  # discount per 10 ms step
+    train_freq: int = 1  # env steps (per env) between updates
+    gradient_steps: int = 1  # gradient steps per update
+    ent_coef: str = "auto"  # learned entropy temperature
+    net_arch: tuple[int, ...] = (256, 256)  # actor and critic MLPs
+    norm_obs: bool = True  # VecNormalize observations
+    norm_reward: bool = True  # VecNormalize rewards
+
+
+# Payload excitation: longer horizon (the calibration reward comes from accumulated information).
+PAYLOAD_PPO = PPOConfig(n_envs=4, n_steps=512, gamma=0.99, gae_lambda=0.95, log_std_init=-0.5, ent_coef=0.0)
+DEFAULT_CONFIGS: dict[tuple[str, str], PPOConfig | SACConfig] = {
+    ("braking", "ppo"): PPOConfig(),
+    ("braking", "sac"): SACConfig(),
+    ("payload", "ppo"): PAYLOAD_PPO,
+    ("payload", "sac"): SACConfig(gamma=0.99),
+}
+
+
+class ScenarioMix(gym.Wrapper):
+    """Draw a training scenario per episode: a preset road, or a friction change between two presets.
+
+    A stop lasts about ``1 / mu_max`` as long on one road as on another (ice: 10 times dry), so drawing roads
+    uniformly would fill the rollouts with ice. With ``step_balanced`` (default) a preset road is drawn with
+    probability proportional to its peak friction, which gives every road about the same share of *steps*. A
+    friction change is uniform over the ordered pairs of different presets (a first version weighted its first
+    road too, and then almost never showed ice->dry: that policy braked ice->dry at 1.5-1.6 times the limit),
+    at a distance uniform on :data:`CHANGE_RANGE`. Reset options given explicitly win. Draws come from a
+    generator seeded by the first ``reset(seed=...)``.
+
+    :param env: a ``Braking-v0`` env (possibly wrapped).
+    :param change_probability: share of episodes with a friction change [-].
+    :param v0_range: initial speed range [m/s].
+    :param step_balanced: weight roads by their peak friction (else uniform per episode).
+    """
+
+    def __init__(self, env: gym.Env, change_probability: float = CHANGE_PROBABILITY,
+                 v0_range: tuple[float, float] = V0_RANGE, step_balanced: bool = True):
+        super().__init__(env)
+        from fricenv.plants.tire import ROADS
+
+        if not 0.0 <= change_probability <= 1.0:
+            raise ValueError(f"change_probability must be in [0, 1], got {change_probability!r}")
+        self.change_probability = float(change_probability)
+        self.v0_range = (float(v0_range[0]), float(v0_range[1]))
+        self.roads = tuple(ROADS)
+        weights = np.array([ROADS[r].mu_max if step_balanced else 1.0 for r in self.roads])
+        self.road_probabilities = weights / weights.sum()
+        self._rng = np.random.default_rng()
+
+    def draw(self) -> dict[str, Any]:
+        """Reset options of the next scenario."""
+        rng = self._rng
+        drawn: dict[str, Any] = {"v0": self.v0_range}
+        if rng.random() < self.change_probability:
+            # uniform over ordered pairs: ice->dry must be seen as often as dry->ice
+            i = int(rng.integers(len(self.roads)))
+            j = int(rng.integers(len(self.roads) - 1))
+            j = j + 1 if j >= i else j
+            drawn["road"] = f"{self.roads[i]}{SCENARIO_SEPARATOR}{self.roads[j]}"
+            drawn["change_distance"] = float(rng.uniform(*CHANGE_RANGE))
+        else:
+            drawn["road"] = self.roads[int(rng.choice(len(self.roads), p=self.road_probabilities))]
+        return drawn
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        if seed is not None:
+            self._rng = np.random.default_rng(seed)
+        return self.env.reset(seed=seed, options={**self.draw(), **(options or {})})
+
+
+def _check_choice(value: str, valid: tuple[str, ...], what: str) -> str:
+    if value not in valid:
+        raise ValueError(f"unknown {what} {value!r}; valid: {', '.join(valid)}")
+    return value
+
+
+def make_env_fn(env: str, estimator: str, rank: int = 0, training: bool = True,
+                env_kwargs: dict | None = None) -> Callable[[], gym.Env]:
+    """A picklable env constructor for SB3 vector envs.
+
+    :param env: ``braking`` or ``payload``.
+    :param estimator: estimator choice (braking: none/ekf/mhe/ekf-rls/oracle/...; payload: none/rls/oracle).
+    :param rank: index of the env in the vector env (unused but kept for SubprocVecEnv symmetry).
+    :param training: braking: draw scenarios with :class:`ScenarioMix`; payload: random calibrations.
+    :param env_kwargs: extra env arguments.
+    """
+    _check_choice(env, ENVS, "env")
+    kwargs = dict(env_kwargs or {})
+
+    def _make() -> gym.Env:
+        from stable_baselines3.common.monitor import Monitor
+
+        if env == "braking":
+            from fricenv.envs.factory import make_braking
+
+            e = make_braking(estimator, **kwargs)
+            if training:
+                e = ScenarioMix(e)
+        else:
+            from fricenv.envs.factory import make_payload
+
+            if training:
+                kwargs.setdefault("calibration", "random")
+            e = make_payload(estimator, **kwargs)
+        return Monitor(e)
+
+    return _make
+
+
+@dataclass
+class TrainResult:
+    """What a training run produced."""
+
+    out: Path  # run directory
+    model_path: Path
+    vecnormalize_path: Path
+    steps: int  # env steps trained
+    wall_time: float  # [s]
+    steps_per_second: float
+    meta: dict = field(default_factory=dict)
+
+
+def _tensorboard_dir(out: Path) -> str | None:
+    if importlib.util.find_spec("tensorboard") is None:
+        warnings.warn("tensorboard is not installed: training runs without TensorBoard logs "
+                      "(pip install tensorboard to get them)", RuntimeWarning, stacklevel=3)
+        return None
+    return str(out / "tb")
+
+
+def train(out: str | Path, env: str = "braking", estimator: str = "none", algo: str = "ppo", steps: int = 200_000,
+          seed: int = 0, config: PPOConfig | SACConfig | None = None, vec: str = "dummy",
+          progress_bar: bool = True, checkpoint_every: int = CHECKPOINT_EVERY,
+          env_kwargs: dict | None = None, verbose: int = 0) -> TrainResult:
+    """Train a policy and save model, normalisation statistics, checkpoints and metadata in ``out``.
+
+    :param out: run directory (created).
+    :param env: ``braking`` or ``payload``.
+    :param estimator: estimator whose outputs are appended to the observation.
+    :param algo: ``ppo`` or ``sac``.
+    :param steps: env steps to train.
+    :param seed: seed of the run (networks, envs).
+    :param config: hyperparameters; default :data:`DEFAULT_CONFIGS` for (env, algo).
+    :param vec: ``dummy`` (all envs in this process) or ``subproc`` (one process per env).
+    :param progress_bar: show a progress bar (tqdm + rich).
+    :param checkpoint_every: env steps between checkpoints (0: none).
+    :param env_kwargs: extra env arguments.
+    :param verbose: SB3 verbosity.
+    """
+    import torch
+    from stable_baselines3 import PPO, SAC
+    from stable_baselines3.common.callbacks import CheckpointCallback
+    from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecNormalize
+
+    _check_choice(env, ENVS, "env")
+    _check_choice(algo, ALGOS, "algo")
+    _check_choice(vec, ("dummy", "subproc"), "vec")
+    if env == "braking":
+        from fricenv.envs.estimator_observation import check_estimator_name
+
+        check_estimator_name(estimator)
+    else:
+        from fricenv.envs.factory import PAYLOAD_ESTIMATOR_NAMES
+
+        _check_choice(estimator, PAYLOAD_ESTIMATOR_NAMES, "payload estimator")
+    if not isinstance(steps, int) or steps < 1:
+        raise ValueError(f"steps must be a positive int, got {steps!r}")
+    cfg = config if config is not None else DEFAULT_CONFIGS[(env, algo)]
+    expected = PPOConfig if algo == "ppo" else SACConfig
+    if not isinstance(cfg, expected):
+        raise TypeError(f"config for {algo} must be a {expected.__name__}, got {type(cfg).__name__}")
+    torch.set_num_threads(1)
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+
+    fns = [make_env_fn(env, estimator, rank=i, training=True, env_kwargs=env_kwargs) for i in range(cfg.n_envs)]
+    venv = SubprocVecEnv(fns) if vec == "subproc" else DummyVecEnv(fns)
+    venv.seed(seed * SEED_STRIDE)
+    venv = VecNormalize(venv, norm_obs=cfg.norm_obs, norm_reward=cfg.norm_reward, gamma=cfg.gamma)
+    tb = _tensorboard_dir(out)
+    policy_kwargs: dict[str, Any] = {"net_arch": list(cfg.net_arch)}
+    if algo == "ppo":
+        policy_kwargs["log_std_init"] = cfg.log_std_init
+        model = PPO("MlpPolicy", venv, n_steps=cfg.n_steps, batch_size=cfg.batch_size, n_epochs=cfg.n_epochs,
+                    learning_rate=cfg.learning_rate, gamma=cfg.gamma, gae_lambda=cfg.gae_lambda,
+                    clip_range=cfg.clip_range, ent_coef=cfg.ent_coef, vf_coef=cfg.vf_coef,
+                    max_grad_norm=cfg.max_grad_norm, policy_kwargs=policy_kwargs, tensorboard_log=tb,
+                    seed=seed, verbose=verbose, device="cpu")
+    else:
+        model = SAC("MlpPolicy", venv, learning_rate=cfg.learning_rate, buffer_size=cfg.buffer_size,
+                    batch_size=cfg.batch_size, learning_starts=cfg.learning_starts, tau=cfg.tau, gamma=cfg.gamma,
+                    train_freq=cfg.train_freq, gradient_steps=cfg.gradient_steps, ent_coef=cfg.ent_coef,
+                    policy_kwargs=policy_kwargs, tensorboard_log=tb, seed=seed, verbose=verbose, device="cpu")
+    callbacks = []
+    if checkpoint_every > 0:
+        callbacks.append(CheckpointCallback(save_freq=max(checkpoint_every // cfg.n_envs, 1),
+                                            save_path=str(out / "checkpoints"), name_prefix=algo,
+                                            save_vecnormalize=True))
+    t0 = time.perf_counter()
+    model.learn(total_timesteps=steps, callback=callbacks or None, progress_bar=progress_bar,
+                tb_log_name=f"{algo}-{estimator}")
+    wall = time.perf_counter() - t0
+    model_path, vn_path = out / MODEL_FILE, out / VECNORM_FILE
+    model.save(str(model_path))
+    venv.save(str(vn_path))
+    venv.close()
+    trained = int(model.num_timesteps)
+    meta = {"env": env, "estimator": estimator, "algo": algo, "seed": seed, "steps": trained,
+            "wall_time_s": wall, "steps_per_second": trained / wall, "config": dataclasses.asdict(cfg),
+            "vec": vec, "env_kwargs": env_kwargs or {}, "tensorboard": tb is not None,
+            "torch_threads": torch.get_num_threads()}
+    write_json(out / META_FILE, meta)
+    return TrainResult(out=out, model_path=model_path, vecnormalize_path=vn_path, steps=trained, wall_time=wall,
+                       steps_per_second=trained / wall, meta=meta)
+
+
+class TrainedPolicy:
+    """A saved policy with its normalisation statistics, as a controller: ``reset()``, ``act(obs) -> action``.
+
+    :param model: the SB3 model.
+    :param obs_rms: VecNormalize statistics (or None).
+    :param meta: the run's ``train.json`` content.
+    """
+
+    def __init__(self, model, vecnormalize, meta: dict):
+        self.model = model
+        self.vecnormalize = vecnormalize
+        self.meta = meta
+        self.estimator = meta.get("estimator", "none")
+        self.algo = meta.get("algo", "ppo")
+        self.name = f"{self.algo}[{self.estimator}]"
+
+    def reset(self, seed: int | None = None) -> None:
+        """Start of an episode (the policy is memoryless; ``seed`` is accepted for the excitation interface)."""
+
+    def act(self, obs) -> np.ndarray:
+        """Deterministic action for one observation (shape (act_dim,))."""
+        obs = np.asarray(obs, dtype=np.float32)
+        if self.vecnormalize is not None:
+            obs = self.vecnormalize.normalize_obs(obs)
+        action, _ = self.model.predict(obs, deterministic=True)
+        return np.asarray(action, dtype=np.float32)
+
+
+def load_policy(run_dir: str | Path, model_file: str | None = None,
+                vecnormalize_file: str | None = None) -> TrainedPolicy:
+    """Load ``model.zip`` (or ``model_file``), ``vecnormalize.pkl`` and ``train.json`` from a run directory.
+
+    :param run_dir: the ``out`` of :func:`train`.
+    :param model_file: another model in the run (e.g. a checkpoint), relative to ``run_dir``.
+    :param vecnormalize_file: its normalisation statistics, relative to ``run_dir``.
+    """
+    import pickle
+
+    import torch
+    from stable_baselines3 import PPO, SAC
+
+    torch.set_num_threads(1)
+    run_dir = Path(run_dir)
+    meta_path = run_dir / META_FILE
+    if not meta_path.is_file():
+        raise ValueError(f"{run_dir} is not a training run: {META_FILE} is missing")
+    meta = json.loads(meta_path.read_text())
+    algo = meta.get("algo")
+    _check_choice(algo, ALGOS, f"algo in {meta_path}")
+    path = run_dir / (model_file or MODEL_FILE)
+    if not path.is_file():
+        raise ValueError(f"model file {path} does not exist")
+    model = (PPO if algo == "ppo" else SAC).load(str(path), device="cpu")
+    vn = None
+    vn_path = run_dir / (vecnormalize_file or VECNORM_FILE)
+    if vn_path.is_file():
+        with open(vn_path, "rb") as fh:
+            vn = pickle.load(fh)  # a VecNormalize without its venv: only normalize_obs is used
+        vn.training = False
+    return TrainedPolicy(model, vn, meta)
