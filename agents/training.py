@@ -9,7 +9,7 @@ file                              content
 ``model.zip``                     the final policy (SB3 format)
 ``vecnormalize.pkl``              observation/reward normalisation statistics (VecNormalize)
 ``checkpoints/``                  periodic checkpoints (model and VecNormalize statistics)
-``tb/``                           TensorBoard logs (only if ``tensorboard`` is installed; else a warning)
+``tb/``                           TensorBoard logs (``tensorboard`` is a dependency; without it, a warning)
 ``train.json``                    env, estimator, algorithm, seed, steps, hyperparameters, wall time, steps/s
 ================================  ========================================================================
 
