@@ -1,0 +1,862 @@
+"""Sim-to-real gap diagnosis of a quarter-car braking log (issue 6): where the gap lies, which effect, how far it shrinks.
+
+Method (every error measure is computed on data not used for fitting):
+
+1. **Noise level.** Estimated from the log itself, per channel, by the median absolute second difference
+   (white noise of std s gives second differences of std s sqrt(6); the median ignores the sparse kinks of the
+   signal). No assumption on the log writer's noise values.
+2. **States from data.** The log is cut into prediction windows of ``horizon`` samples (0.1 s: beyond the
+   friction peak the wheel dynamics are unstable, so longer open-loop predictions measure the timing of a lock-up
+   rather than the model); every ``test_every``-th window is held out. A window starts from a state estimated from
+   data: the wheel speed (and the speed, when ``v`` is logged; and the transient slip of a relaxation model) as
+   per-window nuisance states fitted by two Gauss-Newton steps on that window's measurements; when ``v`` is not
+   logged, the speed is reconstructed by integrating the model's vehicle equation
+   ``m v' = -F_z mu(lambda(v, omega_meas)) - F_d`` driven by the measured wheel speed from the free-rolling start
+   ``v(0) = r omega`` (the nominal model is a dynamic model; this fits the initial state from omega alone). Effect
+   states with a known input (brake-lag filter, delay buffer) run over the logged command.
+3. **Calibrate.** The nominal model's road ``(B, C, E, theta)`` is fitted by least squares on the training windows
+   (multi-start from the road presets). The road is always treated as unknown.
+4. **Gap.** Held-out residuals over all logged channels, each divided by its noise level (the smaller of the
+   difference-based estimate and the calibrated nominal model's training residual: both over-estimate). A window's
+   mean squared normalised residual counts at most ``WINDOW_MSE_CAP``. ``gap`` is the model part of the held-out
+   error in noise units, ``sqrt(max(MSE - 1, 0))`` (0 for a model that fits within the noise). ``gap_before`` is
+   the calibrated nominal model's.
+5. **Localise.** Nominal residuals by window (worst time segments), by regime (slip below/above the fitted road's
+   peak, brake apply/hold/release, speed bands) and by channel, before and after.
+6. **Candidates.** Every library effect is fitted (road + effect parameters, multi-start; ``mu_change`` by a
+   change-point search) on the training windows, in parallel processes, and scored on the held-out windows. A
+   candidate is significant when its held-out improvement of the squared normalised error, without its single
+   largest window, exceeds ``sig_z`` standard deviations of that sum under pure noise: a richer model cannot win
+   by fitting noise (the improvement is measured on data it was not fitted to), nor by one lucky window.
+7. **Verdict.** An effect when it is significant and closes a clear share of the gap (held-out gap at most
+   ``ratio_explained`` of the nominal one, or within ``gap_none``); ``unexplained`` when the nominal gap exceeds
+   ``gap_none`` and no candidate does; ``none`` otherwise. The two best significant candidates are also fitted
+   jointly; if only the joint model closes the gap, the larger single effect is the verdict and the other follows
+   in ``candidates`` (the joint fit is reported under ``where["joint_fit"]``).
+"""
+
+from __future__ import annotations
+
+import os
+import time
+import warnings
+from collections.abc import Sequence
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+from scipy.optimize import least_squares
+from scipy.signal import savgol_filter
+
+from fricenv.effects.quarter_car import (
+    DEFAULT_SUBSTEPS,
+    EFFECT_PARAMS,
+    EFFECTS,
+    EffectSimulator,
+    ModelBatch,
+    _slip_partials,
+)
+from fricenv.logs import QuarterCarLog, read_log
+from fricenv.plants import quarter_car as qc
+from fricenv.plants.tire import ROADS, MagicFormula, longitudinal_slip, magic_formula, magic_formula_dslip
+
+__all__ = [
+    "ROAD_NAMES",
+    "CandidateFit",
+    "DiagnoseConfig",
+    "Diagnosis",
+    "diagnose",
+    "diagnose_file",
+    "estimate_noise",
+    "load_params",
+]
+
+ROAD_NAMES = ("B", "C", "E", "theta")
+# Road parameter bounds for the fit: wide enough for every preset and for unknown roads.
+ROAD_BOUNDS = {"B": (2.0, 40.0), "C": (0.5, 3.0), "E": (-12.0, 1.0), "theta": (0.03, 1.6)}
+# Effect parameter bounds (SI units) and the starting values of the multi-start.
+EFFECT_BOUNDS = {
+    "tau": (1e-3, 0.4), "delay": (0.0, 0.25), "gain": (0.3, 3.0), "sigma": (0.01, 3.0), "r_eff": (0.25, 0.45),
+    "t_change": (-np.inf, np.inf), "theta_after": (0.03, 1.6), "c0": (0.0, 3000.0), "c2": (0.0, 10.0),
+}
+EFFECT_STARTS = {
+    "brake_lag": [{"tau": v} for v in (0.01, 0.03, 0.07, 0.15)],
+    "brake_delay": [{"delay": v} for v in (0.01, 0.025, 0.045, 0.08)],
+    "brake_gain": [{"gain": v} for v in (0.8, 0.9, 1.1, 1.25)],
+    "relaxation_length": [{"sigma": v} for v in (0.1, 0.3, 0.6, 1.2)],
+    "radius_error": [{"r_eff": f} for f in (0.96, 0.98, 1.02, 1.04)],  # times the nominal radius
+    "mu_change": [],  # grid over t_change, see _mu_change_starts
+    "drag": [{"c0": a, "c2": b} for a, b in ((50.0, 0.0), (200.0, 0.0), (0.0, 0.3), (100.0, 0.2), (400.0, 0.5))],
+}
+# Finite-difference steps of the fit Jacobian, per parameter (absolute).
+FD_STEP = {"B": 0.05, "C": 0.005, "E": 0.02, "theta": 0.002, "tau": 1e-3, "delay": 1e-3, "gain": 2e-3,
+           "sigma": 5e-3, "r_eff": 2e-4, "t_change": 0.01, "theta_after": 0.002, "c0": 2.0, "c2": 0.01}
+X_SCALE = {"B": 1.0, "C": 0.1, "E": 0.5, "theta": 0.05, "tau": 0.01, "delay": 0.01, "gain": 0.05, "sigma": 0.1,
+           "r_eff": 0.005, "t_change": 0.1, "theta_after": 0.05, "c0": 50.0, "c2": 0.1}
+
+V0_STEP = 0.02  # finite-difference step of the per-window speed nuisance (v logged) [m/s]
+LAMT_STEP = 0.005  # finite-difference step of the transient-slip nuisance [-]
+LAMT_MAX_MOVE = 0.1  # largest Gauss-Newton move of the transient slip per iteration [-]
+OMEGA0_STEP = 0.1  # finite-difference step of the per-window wheel-speed nuisance [rad/s]
+OMEGA0_MAX_MOVE = 3.0  # largest Gauss-Newton move of that nuisance per iteration, in noise std [-]
+GN_ITERS = 2  # Gauss-Newton iterations of the wheel-speed nuisance
+FREE_ROLL_TORQUE = 0.02  # free rolling: |T_b| below this share of max |T_b| [-]
+SAVGOL = (11, 2)  # speed smoother: window [samples], polynomial order
+NOISE_FLOOR = {"omega": 1e-3, "v": 1e-3, "a_x": 1e-3}  # smallest accepted noise std per channel (SI)
+SPEED_BANDS = (10.0, 20.0)  # band edges [m/s]
+# Transient slip at a window start: False = the slip of the window's start state (the wheel-speed nuisance fit then
+# absorbs the difference); True = the measured slip filtered through the relaxation equation.
+RELAX_STATE_FROM_FILTER = True
+# A window's mean squared normalised error counts at most this much in the scores (RMS 5 noise std): a wheel lock-up
+# predicted a few milliseconds early or late is wrong whatever the size of its error, and must not decide alone.
+WINDOW_MSE_CAP = 25.0
+# Robust loss of the fits: residuals beyond this many noise std count linearly (soft L1).
+FIT_LOSS_SCALE = 3.0
+MU_CHANGE_FACTORS = np.geomspace(0.35, 2.0, 16)  # theta grid of the change-point search, times the nominal theta
+APPLY_RATE = 0.5  # |dT_b/dt| above this share of max |T_b| per second counts as apply/release [1/s]
+
+
+@dataclass(frozen=True)
+class DiagnoseConfig:
+    """Settings of the diagnosis."""
+
+    horizon: int = 10  # prediction window [samples]
+    test_every: int = 2  # every test_every-th window is held out [-]
+    max_nfev: int = 30  # least-squares iterations per start [-]
+    sig_z: float = 4.0  # robust held-out improvement (noise standard deviations) a candidate must exceed [-]
+    ratio_explained: float = 0.35  # a verdict leaves at most this share: gap_after <= ratio * gap_before [-]
+    gap_none: float = 1.1  # nominal gap (noise units) below which the model fits within noise [-]
+    substeps: int = DEFAULT_SUBSTEPS  # physics substeps per sample
+    jobs: int | None = None  # processes for the candidate fits (None: min(2, available cores))
+    joint: bool = True  # also fit the two best significant candidates together
+    candidates: tuple[str, ...] = tuple(EFFECTS)  # effects to try
+
+
+@dataclass
+class Data:
+    """The log prepared for fitting (picklable for the worker processes)."""
+
+    t0: float
+    dt: float
+    Tb: np.ndarray
+    omega: np.ndarray
+    v: np.ndarray | None
+    a_x: np.ndarray | None
+    sigma: dict  # noise std per logged channel
+    v_smooth: np.ndarray | None
+    starts: np.ndarray  # window start indices
+    test: np.ndarray  # bool per window: held out
+    horizon: int
+    free_end: int  # first sample after the free-rolling stretch
+    p: qc.QuarterCarParams
+    substeps: int
+
+    @property
+    def n(self) -> int:
+        return len(self.Tb)
+
+    @property
+    def channels(self) -> list[str]:
+        return ["omega"] + (["v"] if self.v is not None else []) + (["a_x"] if self.a_x is not None else [])
+
+
+@dataclass
+class CandidateFit:
+    """One fitted model: name, full parameter vector, held-out figures."""
+
+    effect: str  # effect name, "nominal", or "a+b" for a joint fit
+    names: tuple[str, ...]  # parameter names of x (road first)
+    x: np.ndarray  # fitted parameters
+    train_mse: float
+    test_mse: float
+    window_mse: np.ndarray  # per window (all windows), mean squared normalised residual
+    gap: float = 0.0  # held-out gap, noise units
+    t_stat: float = 0.0  # paired test against the nominal model on held-out windows
+    z: float = 0.0  # robust held-out improvement in noise standard deviations
+    seconds: float = 0.0
+
+    def effect_params(self) -> dict[str, float]:
+        return {k: float(v) for k, v in zip(self.names, self.x) if k not in ROAD_NAMES}
+
+    def road(self) -> dict[str, float]:
+        return {k: float(v) for k, v in zip(self.names, self.x) if k in ROAD_NAMES}
+
+
+@dataclass
+class Diagnosis:
+    """Result of :func:`diagnose`; :func:`fricenv.gap.report.report_dict` turns it into the report.json contract."""
+
+    verdict: str
+    gap_before: float
+    gap_after: float
+    params: dict
+    where: dict
+    candidates: list  # CandidateFit, best first (single effects)
+    nominal: CandidateFit
+    joint: CandidateFit | None
+    data: Data
+    residuals: dict = field(default_factory=dict)  # "before"/"after": (n_windows, H) RMS normalised residual
+    seconds: float = 0.0
+    source: str = "<memory>"
+
+
+# --------------------------------------------------------------------------------------------- data preparation
+def estimate_noise(x: np.ndarray) -> float:
+    """Noise std of a sampled signal from the median absolute second difference (robust to sparse kinks)."""
+    d2 = np.diff(np.asarray(x, dtype=float), 2)
+    if d2.size < 3:
+        return float("nan")
+    mad = np.median(np.abs(d2 - np.median(d2)))
+    return float(1.4826 * mad / np.sqrt(6.0))
+
+
+def _prepare(log: QuarterCarLog, p: qc.QuarterCarParams, cfg: DiagnoseConfig) -> Data:
+    n = len(log)
+    H = cfg.horizon
+    if n < 3 * H:
+        raise ValueError(f"{log.source}: log too short for diagnosis: {n} samples, need at least {3 * H} "
+                         f"(3 prediction windows of {H} samples)")
+    sigma = {"omega": max(estimate_noise(log.omega), NOISE_FLOOR["omega"])}
+    if log.v is not None:
+        sigma["v"] = max(estimate_noise(log.v), NOISE_FLOOR["v"])
+    if log.a_x is not None:
+        sigma["a_x"] = max(estimate_noise(log.a_x), NOISE_FLOOR["a_x"])
+    v_smooth = None
+    if log.v is not None:
+        win = min(SAVGOL[0], n - (1 - n % 2))
+        v_smooth = savgol_filter(log.v, win, SAVGOL[1])
+    T = np.asarray(log.T_b, dtype=float)
+    tmax = max(float(np.max(np.abs(T))), 1e-9)
+    braking = np.flatnonzero(np.abs(T) > FREE_ROLL_TORQUE * tmax)
+    free_end = int(braking[0]) if braking.size else n
+    starts = np.arange(0, n - H + 1, H)
+    idx = np.arange(len(starts))
+    test = (idx % cfg.test_every) == (cfg.test_every - 2 if cfg.test_every > 1 else 0)
+    return Data(t0=float(log.t[0]), dt=log.dt, Tb=T, omega=np.asarray(log.omega, dtype=float),
+                v=None if log.v is None else np.asarray(log.v, dtype=float),
+                a_x=None if log.a_x is None else np.asarray(log.a_x, dtype=float), sigma=sigma, v_smooth=v_smooth,
+                starts=starts, test=test, horizon=H, free_end=free_end, p=p, substeps=cfg.substeps)
+
+
+# --------------------------------------------------------------------------------------------- models
+def _param_names(effects: Sequence[str]) -> tuple[str, ...]:
+    names = list(ROAD_NAMES)
+    for e in effects:
+        names += list(EFFECT_PARAMS[e])
+    return tuple(names)
+
+
+def _batch(effects: Sequence[str], names: Sequence[str], X: np.ndarray, p: qc.QuarterCarParams) -> ModelBatch:
+    """A ModelBatch of K elements from a (K, len(names)) parameter matrix."""
+    X = np.atleast_2d(X)
+    col = {name: X[:, i] for i, name in enumerate(names)}
+    road = np.column_stack([col[k] for k in ROAD_NAMES])
+    b = ModelBatch.nominal(road, X.shape[0], p)
+    upd = {}
+    for e in effects:
+        for pname in EFFECT_PARAMS[e]:
+            upd[pname] = col[pname].copy()
+    return replace(b, **upd)
+
+
+def _reconstruct_speed(batch: ModelBatch, d: Data) -> np.ndarray:
+    """Speed (K, n) from the measured wheel speed through the model's vehicle equation (no v logged).
+
+    ``v(0) = r_eff * mean(omega)`` over the free-rolling start; then linearly implicit Euler steps of
+    ``m v' = -F_z mu(lambda) - F_d(v)``, with ``lambda`` from ``v`` and the measured wheel speed (the transient slip
+    of the relaxation model, filtered from it, where that effect is on).
+    """
+    p, dt = d.p, d.dt
+    K = len(batch)
+    m0 = max(min(d.free_end, 20), 3)
+    v = batch.r_eff * float(np.mean(d.omega[:m0]))
+    out = np.empty((K, d.n))
+    lt = np.zeros(K)
+    relax = batch.sigma > 0
+    road = batch.road.copy()
+    change = np.isfinite(batch.t_change)
+    for k in range(d.n):
+        out[:, k] = v
+        if np.any(change):
+            t = d.t0 + k * d.dt
+            road[:, 3] = np.where(change & (t >= batch.t_change), batch.theta_after, batch.road[:, 3])
+        w = d.omega[k]
+        lam = longitudinal_slip(v, w, batch.r_eff)
+        if np.any(relax):
+            lt = np.where(relax, lam + (lt - lam) * np.exp(-np.maximum(v, 0) * dt / np.where(relax, batch.sigma, 1)),
+                          lam)
+            s = lt
+        else:
+            s = lam
+        B, C, E, th = road.T
+        F = p.Fz * magic_formula(s, B, C, E, th)
+        drag = batch.c0 + batch.c2 * v * v
+        f = -(F + drag) / p.m
+        dlam_dv, _ = _slip_partials(v, w, batch.r_eff)
+        dfdv = -(p.Fz * magic_formula_dslip(s, B, C, E, th) * np.where(relax, 0.0, dlam_dv) + 2 * batch.c2 * v) / p.m
+        v = np.maximum(v + dt * f / (1.0 - dt * np.minimum(dfdv, 0.0)), 0.0)
+    return out
+
+
+def _speed_states(batch: ModelBatch, d: Data) -> np.ndarray:
+    """Speed estimate (K, n) used to start the windows."""
+    if d.v_smooth is not None:
+        return np.broadcast_to(d.v_smooth, (len(batch), d.n))
+    return _reconstruct_speed(batch, d)
+
+
+def _effect_states(batch: ModelBatch, d: Data, vhat: np.ndarray):
+    """Lag-filter output and transient slip (K, n) estimated from the command log and the measured slip."""
+    K = len(batch)
+    Ta = None
+    if np.any(batch.tau > 0):
+        sim = EffectSimulator(batch, d.dt, d.n, d.p, d.substeps, d.t0, commands=d.Tb)
+        sim.reset(vhat[:, 0], d.omega[0], k0=0, Ta=d.Tb[0])
+        Ta = sim.actuator_run(d.n)
+    lt = None
+    if RELAX_STATE_FROM_FILTER and np.any(batch.sigma > 0):
+        lam = longitudinal_slip(vhat, d.omega[None, :], batch.r_eff[:, None])
+        lt = np.empty((K, d.n))
+        cur = lam[:, 0].copy()
+        sig = np.where(batch.sigma > 0, batch.sigma, 1.0)
+        for k in range(d.n):
+            lt[:, k] = cur
+            cur = lam[:, k] + (cur - lam[:, k]) * np.exp(-np.maximum(vhat[:, k], 0) * d.dt / sig)
+    return Ta, lt
+
+
+def _simulate_windows(batch: ModelBatch, d: Data, widx: np.ndarray, v0, w0, Ta0, lt0, reps: int):
+    """Simulate the windows ``widx`` for every element of ``batch`` and ``reps`` wheel-speed starts each.
+
+    v0, w0, Ta0, lt0 have shape (K, W, reps) (Ta0, lt0 may be None). Returns dict channel -> (K, W, reps, H).
+    """
+    K, W, H = len(batch), len(widx), d.horizon
+    full = batch.repeat(W * reps)
+    sim = EffectSimulator(full, d.dt, d.n, d.p, d.substeps, d.t0, commands=d.Tb)
+    k0 = np.tile(np.repeat(d.starts[widx], reps), K)
+    sim.reset(v0.ravel(), w0.ravel(), k0=k0, Ta=None if Ta0 is None else Ta0.ravel(),
+              lam_t=None if lt0 is None else lt0.ravel())
+    out = {"omega": np.empty((K * W * reps, H))}
+    if d.v is not None:
+        out["v"] = np.empty_like(out["omega"])
+    if d.a_x is not None:
+        out["a_x"] = np.empty_like(out["omega"])
+    for j in range(H):
+        out["omega"][:, j] = sim.omega
+        if "v" in out:
+            out["v"][:, j] = sim.v
+        if "a_x" in out:
+            out["a_x"][:, j] = sim.accel()
+        if j < H - 1:
+            sim.step()
+    return {k: v.reshape(K, W, reps, H) for k, v in out.items()}
+
+
+def _measured(d: Data, widx: np.ndarray) -> dict:
+    rows = d.starts[widx][:, None] + np.arange(d.horizon)[None, :]
+    out = {"omega": d.omega[rows]}
+    if d.v is not None:
+        out["v"] = d.v[rows]
+    if d.a_x is not None:
+        out["a_x"] = d.a_x[rows]
+    return out
+
+
+def _normalised(pred: dict, meas: dict, d: Data) -> np.ndarray:
+    """Residuals (..., M): all channels concatenated, each divided by its noise std."""
+    parts = [(pred[c] - meas[c]) / d.sigma[c] for c in d.channels]
+    return np.concatenate(parts, axis=-1)
+
+
+def window_residuals(effects: Sequence[str], names: Sequence[str], X: np.ndarray, d: Data,
+                     widx: np.ndarray | None = None, per_channel: bool = False):
+    """Normalised residuals (K, W, M) of K parameter sets on windows ``widx``, wheel-speed nuisance fitted.
+
+    :param per_channel: also return the per-channel residual blocks, dict channel -> (K, W, H).
+    """
+    X = np.atleast_2d(X)
+    widx = np.arange(len(d.starts)) if widx is None else np.asarray(widx)
+    batch = _batch(effects, names, X, d.p)
+    K, W = X.shape[0], len(widx)
+    vhat = _speed_states(batch, d)
+    Ta, lt = _effect_states(batch, d, vhat)
+    s = d.starts[widx]
+    meas = _measured(d, widx)
+    # nuisance states of each window, fitted by Gauss-Newton: omega0 always, v0 if v is logged, the transient slip
+    # if the model has tire relaxation
+    state = {"omega": np.broadcast_to(d.omega[s][None, :], (K, W)).copy(), "v": vhat[:, s].copy()}
+    relax = bool(np.any(batch.sigma > 0))
+    if relax:
+        state["lam_t"] = lt[:, s].copy() if lt is not None else \
+            longitudinal_slip(state["v"], state["omega"], batch.r_eff[:, None])
+    free = ["omega"] + (["v"] if d.v is not None else []) + (["lam_t"] if relax else [])
+    steps = {"omega": OMEGA0_STEP, "v": V0_STEP, "lam_t": LAMT_STEP}
+    max_move = {"omega": OMEGA0_MAX_MOVE * d.sigma["omega"], "v": OMEGA0_MAX_MOVE * d.sigma.get("v", 1.0),
+                "lam_t": LAMT_MAX_MOVE}
+    lower = {"omega": 0.0, "v": 0.0, "lam_t": -1.0}
+    upper = {"omega": np.inf, "v": np.inf, "lam_t": 1.0}
+    reps = 1 + len(free)
+    Ta0 = None if Ta is None else np.repeat(Ta[:, s][:, :, None], reps, axis=2)
+    meas_b = {c: m[None, :, None, :] for c, m in meas.items()}
+
+    def replicas(name):
+        x = np.repeat(state[name][:, :, None], reps, axis=2)
+        if name in free:
+            x[:, :, 1 + free.index(name)] += steps[name]
+        return x
+
+    for _ in range(GN_ITERS):
+        pred = _simulate_windows(batch, d, widx, replicas("v"), replicas("omega"), Ta0,
+                                 replicas("lam_t") if relax else None, reps)
+        r = _normalised(pred, meas_b, d)  # (K, W, reps, M)
+        J = np.stack([(r[:, :, 1 + i] - r[:, :, 0]) / steps[n] for i, n in enumerate(free)], axis=-1)  # (K,W,M,q)
+        A = np.einsum("kwmi,kwmj->kwij", J, J) + 1e-9 * np.eye(len(free))
+        g = -np.einsum("kwmi,kwm->kwi", J, r[:, :, 0])
+        try:
+            move = np.linalg.solve(A, g[..., None])[..., 0]
+        except np.linalg.LinAlgError:
+            move = np.zeros_like(g)
+        move = np.nan_to_num(move)
+        for i, n in enumerate(free):
+            state[n] = np.clip(state[n] + np.clip(move[..., i], -max_move[n], max_move[n]), lower[n], upper[n])
+    pred = _simulate_windows(batch, d, widx, state["v"][:, :, None], state["omega"][:, :, None],
+                             None if Ta0 is None else Ta0[:, :, :1],
+                             state["lam_t"][:, :, None] if relax else None, 1)
+    pred = {c: x[:, :, 0] for c, x in pred.items()}
+    r = _normalised(pred, {c: m[None] for c, m in meas.items()}, d)
+    if per_channel:
+        return r, {c: (pred[c] - meas[c][None]) / d.sigma[c] for c in d.channels}
+    return r
+
+
+# --------------------------------------------------------------------------------------------- fitting
+def _bounds(names: Sequence[str], d: Data):
+    lo, hi = [], []
+    for n in names:
+        b = ROAD_BOUNDS.get(n) or EFFECT_BOUNDS[n]
+        if n == "t_change":  # at least one training window on either side
+            train = d.starts[~d.test]
+            b = (d.t0 + d.dt * (train[0] + d.horizon), d.t0 + d.dt * train[-1])
+        lo.append(b[0])
+        hi.append(b[1])
+    return np.array(lo), np.array(hi)
+
+
+def _fit(effects: Sequence[str], names: Sequence[str], starts: np.ndarray, d: Data, cfg: DiagnoseConfig,
+         fixed: dict | None = None) -> np.ndarray:
+    """Least squares on the training windows from the best of ``starts`` (K, len(names)); ``fixed`` params held."""
+    train = np.flatnonzero(~d.test)
+    lo, hi = _bounds(names, d)
+    starts = np.clip(np.atleast_2d(starts), lo, hi)
+    r = window_residuals(effects, names, starts, d, train)
+    cost = np.sum(r.reshape(len(starts), -1) ** 2, axis=1)
+    cost = np.where(np.isfinite(cost), cost, np.inf)
+    x0 = starts[int(np.argmin(cost))].copy()
+    fixed = fixed or {}
+    free = np.array([n not in fixed for n in names])
+    for k, v in fixed.items():
+        x0[names.index(k)] = v
+    fidx = np.flatnonzero(free)
+    if fidx.size == 0:
+        return x0
+    steps = np.array([FD_STEP[names[i]] for i in fidx])
+    cache: dict = {}
+
+    def full(z):
+        x = x0.copy()
+        x[fidx] = z
+        return x
+
+    def evaluate(Z):
+        R = window_residuals(effects, names, np.array([full(z) for z in Z]), d, train).reshape(len(Z), -1)
+        return np.where(np.isfinite(R), R, 1e3)
+
+    def fun(z):
+        key = z.tobytes()
+        if key not in cache:
+            cache.clear()
+            cache[key] = evaluate([z])[0]
+        return cache[key]
+
+    def jac(z):
+        # forward differences, stepping inwards at an upper bound; all perturbations in one batch
+        h = np.where(z + steps > hi[fidx], -steps, steps)
+        Z = [z] + [z + h[i] * np.eye(len(z))[i] for i in range(len(z))]
+        R = evaluate(Z)
+        cache.clear()
+        cache[z.tobytes()] = R[0]
+        return ((R[1:] - R[0]) / h[:, None]).T
+
+    z0 = np.clip(x0[fidx], lo[fidx] + 1e-12, hi[fidx] - 1e-12)
+    sol = least_squares(fun, z0, jac=jac, bounds=(lo[fidx], hi[fidx]),
+                        x_scale=np.array([X_SCALE[names[i]] for i in fidx]), max_nfev=cfg.max_nfev, method="trf")
+    return full(sol.x)
+
+
+def _score(effect: str, effects: Sequence[str], names, x, d: Data, seconds: float) -> CandidateFit:
+    r = window_residuals(effects, names, x, d)[0]
+    wm = np.minimum(np.mean(r**2, axis=-1), WINDOW_MSE_CAP)
+    return CandidateFit(effect=effect, names=tuple(names), x=np.asarray(x, dtype=float),
+                        train_mse=float(np.mean(wm[~d.test])), test_mse=float(np.mean(wm[d.test])), window_mse=wm,
+                        seconds=seconds)
+
+
+def _road_starts(d: Data) -> np.ndarray:
+    return np.array([ROADS[k].as_array() for k in ROADS])
+
+
+def fit_nominal(d: Data, cfg: DiagnoseConfig) -> CandidateFit:
+    """Calibrate the nominal model's road on the training windows."""
+    t = time.perf_counter()
+    names = _param_names([])
+    x = _fit([], names, _road_starts(d), d, cfg)
+    return _score("nominal", [], names, x, d, time.perf_counter() - t)
+
+
+def _mu_change_start(road: np.ndarray, d: Data) -> np.ndarray:
+    """Start of the mu_change fit by a change-point search; t_change only moves the windows it falls in, so it is
+    searched, not differentiated.
+
+    Every training window is scored with the nominal road at a grid of theta values; the best split into a before
+    and an after theta (exact over the grid, by cumulative sums) locates the change between two training windows;
+    the switching time is then refined at single-sample resolution over that stretch.
+    """
+    train = np.flatnonzero(~d.test)
+    names = _param_names([])
+    lo_t, hi_t = ROAD_BOUNDS["theta"]
+    thetas = np.clip(road[3] * MU_CHANGE_FACTORS, lo_t, hi_t)
+    X = np.repeat(road[None], len(thetas), axis=0)
+    X[:, 3] = thetas
+    r = window_residuals([], names, X, d, train)
+    c = np.sum(np.minimum(r**2, FIT_LOSS_SCALE**2 * 4), axis=-1)  # (F, Wtrain), outliers bounded
+    c = np.where(np.isfinite(c), c, np.inf)
+    cum = np.cumsum(c, axis=1)
+    total = cum[:, -1:]
+    best = (np.inf, 1, 0, 0)
+    for s_ in range(1, len(train)):
+        before = cum[:, s_ - 1]
+        after = (total[:, 0] - cum[:, s_ - 1])
+        i, j = int(np.argmin(before)), int(np.argmin(after))
+        cost = before[i] + after[j]
+        if cost < best[0]:
+            best = (cost, s_, i, j)
+    _, split, i, j = best
+    mnames = _param_names(["mu_change"])
+    lo, hi = _bounds(mnames, d)
+    t_lo = d.t0 + d.dt * (d.starts[train[split - 1]] + d.horizon // 2)
+    t_hi = d.t0 + d.dt * (d.starts[train[split]] + d.horizon // 2)
+    fine_t = np.clip(np.arange(t_lo, t_hi + 1e-9, d.dt), lo[4], hi[4])
+    base = road.copy()
+    base[3] = thetas[i]
+    fine = np.array([np.concatenate([base, [tc, thetas[j]]]) for tc in fine_t])
+    r = window_residuals(["mu_change"], mnames, fine, d, train)
+    cost = np.sum(np.minimum(r.reshape(len(fine), -1) ** 2, FIT_LOSS_SCALE**2 * 4), axis=1)
+    return fine[int(np.argmin(np.where(np.isfinite(cost), cost, np.inf)))]
+
+
+def _mu_change_starts(road: np.ndarray, d: Data) -> np.ndarray:
+    """Grid of (t_change, theta_after): every half window, theta_after at five shares of the fitted theta."""
+    lo, hi = _bounds(_param_names(["mu_change"]), d)
+    times = np.arange(lo[4], hi[4] + 1e-9, d.dt * max(d.horizon // 2, 1))
+    rows = []
+    for tc in times:
+        for f in (0.4, 0.7, 0.85, 1.2, 1.5):
+            rows.append(np.concatenate([road, [tc, f * road[3]]]))
+    return np.array(rows)
+
+
+def _effect_start_matrix(effects: Sequence[str], road: np.ndarray, d: Data, seeds: dict | None = None) -> np.ndarray:
+    """Starting points (K, 4 + q) for the effects' fit: the product of the roads (the nominal fit's and the presets)
+    and each effect's start list. The nominal road has absorbed part of the effect, so it is not always the best
+    start."""
+    rows = [road.copy()] + [r for r in _road_starts(d)]
+    for e in effects:
+        if seeds and e in seeds:
+            opts = [seeds[e]]
+        elif e == "radius_error":
+            opts = [{"r_eff": f["r_eff"] * d.p.r} for f in EFFECT_STARTS[e]]
+            if d.v_smooth is not None and d.free_end >= 3:
+                m = min(d.free_end, 50)
+                ratio = np.median(d.v_smooth[:m] / np.maximum(d.omega[:m], 1e-6))
+                if np.isfinite(ratio):
+                    opts.append({"r_eff": float(ratio)})
+        else:
+            opts = EFFECT_STARTS[e]
+        rows = [np.concatenate([r, [o[k] for k in EFFECT_PARAMS[e]]]) for r in rows for o in opts]
+    return np.array(rows)
+
+
+def fit_candidate(effects: Sequence[str], road: np.ndarray, d: Data, cfg: DiagnoseConfig,
+                  seeds: dict | None = None) -> CandidateFit:
+    """Fit road + the effects' parameters on the training windows; score on all windows."""
+    t = time.perf_counter()
+    effects = list(effects)
+    names = _param_names(effects)
+    if effects == ["mu_change"]:
+        best = _mu_change_start(road, d)
+        x = _fit(effects, names, best[None], d, cfg, fixed={"t_change": float(best[4])})
+        # one alternation: re-search the switching time with the fitted road, then refit the rest
+        lo, hi = _bounds(names, d)
+        fine_t = np.clip(x[4] + d.dt * np.arange(-d.horizon * 3 // 2, d.horizon * 3 // 2 + 1), lo[4], hi[4])
+        fine = np.repeat(x[None], len(fine_t), axis=0)
+        fine[:, 4] = fine_t
+        r = window_residuals(effects, names, fine, d, np.flatnonzero(~d.test))
+        cost = np.sum(r.reshape(len(fine), -1) ** 2, axis=1)
+        best = fine[int(np.argmin(np.where(np.isfinite(cost), cost, np.inf)))]
+        if best[4] != x[4]:
+            x = _fit(effects, names, best[None], d, cfg, fixed={"t_change": float(best[4])})
+    else:
+        x = _fit(effects, names, _effect_start_matrix(effects, road, d, seeds), d, cfg)
+    return _score("+".join(effects), effects, names, x, d, time.perf_counter() - t)
+
+
+def _fit_worker(args):
+    effects, road, d, cfg, seeds = args
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        return fit_candidate(effects, road, d, cfg, seeds)
+
+
+# --------------------------------------------------------------------------------------------- scoring, verdict
+def gap_of(mse: float) -> float:
+    """Model part of a mean squared normalised residual, in noise units: sqrt(max(mse - 1, 0))."""
+    return float(np.sqrt(max(mse - 1.0, 0.0)))
+
+
+def paired_t(base: CandidateFit, cand: CandidateFit, d: Data) -> float:
+    """t statistic of the held-out per-window improvement of ``cand`` over ``base``.
+
+    The per-window statistic is the log ratio of the mean squared normalised residuals, which keeps the test robust
+    to the few windows whose error is dominated by a wheel lock-up predicted slightly early or late.
+    """
+    diff = np.log(base.window_mse[d.test]) - np.log(cand.window_mse[d.test])
+    if diff.size < 2:
+        return 0.0
+    sd = float(np.std(diff, ddof=1))
+    mean = float(np.mean(diff))
+    if sd <= 0:
+        return float(np.sign(mean) * np.inf) if mean != 0 else 0.0
+    return mean / (sd / np.sqrt(diff.size))
+
+
+def _refine_noise(nominal: CandidateFit, d: Data) -> None:
+    """Noise level per channel: the smaller of the difference-based estimate and the calibrated nominal model's
+    training residual (corrected for the fitted wheel-speed nuisance). Both over-estimate (the first by the signal's
+    own curvature, the second by any model error), so the smaller is the better estimate."""
+    train = np.flatnonzero(~d.test)
+    _, r_ch = window_residuals([], nominal.names, nominal.x, d, train, per_channel=True)
+    for c in d.channels:
+        rms = float(np.sqrt(np.mean(r_ch[c][0] ** 2))) * d.sigma[c]
+        if c == "omega" or c == "v":  # one fitted nuisance state per window in this channel
+            rms *= np.sqrt(d.horizon / (d.horizon - 1.0))
+        d.sigma[c] = max(min(d.sigma[c], rms), NOISE_FLOOR[c])
+
+
+def improvement_z(base: CandidateFit, cand: CandidateFit, d: Data) -> float:
+    """Held-out improvement of the sum of squared normalised residuals, without its single largest window, in units
+    of that sum's standard deviation under pure noise (sqrt(2 n)); one lucky window cannot make it large."""
+    m = d.horizon * len(d.channels)
+    gain = (base.window_mse[d.test] - cand.window_mse[d.test]) * m
+    if gain.size == 0:
+        return 0.0
+    robust = float(np.sum(gain) - max(float(np.max(gain)), 0.0))
+    return robust / np.sqrt(2.0 * gain.size * m)
+
+
+def _significant(f: CandidateFit, nominal: CandidateFit, cfg: DiagnoseConfig) -> bool:
+    """A large robust held-out improvement (the paired t statistic is reported, not required: an effect that shows
+    only in the transients improves few windows, which a t test over all windows does not see)."""
+    return f.z > cfg.sig_z and f.test_mse < nominal.test_mse
+
+
+def _jobs(cfg: DiagnoseConfig) -> int:
+    if cfg.jobs is not None:
+        return max(int(cfg.jobs), 1)
+    try:
+        avail = len(os.sched_getaffinity(0))
+    except AttributeError:  # pragma: no cover - non-Linux
+        avail = os.cpu_count() or 1
+    return max(min(2, avail), 1)
+
+
+def _regimes(nominal: CandidateFit, d: Data, r_ch: dict, r_after: dict | None = None) -> dict:
+    """Residual by regime (slip vs the fitted peak, apply/hold/release, speed band) and by channel, on all windows:
+    the nominal model's (``gap``) and, if given, the verdict model's (``gap_after``)."""
+    rows = d.starts[:, None] + np.arange(d.horizon)[None, :]
+    vhat = _speed_states(_batch([], nominal.names, nominal.x, d.p), d)[0]
+    road = MagicFormula(*nominal.x[:4])
+    lam = longitudinal_slip(vhat, d.omega, d.p.r)
+    lam_s = savgol_filter(lam, min(5, d.n - (1 - d.n % 2)), 1)
+    dT = np.gradient(d.Tb, d.dt)
+    tmax = max(float(np.max(np.abs(d.Tb))), 1e-9)
+    labels = {
+        "slip_below_peak": lam_s < road.peak_slip,
+        "slip_above_peak": lam_s >= road.peak_slip,
+        "apply": dT > APPLY_RATE * tmax,
+        "release": dT < -APPLY_RATE * tmax,
+        "hold": np.abs(dT) <= APPLY_RATE * tmax,
+        f"speed_below_{SPEED_BANDS[0]:g}": vhat < SPEED_BANDS[0],
+        f"speed_{SPEED_BANDS[0]:g}_to_{SPEED_BANDS[1]:g}": (vhat >= SPEED_BANDS[0]) & (vhat < SPEED_BANDS[1]),
+        f"speed_above_{SPEED_BANDS[1]:g}": vhat >= SPEED_BANDS[1],
+    }
+    sq = sum(r_ch[c] ** 2 for c in d.channels) / len(d.channels)  # (W, H)
+    sq_after = None if r_after is None else sum(r_after[c] ** 2 for c in d.channels) / len(d.channels)
+    regimes = {}
+    for name, mask in labels.items():
+        m = mask[rows]
+        n = int(np.count_nonzero(m))
+        regimes[name] = {"gap": gap_of(float(np.mean(sq[m]))) if n else None, "samples": n}
+        if sq_after is not None:
+            regimes[name]["gap_after"] = gap_of(float(np.mean(sq_after[m]))) if n else None
+    channels = {}
+    for c in d.channels:
+        channels[c] = {"gap": gap_of(float(np.mean(r_ch[c] ** 2))), "noise_std": d.sigma[c]}
+        if r_after is not None:
+            channels[c]["gap_after"] = gap_of(float(np.mean(r_after[c] ** 2)))
+    return {"regimes": regimes, "channels": channels, "peak_slip": road.peak_slip, "labels": labels}
+
+
+def diagnose(log: QuarterCarLog, p: qc.QuarterCarParams = qc.PAPER_PARAMS,
+             cfg: DiagnoseConfig = DiagnoseConfig()) -> Diagnosis:
+    """Diagnose the sim-to-real gap of a quarter-car log (see the module docstring).
+
+    :param log: the log (from :func:`fricenv.logs.read_log`).
+    :param p: nominal vehicle parameters (``--params``).
+    :param cfg: settings.
+    :return: a :class:`Diagnosis`.
+    """
+    t_start = time.perf_counter()
+    unknown = [c for c in cfg.candidates if c not in EFFECTS]
+    if unknown:
+        raise ValueError(f"unknown candidate effect(s) {', '.join(unknown)}; valid effects: {', '.join(EFFECTS)}")
+    d = _prepare(log, p, cfg)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        nominal = fit_nominal(d, cfg)
+        _refine_noise(nominal, d)
+        nominal = _score("nominal", [], nominal.names, nominal.x, d, nominal.seconds)
+    nominal.gap = gap_of(nominal.test_mse)
+    road = nominal.x[:4]
+    jobs = _jobs(cfg)
+    tasks = [([c], road, d, cfg, None) for c in cfg.candidates]
+    if jobs > 1 and len(tasks) > 1:
+        # longest fits first keeps both workers busy
+        order = sorted(range(len(tasks)), key=lambda i: -len(EFFECT_PARAMS[cfg.candidates[i]]))
+        with ProcessPoolExecutor(max_workers=min(jobs, len(tasks))) as pool:
+            done = dict(zip(order, pool.map(_fit_worker, [tasks[i] for i in order])))
+        fits = [done[i] for i in range(len(tasks))]
+    else:
+        fits = [_fit_worker(t) for t in tasks]
+    for f in fits:
+        f.gap = gap_of(f.test_mse)
+        f.t_stat = paired_t(nominal, f, d)
+        f.z = improvement_z(nominal, f, d)
+    fits.sort(key=lambda f: f.test_mse)
+    significant = [f for f in fits if _significant(f, nominal, cfg)]
+    joint = None
+    if cfg.joint and len(significant) >= 2:
+        a, b = significant[0], significant[1]
+        seeds = {a.effect: a.effect_params(), b.effect: b.effect_params()}
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            joint = fit_candidate([a.effect, b.effect], a.x[:4], d, cfg, seeds)
+        joint.gap = gap_of(joint.test_mse)
+        joint.t_stat = paired_t(nominal, joint, d)
+        joint.z = improvement_z(nominal, joint, d)
+
+    def explains(f: CandidateFit) -> bool:
+        return f.gap <= cfg.ratio_explained * nominal.gap or f.gap <= cfg.gap_none
+
+    verdict, chosen = "none", None
+    if significant:
+        best = significant[0]
+        if explains(best):
+            verdict, chosen = best.effect, best
+        elif joint is not None and _significant(joint, nominal, cfg) and explains(joint) and \
+                joint.test_mse < best.test_mse:
+            # two effects at once: the larger single effect is the verdict, the other follows in candidates
+            verdict, chosen = best.effect, best
+        elif nominal.gap > cfg.gap_none:
+            verdict = "unexplained"
+    elif nominal.gap > cfg.gap_none:
+        verdict = "unexplained"
+    if chosen is not None:
+        # the verdict first, then the other candidates by held-out error
+        fits = [chosen] + [f for f in fits if f is not chosen]
+
+    # localisation: nominal residuals on all windows
+    r_all, r_ch = window_residuals([], nominal.names, nominal.x, d, per_channel=True)
+    r_ch = {c: v[0] for c, v in r_ch.items()}
+    residuals = {"before": np.sqrt(np.mean(r_all[0] ** 2, axis=-1)), "before_samples": r_ch}
+    gap_after = nominal.gap
+    params: dict = {}
+    r_after_ch = None
+    if chosen is not None:
+        r_after, r_after_ch = window_residuals(chosen.effect.split("+"), chosen.names, chosen.x, d, per_channel=True)
+        r_after_ch = {c: v[0] for c, v in r_after_ch.items()}
+        residuals["after"] = np.sqrt(np.mean(r_after[0] ** 2, axis=-1))
+        residuals["after_samples"] = r_after_ch
+        gap_after = chosen.gap
+        params = chosen.effect_params()
+    loc = _regimes(nominal, d, r_ch, r_after_ch)
+    residuals["labels"] = loc["labels"]
+    wm = nominal.window_mse
+    order = np.argsort(-wm)[:3]
+    segments = [{"t_start": float(d.t0 + d.dt * d.starts[i]), "t_end": float(d.t0 + d.dt * (d.starts[i] + d.horizon)),
+                 "gap": gap_of(float(wm[i])), "held_out": bool(d.test[i])} for i in order]
+    missing = [c for c in ("v", "a_x") if c not in d.channels]
+    certainty = ("all channels logged" if not missing else
+                 f"{' and '.join(missing)} not logged: "
+                 + ("speed reconstructed from the wheel speed through the fitted model (initial state from the "
+                    "free-rolling start); " if "v" in missing else "")
+                 + "effects acting on the vehicle (drag, radius, friction level) and actuator gain are less "
+                   "identifiable from the wheel speed alone; the verdict is less certain")
+    where = {
+        "segments": segments,
+        "regimes": loc["regimes"],
+        "channels": loc["channels"],
+        "fitted_peak_slip": loc["peak_slip"],
+        "nominal_road": nominal.road(),
+        "data": {"channels": d.channels, "samples": d.n, "windows": len(d.starts),
+                 "held_out_windows": int(np.count_nonzero(d.test)), "horizon_s": d.horizon * d.dt,
+                 "speed_source": "logged v (smoothed)" if d.v is not None else "reconstructed from omega",
+                 "certainty": certainty},
+        "tests": {f.effect: {"t_stat": f.t_stat, "z": f.z, "significant": bool(f in significant)} for f in fits},
+    }
+    if joint is not None:
+        where["joint_fit"] = {"effects": joint.effect.split("+"), "params": joint.effect_params(),
+                              "gap_after": joint.gap, "t_stat": joint.t_stat}
+    return Diagnosis(verdict=verdict, gap_before=nominal.gap, gap_after=gap_after, params=params, where=where,
+                     candidates=fits, nominal=nominal, joint=joint, data=d, residuals=residuals,
+                     seconds=time.perf_counter() - t_start, source=log.source)
+
+
+def load_params(path) -> qc.QuarterCarParams:
+    """Vehicle parameters from a JSON file (keys of :class:`QuarterCarParams`; unknown keys rejected)."""
+    import json
+    from dataclasses import fields as dc_fields
+
+    with open(path) as fh:
+        try:
+            raw = json.load(fh)
+        except json.JSONDecodeError as exc:
+            raise ValueError(f"{path}: not valid JSON ({exc})") from None
+    if not isinstance(raw, dict):
+        raise ValueError(f"{path}: expected a JSON object of vehicle parameters")
+    valid = [f.name for f in dc_fields(qc.QuarterCarParams)]
+    unknown = sorted(set(raw) - set(valid))
+    if unknown:
+        raise ValueError(f"{path}: unknown parameter(s) {', '.join(unknown)}; valid: {', '.join(valid)}")
+    try:
+        return qc.QuarterCarParams(**{k: float(v) for k, v in raw.items()})
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{path}: {exc}") from None
+
+
+def diagnose_file(path, plant: str = "quarter-car", params_file=None, cfg: DiagnoseConfig = DiagnoseConfig()):
+    """Read a log with :func:`fricenv.logs.read_log` and diagnose it."""
+    if plant != "quarter-car":
+        raise ValueError(f"unknown plant {plant!r} for this diagnosis; valid plants: quarter-car")
+    p = load_params(params_file) if params_file is not None else qc.PAPER_PARAMS
+    log = read_log(path, plant)
+    return diagnose(log, p, cfg)

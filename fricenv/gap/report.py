@@ -1,0 +1,161 @@
+"""Reports of the gap diagnosis: ``report.json`` (the DESIGN.md contract), ``report.md`` and PNG plots.
+
+This is the gap tool's only plotting module (matplotlib is imported inside the plotting function, with the Agg
+backend). Nothing is overwritten half-way: every file is first written completely under a temporary name in the
+output directory and then renamed onto its final name, ``report.json`` last, so a reader either sees the previous
+report or the complete new one, and a failure (e.g. while plotting) leaves any previous ``report.json`` intact.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from fricenv.gap.diagnose import CandidateFit, Diagnosis
+from fricenv.utils import atomic_write, to_jsonable, write_json
+
+__all__ = ["CANDIDATE_KEYS", "REPORT_KEYS", "report_dict", "report_markdown", "summary_line", "write_report"]
+
+REPORT_KEYS = ("plant", "verdict", "gap_before", "gap_after", "params", "where", "candidates")
+CANDIDATE_KEYS = ("effect", "params", "gap_after", "score")
+PLOT_TIME = "residual_time.png"
+PLOT_REGIMES = "residual_regimes.png"
+
+
+def _score(c: CandidateFit, gap_before: float) -> float:
+    """Share of the nominal model's held-out excess squared error that the candidate closes (1 = all, <0 = worse)."""
+    if gap_before <= 0:
+        return 0.0
+    return float(1.0 - c.gap**2 / gap_before**2)
+
+
+def report_dict(dg: Diagnosis, plant: str = "quarter-car") -> dict:
+    """The report.json object, exactly the DESIGN.md schema (extra detail lives inside ``where``)."""
+    cands = [{"effect": c.effect, "params": c.effect_params(), "gap_after": c.gap, "score": _score(c, dg.gap_before)}
+             for c in dg.candidates]
+    return to_jsonable({"plant": plant, "verdict": dg.verdict, "gap_before": dg.gap_before,
+                        "gap_after": dg.gap_after, "params": dg.params, "where": dg.where, "candidates": cands})
+
+
+def summary_line(dg: Diagnosis) -> str:
+    """One-line summary for the command line."""
+    params = ", ".join(f"{k}={v:.4g}" for k, v in dg.params.items())
+    verdict = dg.verdict + (f" ({params})" if params else "")
+    seg = dg.where["segments"][0] if dg.where.get("segments") else None
+    worst = f"; worst segment {seg['t_start']:.2f}-{seg['t_end']:.2f} s" if seg else ""
+    return (f"verdict: {verdict}; gap_before {dg.gap_before:.3g} -> gap_after {dg.gap_after:.3g} "
+            f"(noise units, held-out){worst}")
+
+
+def report_markdown(dg: Diagnosis, report: dict) -> str:
+    """A readable report."""
+    w = report["where"]
+    lines = [f"# Sim-to-real gap report: {Path(dg.source).name}", "",
+             f"**Verdict: `{report['verdict']}`**" + (f" with {report['params']}" if report["params"] else ""), "",
+             f"- held-out gap before: {report['gap_before']:.3f} (noise units; 0 = the model fits within noise)",
+             f"- held-out gap after:  {report['gap_after']:.3f}",
+             (f"- data: {w['data']['samples']} samples, channels {', '.join(w['data']['channels'])}; "
+              f"{w['data']['windows']} prediction windows of {w['data']['horizon_s']:.2f} s, "
+              f"{w['data']['held_out_windows']} held out; speed: {w['data']['speed_source']}"),
+             f"- certainty: {w['data']['certainty']}",
+             "- calibrated nominal road: " + ", ".join(f"{k}={v:.4g}" for k, v in w["nominal_road"].items()),
+             f"- diagnosis time: {dg.seconds:.1f} s", "",
+             "## Where the gap lies", "", "Worst time segments (nominal model):", ""]
+    for s in w["segments"]:
+        lines.append(f"- {s['t_start']:.2f}-{s['t_end']:.2f} s: gap {s['gap']:.2f}"
+                     + (" (held out)" if s["held_out"] else ""))
+    lines += ["", "| regime | samples | gap before | gap after |", "| --- | --- | --- | --- |"]
+    for name, r in w["regimes"].items():
+        fmt = (lambda x: "-" if x is None else f"{x:.2f}")
+        lines.append(f"| {name} | {r['samples']} | {fmt(r['gap'])} | {fmt(r.get('gap_after'))} |")
+    lines += ["", "| channel | noise std (estimated) | gap before | gap after |", "| --- | --- | --- | --- |"]
+    for name, c in w["channels"].items():
+        after = c.get("gap_after")
+        lines.append(f"| {name} | {c['noise_std']:.4g} | {c['gap']:.2f} | {'-' if after is None else f'{after:.2f}'} |")
+    lines += ["", "## Candidates (fitted on training windows, scored on held-out windows)", "",
+              "| effect | params | gap after | score | t | z | significant |", "| --- | --- | --- | --- | --- | --- | --- |"]
+    for c in report["candidates"]:
+        t = w["tests"].get(c["effect"], {})
+        params = ", ".join(f"{k}={v:.4g}" for k, v in c["params"].items())
+        lines.append(f"| {c['effect']} | {params} | {c['gap_after']:.3f} | {c['score']:.3f} | "
+                     f"{t.get('t_stat', float('nan')):.2f} | {t.get('z', float('nan')):.1f} | "
+                     f"{t.get('significant', False)} |")
+    if "joint_fit" in w:
+        j = w["joint_fit"]
+        lines += ["", f"Joint fit of {' + '.join(j['effects'])}: gap after {j['gap_after']:.3f}, params {j['params']}"]
+    lines += ["", ("Score: share of the nominal model's held-out excess squared error the candidate closes. "
+                   "z: held-out improvement of the squared normalised error without its largest window, in noise "
+                   "standard deviations (significant above the configured threshold); t: paired t statistic of the "
+                   "per-window log error ratio (reported only). A verdict needs a significant z and a held-out gap "
+                   "of at most 35 % of the nominal one or within the noise (DiagnoseConfig.ratio_explained, "
+                   "gap_none)."), "", f"![residual over time]({PLOT_TIME})", "",
+              f"![residual by regime]({PLOT_REGIMES})", ""]
+    return "\n".join(lines)
+
+
+def _plots(dg: Diagnosis, report: dict, tmpdir: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    d = dg.data
+    t_mid = d.t0 + d.dt * (d.starts + d.horizon / 2)
+    fig, ax = plt.subplots(figsize=(8, 3.5))
+    ax.step(t_mid, dg.residuals["before"], where="mid", label="nominal (before)")
+    if "after" in dg.residuals:
+        ax.step(t_mid, dg.residuals["after"], where="mid", label=f"with {dg.verdict} (after)")
+    held = d.test
+    ax.plot(t_mid[held], np.zeros(held.sum()) + 0.05, "k|", label="held-out windows")
+    ax.axhline(1.0, color="gray", lw=0.8, ls="--", label="noise level")
+    ax.set_yscale("log")
+    ax.set_xlabel("t [s]")
+    ax.set_ylabel("RMS residual / noise")
+    ax.legend(fontsize=8)
+    ax.set_title("prediction residual per window")
+    fig.tight_layout()
+    fig.savefig(tmpdir / PLOT_TIME, dpi=100)
+    plt.close(fig)
+
+    regimes = report["where"]["regimes"]
+    names = [k for k, r in regimes.items() if r["samples"]]
+    x = np.arange(len(names))
+    fig, ax = plt.subplots(figsize=(8, 3.5))
+    ax.bar(x - 0.2, [regimes[k]["gap"] for k in names], 0.4, label="before")
+    if "after" in dg.residuals:
+        ax.bar(x + 0.2, [regimes[k].get("gap_after") or 0.0 for k in names], 0.4, label="after")
+    ax.set_xticks(x)
+    ax.set_xticklabels(names, rotation=30, ha="right", fontsize=8)
+    ax.set_ylabel("gap (noise units)")
+    ax.legend(fontsize=8)
+    ax.set_title("gap by operating regime")
+    fig.tight_layout()
+    fig.savefig(tmpdir / PLOT_REGIMES, dpi=100)
+    plt.close(fig)
+
+
+def write_report(dg: Diagnosis, out_dir, plant: str = "quarter-car", plots: bool = True) -> dict:
+    """Write report.json, report.md and the plots into ``out_dir``; returns the report dict.
+
+    Files are produced in a temporary directory beside the final ones, then renamed into place (report.json last).
+    """
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    report = report_dict(dg, plant)
+    tmp = Path(tempfile.mkdtemp(prefix=".report.", dir=out))
+    try:
+        if plots:
+            _plots(dg, report, tmp)
+        with atomic_write(tmp / "report.md") as fh:
+            fh.write(report_markdown(dg, report))
+        write_json(tmp / "report.json", report)
+        for name in [PLOT_TIME, PLOT_REGIMES, "report.md", "report.json"]:
+            if (tmp / name).exists():
+                os.replace(tmp / name, out / name)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    return report

@@ -1,0 +1,275 @@
+"""Validation of the gap diagnosis on withheld effects (issue 6, item 5).
+
+Random logs are drawn from the real stand-in: each library effect at a realistic size, logs with no effect, and logs
+with a physically real effect that is NOT in the library (temperature brake fade, or wheel-load transfer through the
+body's pitch dynamics), on random roads (the presets with their stiffness and peak factor perturbed, so the road is
+never one the tool could know) and random drivers. Each log is diagnosed without telling the tool anything. The
+summary has the confusion matrix, the share of right verdicts (library effect -> its name, no effect -> ``none``,
+out-of-library effect -> ``unexplained``), the median ``gap_after / gap_before`` on library-effect logs and the
+fitted parameters' errors when the verdict is right.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+import time
+import warnings
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass
+
+import numpy as np
+
+from fricenv.effects.quarter_car import EFFECTS, effect_params, make_effect
+from fricenv.gap.diagnose import DiagnoseConfig, diagnose
+from fricenv.gap.simulate import DRIVERS, simulate_log
+from fricenv.logs import read_log, write_log
+from fricenv.plants import quarter_car as qc
+from fricenv.plants.tire import ROADS, MagicFormula
+from fricenv.utils import as_generator, progress
+
+__all__ = ["CATEGORIES", "PARAM_TOLERANCE", "Case", "draw_case", "run_case", "summarize", "validate"]
+
+NONE, OUT = "none", "out_of_library"
+CATEGORIES = tuple(EFFECTS) + (NONE, OUT)
+PARAM_TOLERANCE = 0.15  # relative parameter error counted as right [-]
+ROAD_JITTER = {"B": 0.15, "theta": 0.1}  # relative perturbation of the preset roads [-]
+DURATION = 5.0  # log length [s]
+# A road speed for the drag force used as drag's single error figure [m/s].
+DRAG_REFERENCE_SPEED = 15.0
+
+
+@dataclass(frozen=True)
+class Case:
+    """One validation log's recipe."""
+
+    category: str  # effect name, "none" or "out_of_library"
+    effects: tuple  # effect specs switched on in the stand-in
+    road: MagicFormula
+    driver: str
+    seed: int
+    drop_optional: bool  # log only the required columns
+
+
+def _random_road(rng: np.random.Generator) -> MagicFormula:
+    base = ROADS[list(ROADS)[int(rng.integers(len(ROADS)))]]
+    B = base.B * (1 + ROAD_JITTER["B"] * rng.uniform(-1, 1))
+    theta = min(base.theta * (1 + ROAD_JITTER["theta"] * rng.uniform(-1, 1)), 1.2)
+    return MagicFormula(B=B, C=base.C, E=base.E, theta=theta, name=f"{base.name}~")
+
+
+def _random_effect(category: str, road: MagicFormula, rng: np.random.Generator, p: qc.QuarterCarParams):
+    """A library or out-of-library effect at a realistic size."""
+    u = rng.uniform
+    if category == "brake_lag":
+        return make_effect(category, tau=u(0.02, 0.08))
+    if category == "brake_delay":
+        return make_effect(category, delay=u(0.015, 0.06))
+    if category == "brake_gain":
+        return make_effect(category, gain=u(0.75, 0.88) if rng.random() < 0.5 else u(1.12, 1.3))
+    if category == "relaxation_length":
+        return make_effect(category, sigma=u(0.2, 0.6))
+    if category == "radius_error":
+        return make_effect(category, r_eff=p.r * (1 + rng.choice([-1, 1]) * u(0.02, 0.05)))
+    if category == "mu_change":
+        rise = road.theta < 0.85 and rng.random() < 0.5
+        factor = u(1.2, 1.4) if rise else u(0.55, 0.8)
+        return make_effect(category, t_change=u(1.0, 2.2), theta_after=road.theta * factor)
+    if category == "drag":
+        return make_effect(category, c0=u(100.0, 300.0), c2=u(0.2, 0.6))
+    if category == OUT:
+        if rng.random() < 0.5:
+            return make_effect("brake_fade", allow_out_of_library=True, k=u(3e-6, 6e-6))
+        return make_effect("load_transfer", allow_out_of_library=True, k=u(0.25, 0.45))
+    raise ValueError(f"unknown category {category!r}; valid: {', '.join(CATEGORIES)}")
+
+
+def draw_case(category: str, rng: np.random.Generator, drop_optional: bool = False,
+              p: qc.QuarterCarParams = qc.PAPER_PARAMS) -> Case:
+    """A random case of the given category."""
+    road = _random_road(rng)
+    effects = () if category == NONE else (_random_effect(category, road, rng, p),)
+    driver = DRIVERS[int(rng.integers(len(DRIVERS)))]
+    return Case(category, effects, road, driver, int(rng.integers(2**31)), drop_optional)
+
+
+def _main_error(category: str, truth: dict, fitted: dict) -> tuple[float, dict]:
+    """Relative errors of the fitted parameters, and the single figure the 15 % target is checked on."""
+    errs = {}
+    for k, v in truth.items():
+        if k in fitted:
+            errs[k] = abs(fitted[k] - v) / abs(v) if v != 0 else abs(fitted[k])
+    if category == "mu_change":
+        errs["t_change_abs_s"] = abs(fitted.get("t_change", np.nan) - truth["t_change"])
+        return errs.get("theta_after", np.nan), errs
+    if category == "drag":
+        ref = DRAG_REFERENCE_SPEED**2
+        f_true = truth["c0"] + truth["c2"] * ref
+        f_fit = fitted.get("c0", np.nan) + fitted.get("c2", np.nan) * ref
+        errs[f"force_at_{DRAG_REFERENCE_SPEED:g}_m_s"] = abs(f_fit - f_true) / f_true
+        return errs[f"force_at_{DRAG_REFERENCE_SPEED:g}_m_s"], errs
+    return next(iter(errs.values()), np.nan), errs
+
+
+def run_case(case: Case, cfg: DiagnoseConfig | None = None, via_file: bool = True) -> dict:
+    """Simulate, (write and re-read,) diagnose blind, and score one case (default: one process per diagnosis)."""
+    cfg = cfg or DiagnoseConfig(jobs=1)
+    log, _ = simulate_log(list(case.effects), case.road, case.driver, case.seed, DURATION,
+                          write_v=not case.drop_optional, write_ax=not case.drop_optional)
+    if via_file:  # through the log format, with neutral comments: the tool is told nothing
+        with tempfile.TemporaryDirectory() as tmp:
+            path = os.path.join(tmp, "log.csv")
+            write_log(path, log, comments=("validation log",))
+            log = read_log(path)
+    t0 = time.perf_counter()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        dg = diagnose(log, cfg=cfg)
+    seconds = time.perf_counter() - t0
+    expected = {NONE: "none", OUT: "unexplained"}.get(case.category, case.category)
+    out = {"category": case.category, "true_effect": case.effects[0].name if case.effects else "none",
+           "true_params": effect_params(case.effects[0]) if case.effects else {},
+           "road": {"B": case.road.B, "C": case.road.C, "E": case.road.E, "theta": case.road.theta,
+                    "preset": case.road.name}, "driver": case.driver, "seed": case.seed,
+           "columns": "required only" if case.drop_optional else "all", "verdict": dg.verdict,
+           "expected": expected, "right": dg.verdict == expected, "gap_before": dg.gap_before,
+           "gap_after": dg.gap_after, "params": dg.params, "seconds": seconds, "samples": len(log),
+           "candidates": [c.effect for c in dg.candidates[:3]]}
+    if case.category in EFFECTS:
+        out["ratio"] = dg.gap_after / dg.gap_before if dg.gap_before > 0 else np.nan
+        out["detectable"] = _detectable(case, dg, cfg)
+        if out["right"]:
+            out["param_error"], out["param_errors"] = _main_error(case.category, out["true_params"], dg.params)
+    return out
+
+
+def _detectable(case: Case, dg, cfg: DiagnoseConfig) -> bool:
+    """Oracle check (for the summary only): does the TRUE model (true road and effect) improve the held-out error
+    over the calibrated nominal model by the diagnosis' own significance rule? If not, the effect is below the
+    noise in this log and no tool could name it from these data."""
+    from fricenv.gap.diagnose import _param_names, _score, improvement_z
+
+    e = case.effects[0]
+    names = _param_names([e.name])
+    x = np.concatenate([[case.road.B, case.road.C, case.road.E, case.road.theta],
+                        [getattr(e, k) for k in names[4:]]])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        true_fit = _score(e.name, [e.name], names, x, dg.data, 0.0)
+    return bool(improvement_z(dg.nominal, true_fit, dg.data) > cfg.sig_z)
+
+
+def _run(args):
+    case, cfg = args
+    try:
+        return run_case(case, cfg)
+    except ValueError as exc:  # LogFormatError included: a log the reader rejects counts as a wrong verdict
+        expected = {NONE: "none", OUT: "unexplained"}.get(case.category, case.category)
+        return {"category": case.category, "true_effect": case.effects[0].name if case.effects else "none",
+                "true_params": effect_params(case.effects[0]) if case.effects else {}, "driver": case.driver,
+                "seed": case.seed, "road": {"B": case.road.B, "C": case.road.C, "E": case.road.E,
+                                            "theta": case.road.theta, "preset": case.road.name},
+                "verdict": "error", "error": str(exc), "expected": expected, "right": False,
+                "gap_before": float("nan"), "gap_after": float("nan"), "params": {}, "seconds": 0.0}
+
+
+def validate(n: int, seed=None, jobs: int = 1, drop_optional_share: float = 0.0,
+             cfg: DiagnoseConfig | None = None, show_progress: bool = True) -> dict:
+    """Draw ``n`` random logs (categories in turn, shuffled), diagnose each blind, and summarise.
+
+    :param n: number of logs.
+    :param seed: seed of the draw.
+    :param jobs: processes (each diagnosis runs its candidate fits in one process).
+    :param drop_optional_share: share of logs written with the required columns only.
+    :param cfg: diagnosis settings.
+    :return: the summary (see :func:`summarize`) with the per-log results under ``"logs"``.
+    """
+    if n < 1:
+        raise ValueError(f"n must be >= 1, got {n}")
+    cfg = cfg or DiagnoseConfig(jobs=1)
+    rng = as_generator(seed)
+    cats = [CATEGORIES[i % len(CATEGORIES)] for i in range(n)]
+    rng.shuffle(cats)
+    cases = [draw_case(c, rng, bool(rng.random() < drop_optional_share)) for c in cats]
+    t0 = time.perf_counter()
+    if jobs > 1:
+        with ProcessPoolExecutor(max_workers=jobs) as pool:
+            results = list(progress(pool.map(_run, [(c, cfg) for c in cases]), total=n, desc="validate",
+                                    disable=None if show_progress else True))
+    else:
+        results = [_run((c, cfg)) for c in progress(cases, total=n, desc="validate",
+                                                      disable=None if show_progress else True)]
+    summary = summarize(results)
+    summary["wall_seconds"] = time.perf_counter() - t0
+    summary["n"] = n
+    summary["seed"] = seed
+    return summary
+
+
+def summarize(results: list[dict]) -> dict:
+    """Confusion matrix, accuracy, median gap ratio on effect logs, parameter errors."""
+    labels = list(EFFECTS) + ["none", "unexplained"]
+    conf = {c: {lab: 0 for lab in labels} for c in CATEGORIES}
+    for r in results:
+        conf[r["category"]][r["verdict"]] = conf[r["category"]].get(r["verdict"], 0) + 1
+    errors = [r.get("error") for r in results if r["verdict"] == "error"]
+    ratios = [r["ratio"] for r in results if "ratio" in r and np.isfinite(r["ratio"])]
+    perr = {}
+    for r in results:
+        if "param_error" in r:
+            perr.setdefault(r["category"], []).append(r)
+    param_summary = {}
+    for cat, rs in perr.items():
+        main = np.array([r["param_error"] for r in rs], dtype=float)
+        keys = sorted({k for r in rs for k in r["param_errors"]})
+        param_summary[cat] = {
+            "n": len(rs), "median_rel_error": float(np.nanmedian(main)), "max_rel_error": float(np.nanmax(main)),
+            "within_15pct": float(np.mean(main <= PARAM_TOLERANCE)),
+            "per_param_median": {k: float(np.nanmedian([r["param_errors"].get(k, np.nan) for r in rs]))
+                                 for k in keys},
+        }
+    all_main = np.array([r["param_error"] for r in results if "param_error" in r], dtype=float)
+    secs = np.array([r["seconds"] for r in results])
+    by_cat = {c: float(np.mean([r["right"] for r in results if r["category"] == c]))
+              for c in CATEGORIES if any(r["category"] == c for r in results)}
+    det = [r for r in results if r.get("detectable", True)]
+    return {
+        "accuracy": float(np.mean([r["right"] for r in results])) if results else float("nan"),
+        "accuracy_detectable": float(np.mean([r["right"] for r in det])) if det else float("nan"),
+        "undetectable_effect_logs": int(sum(1 for r in results if r.get("detectable") is False)),
+        "accuracy_by_category": by_cat,
+        "median_gap_ratio_effect_logs": float(np.median(ratios)) if ratios else float("nan"),
+        "param_within_15pct": float(np.mean(all_main <= PARAM_TOLERANCE)) if all_main.size else float("nan"),
+        "param_errors": param_summary,
+        "confusion": conf,
+        "seconds_per_log": {"median": float(np.median(secs)), "max": float(np.max(secs))} if len(secs) else {},
+        "errors": errors,
+        "logs": results,
+    }
+
+
+def format_summary(s: dict) -> str:
+    """A plain-text confusion matrix and the headline figures."""
+    labels = list(EFFECTS) + ["none", "unexplained"]
+    short = {lab: lab[:10] for lab in labels}
+    lines = ["confusion matrix (rows: truth, columns: verdict)",
+             f"{'':>16}" + "".join(f"{short[lab]:>11}" for lab in labels)]
+    for cat, row in s["confusion"].items():
+        if sum(row.values()):
+            lines.append(f"{cat:>16}" + "".join(f"{row.get(lab, 0):>11d}" for lab in labels))
+    lines.append(f"right verdicts: {s['accuracy'] * 100:.1f} % of {s.get('n', '?')} logs")
+    for err in s.get("errors", []):
+        lines.append(f"  log rejected: {err}")
+    if "accuracy_detectable" in s:
+        lines.append(f"  excluding {s['undetectable_effect_logs']} effect logs where even the true model does not "
+                     f"pass the significance rule (effect below the noise): {s['accuracy_detectable'] * 100:.1f} %")
+    lines.append(f"median gap_after/gap_before on effect logs: {s['median_gap_ratio_effect_logs']:.3f}")
+    lines.append(f"fitted parameter within 15 % (right verdicts): {s['param_within_15pct'] * 100:.1f} %")
+    for cat, ps in s["param_errors"].items():
+        per = ", ".join(f"{k} {v:.3g}" for k, v in ps["per_param_median"].items())
+        lines.append(f"  {cat:>18}: n={ps['n']}, median rel. error {ps['median_rel_error']:.3f}, "
+                     f"max {ps['max_rel_error']:.3f}  ({per})")
+    if s.get("seconds_per_log"):
+        lines.append(f"seconds per diagnosis: median {s['seconds_per_log']['median']:.1f}, "
+                     f"max {s['seconds_per_log']['max']:.1f}")
+    return "\n".join(lines)

@@ -1,0 +1,320 @@
+"""Gap diagnosis: verdicts on held-out data, corrupted logs, the report contract, atomic writes, CLI options.
+
+Each diagnosis runs the full pipeline (nominal calibration, seven candidate fits, held-out scoring); the logs are
+small (a few seconds) and every case is diagnosed once per module. Library effects whose logs take longer are
+behind ``@pytest.mark.slow``.
+"""
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fricenv.effects.quarter_car import EFFECTS, make_effect
+from fricenv.gap import report as report_mod
+from fricenv.gap.diagnose import DiagnoseConfig, diagnose, diagnose_file, estimate_noise, load_params
+from fricenv.gap.report import CANDIDATE_KEYS, REPORT_KEYS, write_report
+from fricenv.gap.simulate import simulate_log, write_simulated_log
+from fricenv.logs import LogFormatError, write_log
+from fricenv.plants.tire import DRY, SNOW, WET, MagicFormula
+
+CFG = DiagnoseConfig(jobs=2)
+# A road that is none of the presets: the tool must fit it.
+ROAD = MagicFormula(B=11.0, C=1.9, E=0.8, theta=0.9, name="custom")
+
+# effect -> (params, road, driver, seed, tolerance on the fitted parameter(s))
+CASES = {
+    "brake_lag": ({"tau": 0.05}, WET, "abs", 3, 0.15),
+    "brake_delay": ({"delay": 0.04}, ROAD, "abs", 4, 0.15),
+    "brake_gain": ({"gain": 0.8}, ROAD, "open-loop", 5, 0.15),
+    "relaxation_length": ({"sigma": 0.4}, DRY, "abs", 3, 0.15),
+    "radius_error": ({"r_eff": 0.335}, ROAD, "open-loop", 6, 0.15),
+    "mu_change": ({"t_change": 1.5, "theta_after": 0.55}, ROAD, "abs", 7, 0.15),
+    "drag": ({"c0": 250.0, "c2": 0.4}, ROAD, "open-loop", 8, None),
+}
+FAST = ("brake_lag", "relaxation_length", "mu_change")
+
+
+@pytest.fixture(scope="module")
+def diagnosed():
+    cache = {}
+
+    def get(name):
+        if name not in cache:
+            if name == "none":
+                log, _ = simulate_log([], ROAD, "abs", seed=11, duration=4.0)
+            elif name == "out_of_library":
+                fade = make_effect("brake_fade", allow_out_of_library=True, k=6e-6)
+                log, _ = simulate_log([fade], ROAD, "abs", seed=12, duration=4.0)
+            else:
+                params, road, driver, seed, _ = CASES[name]
+                log, _ = simulate_log([make_effect(name, **params)], road, driver, seed=seed, duration=4.0)
+            cache[name] = (log, diagnose(log, cfg=CFG))
+        return cache[name]
+
+    return get
+
+
+def _check_identified(diagnosed, name):
+    params, _, _, _, tol = CASES[name]
+    _, dg = diagnosed(name)
+    assert dg.verdict == name, [(c.effect, c.gap) for c in dg.candidates]
+    assert dg.gap_after <= 0.35 * dg.gap_before
+    if name == "drag":  # c0 and c2 trade off over a short speed range: check the drag force at 15 m/s
+        f_true = params["c0"] + params["c2"] * 225
+        f_fit = dg.params["c0"] + dg.params["c2"] * 225
+        assert abs(f_fit - f_true) / f_true < 0.15
+    else:
+        for k, v in params.items():
+            assert abs(dg.params[k] - v) / abs(v) < tol, (k, dg.params[k], v)
+
+
+@pytest.mark.parametrize("name", FAST)
+def test_library_effect_is_identified_on_held_out_data(diagnosed, name):
+    _check_identified(diagnosed, name)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", [n for n in CASES if n not in FAST])
+def test_library_effect_is_identified_on_held_out_data_slow(diagnosed, name):
+    _check_identified(diagnosed, name)
+
+
+def test_every_library_effect_has_a_test_case():
+    assert set(CASES) == set(EFFECTS)
+
+
+def test_nominal_log_gives_none(diagnosed):
+    _, dg = diagnosed("none")
+    assert dg.verdict == "none"
+    assert dg.gap_after == dg.gap_before
+    assert dg.params == {}
+    # the calibrated road is close to the true one where the log excites it
+    assert dg.nominal.road()["theta"] == pytest.approx(ROAD.theta, rel=0.05)
+
+
+def test_out_of_library_effect_gives_unexplained_not_a_wrong_name(diagnosed):
+    _, dg = diagnosed("out_of_library")
+    assert dg.verdict == "unexplained", [(c.effect, c.gap, c.t_stat, c.z) for c in dg.candidates]
+    assert dg.gap_before > 1.0
+
+
+def test_noise_level_is_estimated_from_the_data():
+    rng = np.random.default_rng(0)
+    t = np.arange(2000) * 0.01
+    x = 50 * np.exp(-t / 5) + 3 * np.sin(2 * t) + 0.45 * rng.standard_normal(t.size)
+    assert estimate_noise(x) == pytest.approx(0.45, rel=0.08)
+
+
+# ------------------------------------------------------------------------------------------------- report
+def test_report_json_has_exactly_the_schema_keys(diagnosed, tmp_path):
+    _, dg = diagnosed("brake_lag")
+    rep = write_report(dg, tmp_path / "out")
+    on_disk = json.loads((tmp_path / "out" / "report.json").read_text())
+    assert tuple(on_disk) == REPORT_KEYS
+    assert on_disk["plant"] == "quarter-car"
+    assert on_disk["verdict"] == "brake_lag"
+    assert set(on_disk["params"]) == {"tau"}
+    assert on_disk["gap_after"] < on_disk["gap_before"]
+    assert len(on_disk["candidates"]) == len(EFFECTS)
+    for c in on_disk["candidates"]:
+        assert tuple(c) == CANDIDATE_KEYS
+        assert c["effect"] in EFFECTS
+    assert on_disk["candidates"][0]["effect"] == "brake_lag"
+    assert {"segments", "regimes", "channels"} <= set(on_disk["where"])
+    assert {"slip_below_peak", "slip_above_peak", "apply", "release"} <= set(on_disk["where"]["regimes"])
+    assert rep == on_disk
+    for name in ("report.md", "residual_time.png", "residual_regimes.png"):
+        assert (tmp_path / "out" / name).stat().st_size > 0
+    assert not [p for p in (tmp_path / "out").iterdir() if p.name.startswith(".")]  # no temporary left
+
+
+def test_report_is_never_half_written(diagnosed, tmp_path, monkeypatch):
+    _, dg = diagnosed("brake_lag")
+    out = tmp_path / "out"
+    write_report(dg, out, plots=False)
+    before = (out / "report.json").read_text()
+
+    def boom(*args, **kwargs):
+        raise RuntimeError("disk full while plotting")
+
+    monkeypatch.setattr(report_mod, "_plots", boom)
+    _, dg_none = diagnosed("none")
+    with pytest.raises(RuntimeError, match="disk full"):
+        write_report(dg_none, out)
+    assert (out / "report.json").read_text() == before  # the previous report is intact
+    assert not [p for p in out.iterdir() if p.name.startswith(".")]
+
+
+# ------------------------------------------------------------------------------------------------- bad input
+@pytest.fixture(scope="module")
+def good_csv(tmp_path_factory):
+    path = tmp_path_factory.mktemp("logs") / "good.csv"
+    write_simulated_log(path, [], DRY, "abs", seed=1, duration=1.0)
+    return path
+
+
+def _corrupt(good: Path, tmp_path: Path, edit) -> Path:
+    lines = good.read_text().splitlines()
+    header_i = next(i for i, line in enumerate(lines) if not line.startswith("#"))
+    edit(lines, header_i)
+    bad = tmp_path / "bad.csv"
+    bad.write_text("\n".join(lines) + "\n")
+    return bad
+
+
+def test_missing_column_is_named(good_csv, tmp_path):
+    def drop_omega(lines, h):
+        cols = lines[h].split(",")
+        j = cols.index("omega")
+        for i in range(h, len(lines)):
+            cells = lines[i].split(",")
+            del cells[j]
+            lines[i] = ",".join(cells)
+
+    bad = _corrupt(good_csv, tmp_path, drop_omega)
+    with pytest.raises(LogFormatError, match=r"bad\.csv.*missing required column\(s\) omega"):
+        diagnose_file(bad)
+
+
+def test_non_increasing_time_names_line_and_column(good_csv, tmp_path):
+    def swap(lines, h):
+        lines[h + 10], lines[h + 11] = lines[h + 11], lines[h + 10]
+
+    bad = _corrupt(good_csv, tmp_path, swap)
+    with pytest.raises(LogFormatError) as err:
+        diagnose_file(bad)
+    msg = str(err.value)
+    assert "bad.csv" in msg and "'t'" in msg and "not increasing" in msg
+    header_line = 1 + next(i for i, line in enumerate(bad.read_text().splitlines()) if not line.startswith("#"))
+    assert f":{header_line + 11}:" in msg
+
+
+def test_nan_row_names_line_and_column(good_csv, tmp_path):
+    def nan(lines, h):
+        cells = lines[h + 5].split(",")
+        cells[2] = "nan"
+        lines[h + 5] = ",".join(cells)
+
+    bad = _corrupt(good_csv, tmp_path, nan)
+    header_line = 1 + next(i for i, line in enumerate(bad.read_text().splitlines()) if not line.startswith("#"))
+    with pytest.raises(LogFormatError, match=rf"bad\.csv:{header_line + 5}: column 'omega' is NaN"):
+        diagnose_file(bad)
+
+
+def test_omega_in_rpm_is_rejected(good_csv, tmp_path):
+    def rpm(lines, h):
+        cols = lines[h].split(",")
+        j = cols.index("omega")
+        for i in range(h + 1, len(lines)):
+            cells = lines[i].split(",")
+            cells[j] = repr(float(cells[j]) * 60 / (2 * np.pi))
+            lines[i] = ",".join(cells)
+
+    bad = _corrupt(good_csv, tmp_path, rpm)
+    with pytest.raises(LogFormatError, match=r"bad\.csv:\d+: column 'omega'.*rpm"):
+        diagnose_file(bad)
+
+
+def test_too_short_log_is_a_clear_error(tmp_path):
+    log, _ = simulate_log([], DRY, "abs", seed=0, duration=0.2)
+    path = tmp_path / "short.csv"
+    write_log(path, log)
+    with pytest.raises(ValueError, match="too short"):
+        diagnose_file(path)
+
+
+# ------------------------------------------------------------------------------------------------- options
+def test_params_file_overrides_the_nominal_vehicle(tmp_path, good_csv):
+    pfile = tmp_path / "params.json"
+    pfile.write_text(json.dumps({"r": 0.36, "m": 300.0}))
+    p = load_params(pfile)
+    assert (p.r, p.m, p.J) == (0.36, 300.0, 1.0)
+    bad = tmp_path / "bad_params.json"
+    bad.write_text(json.dumps({"radius": 0.36}))
+    with pytest.raises(ValueError, match="unknown parameter.*radius.*valid: m, J, r, Fz, g"):
+        load_params(bad)
+
+
+def test_params_file_is_used_by_the_diagnosis(tmp_path):
+    """A log of a car with r = 0.36: with --params saying so the nominal model fits; without, radius_error."""
+    from fricenv.plants import quarter_car as qc
+
+    p36 = qc.QuarterCarParams(r=0.36)
+    log, _ = simulate_log([], ROAD, "open-loop", seed=2, duration=3.0, p=p36)
+    path = tmp_path / "r36.csv"
+    write_log(path, log)
+    pfile = tmp_path / "params.json"
+    pfile.write_text(json.dumps({"r": 0.36}))
+    cfg = DiagnoseConfig(jobs=2, candidates=("radius_error", "brake_gain"))
+    with_params = diagnose_file(path, params_file=pfile, cfg=cfg)
+    without = diagnose_file(path, cfg=cfg)
+    assert with_params.verdict == "none"
+    assert without.verdict == "radius_error"
+    assert without.params["r_eff"] == pytest.approx(0.36, rel=0.01)
+
+
+def test_unknown_candidate_effect_is_rejected(good_csv):
+    with pytest.raises(ValueError, match="unknown candidate effect.*valid effects: brake_lag"):
+        diagnose_file(good_csv, cfg=DiagnoseConfig(candidates=("brake_lag", "tyre_wear")))
+
+
+def test_unknown_plant_is_rejected(good_csv):
+    with pytest.raises(ValueError, match="valid plants: quarter-car"):
+        diagnose_file(good_csv, plant="bicycle")
+
+
+def test_required_columns_only_still_works_and_says_so(tmp_path):
+    log, _ = simulate_log([make_effect("brake_lag", tau=0.05)], WET, "abs", seed=3, duration=4.0, write_v=False,
+                          write_ax=False)
+    dg = diagnose(log, cfg=DiagnoseConfig(jobs=2, candidates=("brake_lag", "brake_gain", "drag")))
+    assert dg.where["data"]["channels"] == ["omega"]
+    assert "less certain" in dg.where["data"]["certainty"]
+    assert dg.verdict == "brake_lag"
+    assert dg.params["tau"] == pytest.approx(0.05, rel=0.15)
+
+
+# ------------------------------------------------------------------------------------------------- CLI
+def test_cli_simulate_and_diagnose(tmp_path, capsys):
+    from fricenv.cli import main
+
+    log = tmp_path / "log.csv"
+    assert main(["gap", "simulate", "--effect", "brake_lag", "--param", "tau=0.05", "--road", "wet", "--driver",
+                 "abs", "--seed", "3", "--duration", "4", "--out", str(log)]) == 0
+    text = log.read_text()
+    assert "t,T_b,omega,v,a_x" in text
+    out = tmp_path / "rep"
+    assert main(["gap", "diagnose", str(log), "--plant", "quarter-car", "--out", str(out), "--json",
+                 str(tmp_path / "r.json"), "--no-plots", "--candidates", "brake_lag,brake_gain"]) == 0
+    printed = capsys.readouterr().out
+    assert "verdict: brake_lag" in printed
+    assert json.loads((tmp_path / "r.json").read_text())["verdict"] == "brake_lag"
+
+
+def test_cli_rejects_unknown_effect_and_parameter(tmp_path):
+    from fricenv.commands.gap_simulate import parse_effects
+
+    with pytest.raises(ValueError, match="valid effects: brake_lag"):
+        parse_effects(["brake_lagg"], ["tau=0.1"])
+    with pytest.raises(ValueError, match=r"unknown parameter 'tau'; valid parameters: gain \(brake_gain\)"):
+        parse_effects(["brake_gain"], ["tau=0.1"])
+    both = parse_effects(["brake_lag", "drag"], ["tau=0.03", "c0=100", "drag.c2=0.2"])
+    assert [e.name for e in both] == ["brake_lag", "drag"]
+    assert both[1].c2 == 0.2
+
+
+def test_cli_bad_log_prints_the_error(tmp_path, capsys, good_csv):
+    from fricenv.cli import main
+
+    bad = tmp_path / "bad.csv"
+    bad.write_text("t,T_b\n0,0\n0.01,0\n0.02,0\n")
+    assert main(["gap", "diagnose", str(bad), "--out", str(tmp_path / "o")]) == 2
+    assert "missing required column(s) omega" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_snow_nominal_open_loop_is_none():
+    log, _ = simulate_log([], SNOW, "open-loop", seed=5, duration=3.0)
+    dg = diagnose(log, cfg=CFG)
+    assert dg.verdict == "none", [(c.effect, c.gap, c.t_stat, c.z) for c in dg.candidates]
