@@ -84,6 +84,19 @@ def test_omega_in_rpm_is_caught(tmp_path):
         read_log(path)
 
 
+def test_mostly_locked_log_is_valid(tmp_path):
+    rows = [f"{k * 0.01:.2f},0,{20.0 / 0.345:.3f},20.0,0" for k in range(10)]  # free rolling first
+    rows += [f"{k * 0.01:.2f},3000,0,{20.0 - 0.05 * (k - 10):.3f},-7" for k in range(10, 100)]  # then locked
+    log = read_log(_write(tmp_path, [HEADER] + rows))
+    assert len(log) == 100
+
+
+def test_speed_in_kmh_is_caught(tmp_path):
+    rows = [f"{k * 0.01:.2f},0,{20.0 / 0.345:.3f},72.0,0" for k in range(20)]
+    with pytest.raises(LogFormatError, match="disagree.*units"):
+        read_log(_write(tmp_path, [HEADER] + rows))
+
+
 def test_omega_in_rpm_caught_without_v(tmp_path):
     rpm = 30.0 / 0.345 * 60 / (2 * np.pi)  # 830 rpm at 30 m/s
     path = _write(tmp_path, ["t,T_b,omega"] + [f"{k * 0.01:.2f},0,{rpm:.3f}" for k in range(20)])
