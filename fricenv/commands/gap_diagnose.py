@@ -3,7 +3,9 @@
 Example: fricenv gap diagnose log.csv --plant quarter-car --out report_dir
 
 Writes DIR/report.json (DESIGN.md schema), DIR/report.md and PNG plots (atomically: temporary name, then rename)
-and prints a short summary. --params FILE.json overrides the nominal vehicle parameters (m, J, r, Fz, g).
+and prints a short summary. --params FILE.json overrides the nominal vehicle parameters (m, J, r, Fz, g); for
+--plant payload (log columns t, M, f_x, f_y, theta, X, Y) it gives the known calibration "S" (3x3 row-major) and
+optionally m, I_G, rho_x, rho_y.
 """
 
 from __future__ import annotations
@@ -32,8 +34,10 @@ def run(args: argparse.Namespace) -> int:
     from fricenv.logs import LogFormatError
     from fricenv.utils import write_json
 
+    if args.plant == "payload":
+        return _run_payload(args)
     if args.plant != "quarter-car":
-        print(f"error: plant {args.plant!r} is not supported by gap diagnose; valid plants: quarter-car",
+        print(f"error: plant {args.plant!r} is not supported by gap diagnose; valid plants: quarter-car, payload",
               file=sys.stderr)
         return 2
     cfg = DiagnoseConfig(jobs=args.jobs)
@@ -45,6 +49,31 @@ def run(args: argparse.Namespace) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     report = write_report(dg, args.out, args.plant, plots=not args.no_plots)
+    if args.json:
+        write_json(args.json, report)
+    print(summary_line(dg))
+    top = ", ".join(f"{c['effect']} {c['gap_after']:.3g}" for c in report["candidates"][:3])
+    print(f"best candidates (held-out gap): {top}")
+    print(f"report: {args.out}/report.json, report.md ({dg.seconds:.1f} s)")
+    return 0
+
+
+def _run_payload(args: argparse.Namespace) -> int:
+    """``--plant payload``: the payload diagnosis (fricenv.gap.payload_diagnose); --jobs is not used (its fits are
+    linear least squares and 1-D searches, about a second in total)."""
+    from fricenv.gap.payload_diagnose import PayloadDiagnoseConfig, diagnose_payload_file, summary_line
+    from fricenv.gap.payload_report import write_payload_report
+    from fricenv.logs import LogFormatError
+    from fricenv.utils import write_json
+
+    try:
+        cfg = PayloadDiagnoseConfig() if not args.candidates else PayloadDiagnoseConfig(
+            candidates=tuple(c.strip() for c in args.candidates.split(",")))
+        dg = diagnose_payload_file(args.log, args.params, cfg)
+    except (LogFormatError, ValueError, TypeError) as exc:  # bad log, params file or option
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    report = write_payload_report(dg, args.out, plots=not args.no_plots)
     if args.json:
         write_json(args.json, report)
     print(summary_line(dg))

@@ -5,7 +5,7 @@ Example: fricenv gap validate --n 50 --seed 1 --jobs 2 --json validate.json
 Draws N logs from the real stand-in (each library effect at realistic sizes, no effect, and a physically real effect
 outside the library: brake fade or pitch load transfer) on random roads and drivers, diagnoses each without telling
 the tool, and prints the confusion matrix, the share of right verdicts, the median gap_after/gap_before on effect
-logs and the parameter errors.
+logs and the parameter errors. --plant payload does the same for payload logs (fricenv.gap.payload_validate).
 """
 
 from __future__ import annotations
@@ -21,6 +21,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--required-only-share", type=float, default=0.0,
                         help="share of logs with only the required columns t, T_b, omega (default %(default)s)")
     parser.add_argument("--json", metavar="PATH", help="write the figures (and every log's result) as JSON")
+    parser.add_argument("--plant", default="quarter-car",
+                        help="quarter-car or payload (payload: its four effects, none, and viscous damping as the "
+                             "out-of-library effect; one process; default %(default)s)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -30,6 +33,17 @@ def run(args: argparse.Namespace) -> int:
 
     if args.n < 1:
         raise ValueError(f"--n must be >= 1, got {args.n}")
+    if args.plant == "payload":
+        from fricenv.gap.payload_validate import format_payload_summary, validate_payload
+
+        summary = validate_payload(args.n, args.seed)
+        print(format_payload_summary(summary))
+        print(f"wall time {summary['wall_seconds']:.0f} s")
+        if args.json:
+            write_json(args.json, summary)
+        return 0
+    if args.plant != "quarter-car":
+        raise ValueError(f"unknown plant {args.plant!r}; valid plants: quarter-car, payload")
     summary = validate(args.n, args.seed, jobs=max(args.jobs, 1), drop_optional_share=args.required_only_share)
     print(format_summary(summary))
     print(f"wall time {summary['wall_seconds']:.0f} s")

@@ -201,13 +201,23 @@ class Diagnosis:
 
 
 # --------------------------------------------------------------------------------------------- data preparation
-def estimate_noise(x: np.ndarray) -> float:
-    """Noise std of a sampled signal from the median absolute second difference (robust to sparse kinks)."""
-    d2 = np.diff(np.asarray(x, dtype=float), 2)
-    if d2.size < 3:
+def estimate_noise(x: np.ndarray, order: int = 2) -> float:
+    """Noise std of a sampled signal from the median absolute difference of the given order (robust to sparse
+    kinks). White noise of std s gives k-th differences of std s sqrt(binomial(2k, k)); a higher order suppresses a
+    smooth signal better at coarse sample times.
+
+    :param x: the samples.
+    :param order: difference order k >= 1 (default 2).
+    """
+    from math import comb
+
+    if int(order) != order or order < 1:
+        raise ValueError(f"order must be a positive integer, got {order!r}")
+    dk = np.diff(np.asarray(x, dtype=float), int(order))
+    if dk.size < 3:
         return float("nan")
-    mad = np.median(np.abs(d2 - np.median(d2)))
-    return float(1.4826 * mad / np.sqrt(6.0))
+    mad = np.median(np.abs(dk - np.median(dk)))
+    return float(1.4826 * mad / np.sqrt(comb(2 * int(order), int(order))))
 
 
 def _prepare(log: QuarterCarLog, p: qc.QuarterCarParams, cfg: DiagnoseConfig) -> Data:

@@ -138,10 +138,15 @@ def _plots(dg: Diagnosis, report: dict, tmpdir: Path) -> None:
     plt.close(fig)
 
 
-def write_report(dg: Diagnosis, out_dir, plant: str = "quarter-car", plots: bool = True) -> dict:
+def write_report(dg: Diagnosis, out_dir, plant: str = "quarter-car", plots: bool = True, markdown=None,
+                 plotter=None) -> dict:
     """Write report.json, report.md and the plots into ``out_dir``; returns the report dict.
 
     Files are produced in a temporary directory beside the final ones, then renamed into place (report.json last).
+
+    :param markdown: ``(dg, report) -> str`` for report.md (default :func:`report_markdown`, the quarter car's).
+    :param plotter: ``(dg, report, directory) -> None`` writing the PNG plots named ``PLOT_TIME`` and
+        ``PLOT_REGIMES`` (default the quarter car's).
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -149,9 +154,9 @@ def write_report(dg: Diagnosis, out_dir, plant: str = "quarter-car", plots: bool
     tmp = Path(tempfile.mkdtemp(prefix=".report.", dir=out))
     try:
         if plots:
-            _plots(dg, report, tmp)
+            (plotter or _plots)(dg, report, tmp)
         with atomic_write(tmp / "report.md") as fh:
-            fh.write(report_markdown(dg, report))
+            fh.write((markdown or report_markdown)(dg, report))
         write_json(tmp / "report.json", report)
         for name in [PLOT_TIME, PLOT_REGIMES, "report.md", "report.json"]:
             if (tmp / name).exists():
