@@ -1,40 +1,31 @@
 """Benchmark fricenv's speed against a reference, in one process: medians over repeats, ratios, --json.
 
 Targets (run one, or all when none is given):
-  env    single fricenv/Braking-v0 env steps per second (default observation), and Gymnasium's Pendulum-v1 in the
-         same run as the reference, with their ratio.
-More targets plug in with one line in TARGETS.
+  env         single fricenv/Braking-v0 env steps per second (default observation), and Gymnasium's Pendulum-v1
+              in the same run as the reference, with their ratio.
+  pendulum    Pendulum-v1 alone (the reference).
+  vector      the native vector env (make_vec, vector_entry_point) at 1, 64 and 1024 sub-envs, env-steps/s.
+  estimators  mean update time per estimator (estimators.bench), microseconds.
+  ppo         a fixed SB3 PPO training slice on the vector env: steps/s and the share of time spent in the env.
+  all         all of the above (default).
+Every figure is a median over --repeats; ratios divide by Pendulum-v1 measured in the same run (a target that
+needs the reference measures it too). --json PATH writes single_steps_per_s, pendulum_steps_per_s,
+vector_steps_per_s {"1", "64", "1024"}, estimator_update_us {name: mean}, ppo_steps_per_s, ratio_to_pendulum.
+More targets plug in with one line in TARGETS (or fricenv.bench_targets.TARGETS).
 """
 
 from __future__ import annotations
 
 import argparse
 import statistics
-import time
 from collections.abc import Callable
+
+from fricenv import bench_targets
+from fricenv.bench_targets import BRAKING_ENV, REFERENCE_ENV
+from fricenv.bench_targets import env_steps_per_s as _env_steps_per_s
 
 DEFAULT_REPEATS = 5
 DEFAULT_STEPS = 5000
-REFERENCE_ENV = "Pendulum-v1"
-BRAKING_ENV = "fricenv/Braking-v0"
-
-
-def _env_steps_per_s(env_id: str, steps: int, seed: int, **kwargs) -> float:
-    """Steps per second of ``gymnasium.make(env_id)`` under a fixed action, resetting at episode end."""
-    import gymnasium as gym
-    import numpy as np
-
-    env = gym.make(env_id, **kwargs)
-    action = np.zeros(env.action_space.shape, dtype=env.action_space.dtype)
-    env.reset(seed=seed)
-    start = time.perf_counter()
-    for _ in range(steps):
-        _, _, terminated, truncated, _ = env.step(action)
-        if terminated or truncated:
-            env.reset()
-    elapsed = time.perf_counter() - start
-    env.close()
-    return steps / elapsed
 
 
 def bench_env(args) -> dict:
@@ -43,8 +34,8 @@ def bench_env(args) -> dict:
 
     single, pendulum = [], []
     for k in range(args.repeats):
-        single.append(_env_steps_per_s(BRAKING_ENV, args.steps, seed=k))
-        pendulum.append(_env_steps_per_s(REFERENCE_ENV, args.steps, seed=k))
+        single.append(_env_steps_per_s(BRAKING_ENV, args.steps, seed=args.seed + k))
+        pendulum.append(_env_steps_per_s(REFERENCE_ENV, args.steps, seed=args.seed + k))
     out = {
         "single_steps_per_s": statistics.median(single),
         "pendulum_steps_per_s": statistics.median(pendulum),
@@ -59,9 +50,9 @@ def bench_env(args) -> dict:
 
 
 # target name -> function(args) -> dict of figures (merged into the --json output). Add a target with one line.
-TARGETS: dict[str, Callable[[argparse.Namespace], dict]] = {
-    "env": bench_env,
-}
+TARGETS: dict[str, Callable[[argparse.Namespace], dict]] = {"env": bench_env, **bench_targets.TARGETS}
+# Targets whose figures are divided by the reference: they measure Pendulum-v1 too when run alone.
+NEEDS_REFERENCE = ("vector", "ppo")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -71,18 +62,29 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help=f"repeats per measurement; the median is reported (default: {DEFAULT_REPEATS})")
     parser.add_argument("--steps", type=int, default=DEFAULT_STEPS,
                         help=f"env steps per repeat (default: {DEFAULT_STEPS})")
+    parser.add_argument("--seed", type=int, default=0, help="base seed of the env resets (default: 0)")
     parser.add_argument("--json", metavar="PATH", default=None, help="also write the figures as JSON")
 
 
 def run(args) -> int:
+    from fricenv.bench_targets import ratios
     from fricenv.utils import write_json
 
     if args.repeats < 1 or args.steps < 1:
         raise SystemExit("fricenv bench: --repeats and --steps must be >= 1")
-    targets = list(TARGETS) if args.target == "all" else [args.target]
+    if args.target == "all":
+        targets = [name for name in TARGETS if name != "pendulum"]  # "env" measures the reference
+    elif args.target in NEEDS_REFERENCE:
+        targets = ["pendulum", args.target]
+    else:
+        targets = [args.target]
     figures: dict = {}
     for name in targets:
         figures.update(TARGETS[name](args))
+    figures.update(ratios(figures))
+    for key, value in figures.get("ratio_to_pendulum", {}).items():
+        shown = ", ".join(f"{n}: {r:.2f}" for n, r in value.items()) if isinstance(value, dict) else f"{value:.3f}"
+        print(f"ratio to {REFERENCE_ENV}: {key} {shown}")
     if args.json:
         write_json(args.json, figures)
         print(f"json: {args.json}")

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import math
 from typing import Any, ClassVar
 
 import gymnasium as gym
@@ -113,6 +114,15 @@ class BrakingEnv(gym.Env):
     params=PAPER_PARAMS)``. Unknown arguments raise ``TypeError``; unknown values raise ``ValueError`` listing
     the valid ones. ``reset(options=...)`` accepts ``road``, ``v0`` and ``change_distance``.
 
+    ## Vectorized
+
+    ``gymnasium.make_vec("fricenv/Braking-v0", num_envs=N)`` (``vectorization_mode="vector_entry_point"``, the
+    default for this id) builds :class:`fricenv.envs.braking_vector.BrakingVectorEnv`: all ``N`` cars step in one
+    batched numpy call, with next-step autoreset (or ``autoreset_mode="SameStep"``/``"Disabled"``), per-env seeds
+    (``seed + i``) and per-env roads (``road=[...]``), and the same trajectories as ``N`` single envs. For SB3,
+    :class:`fricenv.envs.sb3_vec.BrakingSB3VecEnv` is a ``VecEnv`` over it. Wrappers need
+    ``vectorization_mode="sync"``.
+
     ## Version History
 
     * v0: initial version.
@@ -148,7 +158,8 @@ class BrakingEnv(gym.Env):
             time_limit=time_limit, omega_noise_var=omega_noise_var, decel_noise_std=decel_noise_std,
             ax_noise_std=ax_noise_std, lock_penalty=lock_penalty, action_mode=action_mode,
             observation=observation, params=params)
-        self.sim = core.BrakingSim(1, self.config, road=road, v0=v0, change_distance=change_distance)
+        self.sim = core.BrakingSim(1, self.config, road=road, v0=v0, change_distance=change_distance,
+                                   scalar=True)
         self.dt = self.config.dt
         self.observation_fields = self.sim.layout
         self.observation_names = tuple(f.name for f in self.observation_fields)
@@ -182,14 +193,13 @@ class BrakingEnv(gym.Env):
             raise ValueError(f"action must be numeric, got dtype {a.dtype}")
         if a.shape != (1,):
             raise ValueError(f"action must have shape (1,), got shape {a.shape}")
-        if not np.isfinite(a[0]):
+        if not math.isfinite(a.item(0)):
             raise ValueError(f"action must be finite, got {a[0]!r} (NaN or inf)")
         obs, reward, terminated, truncated = self.sim.step(a)
-        done = bool(terminated[0] or truncated[0])
+        term, trunc = terminated.item(0), truncated.item(0)
         if self.render_mode is not None:
             self._record()
-        return obs[0].copy(), float(reward[0]), bool(terminated[0]), bool(truncated[0]), \
-            self.sim.car_info(0, final=done)
+        return obs[0].copy(), reward.item(0), term, trunc, self.sim.car_info(0, final=term or trunc)
 
     def render(self):
         if self.render_mode is None:

@@ -33,8 +33,9 @@ from typing import Any
 
 import numpy as np
 
+from fricenv.envs.braking_kernels import Ros2Batch, make_scalar_substep, scalar_road
 from fricenv.plants import quarter_car as qc
-from fricenv.plants.tire import ROADS, MagicFormula, get_road, magic_formula
+from fricenv.plants.tire import ROADS, SLIP_SPEED_FLOOR, MagicFormula, get_road, magic_formula
 
 __all__ = [
     "ACTION_MODES",
@@ -70,6 +71,9 @@ LOCK_SPEED_RATIO = 0.05  # wheel counts as locked while omega r < 0.05 v ...
 LOCK_TIME = 0.1  # ... for longer than this [s], above v_stop
 LOCK_PENALTY = 0.01  # reward subtracted per control step while locked [-]
 NOISE_BLOCK = 512  # control steps of noise drawn at once per car
+# Speed margin [m/s] of the per-step road-switch reach test: more than any tire force adds in one control step
+# (F_z theta / m * dt is about 0.1 m/s), so a car that cannot reach its change point is never tested for it.
+REACH_SPEED_SLACK = 1.0
 N_NOISE = 3  # noisy channels: wheel speed, wheel deceleration, a_x
 
 ACTION_MODES = ("torque", "torque_rate")
@@ -305,7 +309,14 @@ class BrakingSim:
         obs, reward, terminated, truncated = sim.step(actions)   # actions: (n,) in [-1, 1]
 
     Arrays returned by :meth:`observe` and :meth:`step` are internal buffers, valid until the next call: copy
-    them to keep them. Per-car state (``v``, ``omega``, ``slip``, ``mu``, ``x``, ``t``, ``torque``,
+    them to keep them.
+
+    Speed. The physics substeps run in :class:`fricenv.envs.braking_kernels.Ros2Batch` (the ROS2 substep of
+    :func:`fricenv.plants.quarter_car.step` with shared subexpressions and cached road constants, equal to it to
+    1e-12). With ``scalar=True`` (one car only) every step runs in Python floats instead
+    (:func:`~fricenv.envs.braking_kernels.make_scalar_substep`), which is several times faster for one car than
+    numpy on 1-element arrays; it equals the batched path to about 1e-12 (not bit for bit: ``math`` and numpy
+    round transcendentals differently). ``BrakingEnv`` uses it. Per-car state (``v``, ``omega``, ``slip``, ``mu``, ``x``, ``t``, ``torque``,
     ``locked``, ``lock_seen``, ``stop_distance``, ``limit``, ...) is public, read-only by convention.
 
     :param n: number of cars.
@@ -313,13 +324,17 @@ class BrakingSim:
     :param road: default road spec for every car (see :func:`resolve_scenario`), overridable per reset.
     :param v0: default initial speed [m/s] or (low, high) range.
     :param change_distance: default friction-change distance [m] or range; None: 15 m (random-change: 5..30 m).
+    :param scalar: step the single car in Python floats (requires ``n == 1``).
     """
 
     def __init__(self, n: int, config: BrakingConfig | None = None, *, road: str | MagicFormula = "dry",
-                 v0=V0_DEFAULT, change_distance=None):
+                 v0=V0_DEFAULT, change_distance=None, scalar: bool = False):
         if not isinstance(n, (int, np.integer)) or n < 1:
             raise ValueError(f"n must be an int >= 1, got {n!r}")
+        if scalar and n != 1:
+            raise ValueError(f"scalar=True steps one car in Python floats; it needs n == 1, got n={n}")
         self.n = int(n)
+        self.scalar = bool(scalar)
         self.config = config if config is not None else BrakingConfig()
         c = self.config
         # Validate the defaults once (a throwaway generator: only the spec is checked here).
@@ -332,6 +347,21 @@ class BrakingSim:
         self._noise_std = np.array([math.sqrt(c.omega_noise_var), c.decel_noise_std, c.ax_noise_std])
         self._h = c.dt / c.substeps
         self._p = c.params
+        self._kernel = Ros2Batch(self.n, self._h, self._p)
+        self._road_rows: dict[MagicFormula, tuple[float, float, float, float]] = {}
+        # Scalar path: the substep function, the constants of the road in use, and the config's derived integers.
+        self._substep1 = make_scalar_substep(self._h, self._p) if self.scalar else None
+        self._road1: tuple[float, ...] = ()
+        self._mf1: tuple[float, ...] = ()
+        self._substeps, self._max_steps, self._lock_steps = c.substeps, c.max_steps, c.lock_steps
+        # Observation scales with the torque entry's times t_max (the value scaled is T_b itself); scalar path:
+        # (scale, low, high) per entry; noise standard deviations.
+        torque_scale = np.ones(len(self.layout))
+        torque_scale[2] = c.t_max
+        self._scale_t = self._scale * torque_scale
+        self._obs64 = np.zeros((self.n, len(self.layout)))
+        self._obs_consts = tuple(zip(self._scale_t.tolist(), self._low.tolist(), self._high.tolist()))
+        self._noise_sd = tuple(self._noise_std.tolist())
         n = self.n
         z = lambda: np.zeros(n)
         # Physical state and scenario, per car.
@@ -341,6 +371,7 @@ class BrakingSim:
         self.road = np.zeros((n, 4))  # road in use
         self.mu_peak_a, self.mu_peak_b, self.mu_peak = z(), z(), z()
         self.change_distance = np.full(n, np.inf)
+        self._next_change = np.full(n, np.inf)  # change distance until the switch, then inf [m]
         self.switched = np.zeros(n, dtype=bool)
         self.v0, self.limit = z(), z()
         self.names: list[str] = [""] * n
@@ -358,6 +389,8 @@ class BrakingSim:
         self.rngs: list[np.random.Generator | None] = [None] * n
         self._noise = np.zeros((n, NOISE_BLOCK, N_NOISE))
         self._noise_idx = np.zeros(n, dtype=np.intp)
+        self._noise_rows = self._noise.reshape(n * NOISE_BLOCK, N_NOISE)  # a view of the blocks
+        self._row_base = np.arange(n) * NOISE_BLOCK
         self._arange = np.arange(n)
         # Output buffers.
         self._obs = np.zeros((n, len(self.layout)), dtype=np.float32)
@@ -387,12 +420,16 @@ class BrakingSim:
             if len(per_car) != len(idx):
                 raise ValueError(f"need one options dict per reset car: {len(idx)} cars, {len(per_car)} dicts")
         c = self.config
+        rows: list[tuple] = []  # per reset car: (B, C, E, theta) of road a and b, peaks, change distance, v0
         for k, i in enumerate(idx):
-            opts = dict(per_car[k] or {})
-            unknown = sorted(set(opts) - set(RESET_OPTION_KEYS))
-            if unknown:
-                raise ValueError(f"unknown reset option(s) {unknown}; valid: {', '.join(RESET_OPTION_KEYS)}")
-            spec = {**self.defaults, **opts}
+            opts = per_car[k]
+            if opts:
+                unknown = sorted(set(opts) - set(RESET_OPTION_KEYS))
+                if unknown:
+                    raise ValueError(f"unknown reset option(s) {unknown}; valid: {', '.join(RESET_OPTION_KEYS)}")
+                spec = {**self.defaults, **opts}
+            else:
+                spec = self.defaults
             if rngs is not None:
                 self.rngs[i] = rngs[k]
             elif self.rngs[i] is None:
@@ -401,19 +438,22 @@ class BrakingSim:
             sc = resolve_scenario(spec["road"], spec["v0"], spec["change_distance"], c.v_stop, rng)
             self.scenarios[i] = sc
             self.names[i] = sc.name
-            self.road_a[i] = sc.road_a.as_array()
-            self.road_b[i] = sc.road_b.as_array()
-            self.mu_peak_a[i] = sc.road_a.mu_max
-            self.mu_peak_b[i] = sc.road_b.mu_max
-            self.change_distance[i] = sc.change_distance
-            self.v0[i] = sc.v0
+            rows.append((*self._road_row(sc.road_a), *self._road_row(sc.road_b), sc.road_a.mu_max,
+                         sc.road_b.mu_max, sc.change_distance, sc.v0))
             self._noise[i] = rng.standard_normal((NOISE_BLOCK, N_NOISE))
+        if rows:  # one write per array instead of one per car
+            table = np.array(rows, dtype=float)
+            self.road_a[idx], self.road_b[idx] = table[:, 0:4], table[:, 4:8]
+            self.mu_peak_a[idx], self.mu_peak_b[idx] = table[:, 8], table[:, 9]
+            self.change_distance[idx], self.v0[idx] = table[:, 10], table[:, 11]
         self._noise_idx[idx] = 0
         self.limit[idx] = limit_distance(self.v0[idx], c.v_stop, self.mu_peak_a[idx], self.mu_peak_b[idx],
                                          self.change_distance[idx], self._p.g)
         self.road[idx] = self.road_a[idx]
+        self._set_kernel_road(idx)
         self.mu_peak[idx] = self.mu_peak_a[idx]
         self.switched[idx] = False
+        self._next_change[idx] = self.change_distance[idx]
         self.v[idx] = self.v0[idx]
         self.omega[idx] = self.v0[idx] / self._p.r  # free rolling
         self.x[idx] = 0.0
@@ -434,12 +474,22 @@ class BrakingSim:
         self.meas[idx, 0] = self.omega[idx] + noise[:, 0]
         self.meas[idx, 1] = noise[:, 1]
         self.meas[idx, 2] = noise[:, 2]
-        return self.observe()
+        if self.scalar or len(idx) == self.n:
+            return self.observe()
+        return self._observe_rows(idx)
 
     def _take_noise(self, idx: np.ndarray | None = None) -> np.ndarray:
         """The next noise row (scaled) of the given cars (all if None); refills exhausted blocks."""
-        if idx is None:
-            idx = self._arange
+        if idx is None:  # every car: gather one row per car from the flat (n * NOISE_BLOCK, N_NOISE) view
+            pos = self._noise_idx
+            out = np.take(self._noise_rows, self._row_base + pos, axis=0)
+            out *= self._noise_std
+            pos += 1
+            if pos.max() >= NOISE_BLOCK:
+                for i in np.flatnonzero(pos >= NOISE_BLOCK):  # once every NOISE_BLOCK steps per car
+                    self._noise[i] = self.rngs[i].standard_normal((NOISE_BLOCK, N_NOISE))
+                    pos[i] = 0
+            return out
         pos = self._noise_idx[idx]
         out = self._noise[idx, pos] * self._noise_std
         pos += 1
@@ -451,6 +501,30 @@ class BrakingSim:
                 self._noise_idx[i] = 0
         return out
 
+    def __getstate__(self) -> dict[str, Any]:
+        state = self.__dict__.copy()
+        state["_substep1"] = None  # a closure does not pickle; rebuilt from the config
+        return state
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state)
+        if self.scalar:
+            self._substep1 = make_scalar_substep(self._h, self._p)
+
+    def _road_row(self, road: MagicFormula) -> tuple[float, float, float, float]:
+        """(B, C, E, theta) of a road as floats, cached per road."""
+        row = self._road_rows.get(road)
+        if row is None:
+            row = self._road_rows[road] = tuple(road.as_array().tolist())
+        return row
+
+    def _set_kernel_road(self, idx) -> None:
+        """Copy the road in use of cars ``idx`` into the substep kernel's constants."""
+        self._kernel.set_road(idx, self.road[idx])
+        if self.scalar:
+            self._mf1 = tuple(float(q) for q in self.road[0])  # (B, C, E, theta)
+            self._road1 = scalar_road(*self._mf1, self._h, self._p)
+
     # ------------------------------------------------------------------ step
     def command_to_torque(self, action: np.ndarray) -> np.ndarray:
         """Brake torque [N m] after applying the (already clipped) normalized commands."""
@@ -459,13 +533,22 @@ class BrakingSim:
             return (action + 1.0) * (0.5 * c.t_max)
         return np.clip(self.torque + action * (c.torque_rate_max * c.dt), 0.0, c.t_max)
 
-    def step(self, action) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    def step(self, action, resetting=None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Advance every car by one control step.
 
         :param action: normalized commands, shape (n,) (or (n, 1)); NaN raises ValueError, values outside
             [-1, 1] are clipped.
+        :param resetting: cars (indices or mask) that the caller resets right after this step and whose results
+            it discards (a vector env's next-step autoreset). They are advanced like the others, but draw nothing
+            from their generators, so their next episode is the one a single env would draw.
         :return: (observation (n, obs_dim) float32, reward (n,), terminated (n,), truncated (n,)) buffers.
         """
+        if resetting is not None:
+            # Rewind their noise cursor: no block refill (a generator draw) can happen in this step, and the
+            # reset redraws the block anyway.
+            self._noise_idx[_as_index_array(resetting, self.n)] = 0
+        if self.scalar:
+            return self._step_scalar(action)
         a = np.asarray(action, dtype=float)
         if a.shape != (self.n,):
             if a.shape == (self.n, 1):
@@ -477,44 +560,76 @@ class BrakingSim:
         a = np.clip(a, -1.0, 1.0)
         c, p, h = self.config, self._p, self._h
         v_stop = c.v_stop
+        kernel = self._kernel
         self.torque = Tb = self.command_to_torque(a)
+        kernel.set_torque(Tb)
         v_start, w_start = self.v, self.omega
         v, w, x = v_start, w_start, self.x
-        energy = np.zeros(self.n)  # sum of (v^2 drop) / (2 g mu_peak) over substeps [m]
-        travel = np.zeros(self.n)  # distance travelled while above v_stop [m]
+        n = self.n
+        # Substep sums (scaled once at the end): ssum = sum of (v_k + v_k+1), so x = x0 + h/2 ssum (trapezoid: the
+        # speed is nearly linear over a 2 ms substep); esum = sum of (v_k^2 - v_k+1^2) and tsum = sum of
+        # (v_k + v_k+1) while above v_stop, so the braking energy is esum / (2 g mu_peak) and the travel h/2 tsum.
+        ssum, esum, tsum, energy = np.zeros(n), np.zeros(n), np.zeros(n), np.zeros(n)
+        inv_2g_mu = 1.0 / (2.0 * p.g * self.mu_peak)
+        half_h = 0.5 * h
+        x0 = x
+        # Road switches are checked only if some car can reach its change point in this step.
+        reach = c.dt * (float(v_start.max()) + REACH_SPEED_SLACK)
+        check_switch = float((self._next_change - x0).min()) <= reach
+        v_above = v.min() > v_stop  # every car above the stop speed at the start of the substep
         for sub in range(c.substeps):
-            v_new, w_new = qc.step(v, w, Tb, self.road, h, p, 1)
-            dx = 0.5 * h * (v + v_new)  # trapezoid: the speed is nearly linear over a 2 ms substep
-            active = v > v_stop
-            cross = active & (v_new <= v_stop)
-            if cross.any():
-                # v^2 is linear in distance at constant deceleration: locate the stop crossing in the substep.
-                frac = (v * v - v_stop * v_stop) / np.maximum(v * v - v_new * v_new, 1e-300)
-                x_stop = x + frac * dx
-                new_stop = cross & ~self.stopped
-                self.stop_distance = np.where(new_stop, x_stop, self.stop_distance)
-                tfrac = (v - v_stop) / np.maximum(v - v_new, 1e-300)
-                t_stop = (self.t + (sub + tfrac) / c.substeps) * c.dt
-                self.stop_time = np.where(new_stop, t_stop, self.stop_time)
-                self.stopped = self.stopped | cross
-                dx_eff = np.where(cross, frac * dx, dx)
-                v_end = np.where(cross, v_stop, v_new)
+            v_new, w_new = kernel.substep(v, w)
+            s = v + v_new
+            d = v - v_new
+            d *= s  # v_k^2 - v_k+1^2
+            new_above = v_new.min() > v_stop
+            if v_above and new_above:  # every car above the stop speed before and after: the common case
+                esum += d
+                tsum += s
             else:
-                dx_eff, v_end = dx, v_new
-            energy += np.where(active, (v * v - v_end * v_end) / (2.0 * p.g * self.mu_peak), 0.0)
-            travel += np.where(active, dx_eff, 0.0)
-            x = x + dx
+                active = v > v_stop
+                d *= active  # the same value as np.where(active, d, 0.0), cheaper
+                st = s * active
+                cross = np.flatnonzero(active & (v_new <= v_stop))
+                if cross.size:
+                    # v^2 is linear in distance at constant deceleration: locate the stop crossing in the substep.
+                    vc, vn, sc = v[cross], v_new[cross], s[cross]
+                    frac = (vc * vc - v_stop * v_stop) / np.maximum(vc * vc - vn * vn, 1e-300)
+                    is_first = ~self.stopped[cross]  # cars stopping for the first time this episode
+                    first = cross[is_first]
+                    x_start = x0[cross] + half_h * ssum[cross]
+                    self.stop_distance[first] = (x_start + frac * (half_h * sc))[is_first]
+                    tfrac = (vc - v_stop) / np.maximum(vc - vn, 1e-300)
+                    self.stop_time[first] = ((self.t[cross] + (sub + tfrac) / c.substeps) * c.dt)[is_first]
+                    self.stopped[cross] = True
+                    d[cross] = vc * vc - v_stop * v_stop
+                    st[cross] = frac * sc
+                esum += d
+                tsum += st
+            ssum += s
             v, w = v_new, w_new
-            switch = ~self.switched & (x >= self.change_distance)
-            if switch.any():
-                self.road[switch] = self.road_b[switch]
-                self.mu_peak[switch] = self.mu_peak_b[switch]
-                self.switched |= switch
+            v_above = new_above
+            if check_switch:
+                switch = np.flatnonzero(x0 + half_h * ssum >= self._next_change)
+                if switch.size:
+                    energy[switch] += esum[switch] * inv_2g_mu[switch]  # close the energy segment on road a
+                    esum[switch] = 0.0
+                    self.road[switch] = self.road_b[switch]
+                    self._set_kernel_road(switch)
+                    self.mu_peak[switch] = self.mu_peak_b[switch]
+                    self.switched[switch] = True
+                    self._next_change[switch] = np.inf
+                    inv_2g_mu = 1.0 / (2.0 * p.g * self.mu_peak)
+        esum *= inv_2g_mu
+        energy += esum  # sum of (v^2 drop) / (2 g mu_peak) over substeps [m]
+        travel = tsum * half_h  # distance travelled while above v_stop [m]
+        x = ssum * half_h
+        x += x0
         self.v, self.omega, self.x = v, w, x
         self.t += 1
         # Truth and lock detection.
         self.slip = qc.slip(v, w, p)
-        self.mu = magic_formula(self.slip, self.road[:, 0], self.road[:, 1], self.road[:, 2], self.road[:, 3])
+        self.mu = magic_formula(self.slip, kernel.B, kernel.C, kernel.E, kernel.theta)
         cond = (w * p.r < c.lock_speed_ratio * v) & (v > v_stop)
         self.lock_count = np.where(cond, self.lock_count + 1, 0)
         self.locked = self.lock_count > c.lock_steps
@@ -528,18 +643,140 @@ class BrakingSim:
         # Reward (see BrakingEnv docstring): braking efficiency per step, normalised by the limit distance.
         self.reward = (energy - travel) / self.limit - c.lock_penalty * self.locked
         self.terminated = self.stopped.copy()
-        self.truncated = (self.t >= c.max_steps) & ~self.terminated
+        self.truncated = (self.t >= self._max_steps) & ~self.terminated
         return self.observe(), self.reward, self.terminated, self.truncated
+
+    def _step_scalar(self, action) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`step` of one car in Python floats (``scalar=True``): the same model, statement by statement."""
+        a = np.asarray(action, dtype=float)
+        if a.shape not in ((1,), (1, 1)):
+            raise ValueError(f"action must have shape (1,) (one command per car), got {a.shape}")
+        a = float(a.flat[0])
+        if not math.isfinite(a):
+            raise ValueError(f"action contains NaN or inf: {[a]}")
+        a = -1.0 if a < -1.0 else (1.0 if a > 1.0 else a)  # noqa: FURB136 (no builtin calls in the hot path)
+        c, p, h = self.config, self._p, self._h
+        v_stop, r, substeps, substep = c.v_stop, p.r, self._substeps, self._substep1
+        if c.action_mode == "torque":
+            Tb = (a + 1.0) * (0.5 * c.t_max)
+        else:
+            Tb = float(self.torque[0]) + a * (c.torque_rate_max * c.dt)
+            Tb = 0.0 if Tb < 0.0 else (c.t_max if Tb > c.t_max else Tb)  # noqa: FURB136
+        v = v_start = self.v.item(0)
+        w = w_start = self.omega.item(0)
+        x = self.x.item(0)
+        road = self._road1
+        energy = travel = 0.0
+        stopped = self.stopped.item(0)
+        change = math.inf if self.switched.item(0) else self.change_distance.item(0)
+        inv_2g_mu = 1.0 / (2.0 * p.g * self.mu_peak.item(0))
+        steps = self.t.item(0)
+        half_h = 0.5 * h
+        for sub in range(substeps):
+            v_new, w_new = substep(v, w, Tb, road)
+            dx = half_h * (v + v_new)
+            if v > v_stop:
+                if v_new <= v_stop:
+                    frac = (v * v - v_stop * v_stop) / max(v * v - v_new * v_new, 1e-300)
+                    if not stopped:
+                        self.stop_distance[0] = x + frac * dx
+                        tfrac = (v - v_stop) / max(v - v_new, 1e-300)
+                        self.stop_time[0] = (steps + (sub + tfrac) / substeps) * c.dt
+                    stopped = True
+                    energy += (v * v - v_stop * v_stop) * inv_2g_mu
+                    travel += frac * dx
+                else:
+                    energy += (v * v - v_new * v_new) * inv_2g_mu
+                    travel += dx
+            x = x + dx
+            v, w = v_new, w_new
+            if x >= change:
+                self.road[0] = self.road_b[0]
+                self._set_kernel_road([0])
+                self.mu_peak[0] = self.mu_peak_b[0]
+                self.switched[0] = True
+                self._next_change[0] = change = math.inf
+                road = self._road1
+                inv_2g_mu = 1.0 / (2.0 * p.g * self.mu_peak.item(0))
+        # State arrays are written in place (read-only by convention for callers, who copy what they keep).
+        self.v[0], self.omega[0], self.x[0], self.torque[0] = v, w, x, Tb
+        self.t[0] = steps = steps + 1
+        self.stopped[0] = stopped
+        # Truth and lock detection (quarter_car.slip and the Magic Formula, in floats).
+        wr = w * r
+        vw = v if v >= wr else wr  # noqa: FURB136
+        slip = (v - wr) / (vw if vw > SLIP_SPEED_FLOOR else SLIP_SPEED_FLOOR)  # noqa: FURB136
+        B, C, E, theta = self._mf1
+        bs = B * slip
+        self.slip[0] = slip
+        self.mu[0] = theta * math.sin(C * math.atan(bs - E * (bs - math.atan(bs))))
+        count = self.lock_count.item(0) + 1 if (wr < c.lock_speed_ratio * v and v > v_stop) else 0
+        self.lock_count[0] = count
+        locked = count > self._lock_steps
+        self.locked[0] = locked
+        if locked:
+            self.lock_seen[0] = True
+        # Measurements: the next noise row of the car's block.
+        pos = self._noise_idx.item(0)
+        noise, k = self._noise, pos * N_NOISE  # flat index of the row in car 0's block
+        n0, n1, n2 = noise.item(k), noise.item(k + 1), noise.item(k + 2)
+        pos += 1
+        if pos >= NOISE_BLOCK:
+            self._noise[0] = self.rngs[0].standard_normal((NOISE_BLOCK, N_NOISE))
+            pos = 0
+        self._noise_idx[0] = pos
+        s0, s1, s2 = self._noise_sd
+        meas = self.meas
+        meas[0, 0] = m0 = w + n0 * s0
+        meas[0, 1] = m1 = (w_start - w) * (r / c.dt) + n1 * s1
+        meas[0, 2] = m2 = (v - v_start) / c.dt + n2 * s2
+        self.reward[0] = (energy - travel) / self.limit.item(0) - c.lock_penalty * locked
+        self.terminated[0] = stopped
+        self.truncated[0] = steps >= self._max_steps and not stopped
+        return self._observe_scalar(m0, m1, Tb, m2, v, slip, self.mu.item(0)), self.reward, self.terminated, \
+            self.truncated
+
+    def _observe_scalar(self, *vals: float) -> np.ndarray:
+        """:meth:`observe` of the one car from Python floats (meas 0, meas 1, torque, meas 2, v, slip, mu)."""
+        obs = self._obs
+        for j, (scale, low, high) in enumerate(self._obs_consts):  # only the layout's entries
+            val = vals[j] / scale
+            obs[0, j] = low if val < low else (high if val > high else val)  # noqa: FURB136
+        return obs
 
     # ------------------------------------------------------------------ observation
     def observe(self) -> np.ndarray:
         """Scaled, clipped float32 observation of every car, shape (n, obs_dim) (internal buffer)."""
         c = self.config
-        vals = [self.meas[:, 0], self.meas[:, 1], self.torque / c.t_max, self.meas[:, 2]]
+        if self.scalar:
+            m0, m1, m2 = self.meas[0].tolist()
+            return self._observe_scalar(m0, m1, self.torque.item(0), m2, self.v.item(0), self.slip.item(0),
+                                        self.mu.item(0))
+        buf = self._obs64
+        buf[:, 0:2] = self.meas[:, 0:2]
+        buf[:, 2] = self.torque
+        buf[:, 3] = self.meas[:, 2]
         if c.observation == "oracle":
-            vals += [self.v, self.slip, self.mu]
-        for j, val in enumerate(vals):
-            np.clip(val / self._scale[j], self._low[j], self._high[j], out=self._obs[:, j], casting="unsafe")
+            buf[:, 4], buf[:, 5], buf[:, 6] = self.v, self.slip, self.mu
+        buf /= self._scale_t  # one pass over (n, obs_dim): scale (torque by t_max), clip, cast to float32
+        np.maximum(buf, self._low, out=buf)
+        np.minimum(buf, self._high, out=buf)
+        self._obs[...] = buf
+        return self._obs
+
+    def _observe_rows(self, idx: np.ndarray) -> np.ndarray:
+        """:meth:`observe` for the cars ``idx`` only (the other rows are current already)."""
+        meas = self.meas[idx]
+        buf = np.empty((len(idx), len(self.layout)))
+        buf[:, 0:2] = meas[:, 0:2]
+        buf[:, 2] = self.torque[idx]
+        buf[:, 3] = meas[:, 2]
+        if self.config.observation == "oracle":
+            buf[:, 4], buf[:, 5], buf[:, 6] = self.v[idx], self.slip[idx], self.mu[idx]
+        buf /= self._scale_t
+        np.maximum(buf, self._low, out=buf)
+        np.minimum(buf, self._high, out=buf)
+        self._obs[idx] = buf
         return self._obs
 
     @property
@@ -556,14 +793,14 @@ class BrakingSim:
     def car_info(self, i: int, final: bool = False) -> dict[str, Any]:
         """The info dict of car ``i``: truth every step, episode figures when ``final``."""
         info = {
-            "v": float(self.v[i]),
-            "slip": float(self.slip[i]),
-            "mu": float(self.mu[i]),
-            "distance": float(self.x[i]),
+            "v": self.v.item(i),
+            "slip": self.slip.item(i),
+            "mu": self.mu.item(i),
+            "distance": self.x.item(i),
             "road": self.names[i],
-            "torque": float(self.torque[i]),
-            "locked": bool(self.locked[i]),
-            "time": float(self.t[i] * self.config.dt),
+            "torque": self.torque.item(i),
+            "locked": self.locked.item(i),
+            "time": self.t.item(i) * self.config.dt,
         }
         if final:
             info.update(self.final_info(i))

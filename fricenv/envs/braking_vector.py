@@ -1,0 +1,280 @@
+"""Native vector env for ``fricenv/Braking-v0``: all sub-envs step in one batched plant call.
+
+``gymnasium.make_vec("fricenv/Braking-v0", num_envs=N, vectorization_mode="vector_entry_point")`` builds a
+:class:`BrakingVectorEnv`: one :class:`fricenv.envs.braking_core.BrakingSim` over ``N`` quarter cars instead of ``N``
+Python env objects, so a step costs one set of numpy calls over ``N`` cars.
+
+Equivalence with single envs. Sub-env ``i`` is the same process as a single ``BrakingEnv`` with the same arguments:
+``reset(seed=s)`` seeds sub-env ``i`` with ``s + i`` (a list gives one seed per sub-env, as in
+:class:`gymnasium.vector.SyncVectorEnv`), each sub-env owns its generator (scenario draws, then its measurement
+noise), and an autoreset draws the next episode from that same generator, exactly as ``env.reset()`` without a seed
+does on a single env. So ``make_vec(..., num_envs=N)`` reset with seed ``s`` produces the trajectories of ``N``
+single envs reset with seeds ``s, s+1, ...`` and reset without a seed at every episode end (tested to 1e-9).
+
+Autoreset (Gymnasium 1.x, https://farama.org/Vector-Autoreset-Mode), chosen with ``autoreset_mode=``:
+
+=========================  ==========================================================================================
+mode                       behaviour
+=========================  ==========================================================================================
+``NEXT_STEP`` (default)    the step that ends an episode returns its last observation, reward and
+                           ``terminated``/``truncated``; the *next* ``step`` ignores that sub-env's action, resets it
+                           and returns its first observation with reward 0 and ``terminated = truncated = False``
+                           (Gymnasium's default, as ``SyncVectorEnv``).
+``SAME_STEP``              the step that ends an episode resets the sub-env at once: it returns the new episode's
+                           first observation, the last one in ``info["final_obs"]`` and the episode's info in
+                           ``info["final_info"]`` (what SB3's ``VecEnv`` convention needs; used by
+                           :mod:`fricenv.envs.sb3_vec`).
+``DISABLED``               no autoreset; reset finished sub-envs with ``reset(options={"reset_mask": mask})``.
+=========================  ==========================================================================================
+
+Info (Gymnasium's dict of arrays, each key ``k`` with a boolean mask ``_k``): every step and reset carries, for
+all sub-envs, ``v``, ``slip``, ``mu``, ``distance``, ``road`` (object array of names), ``torque``, ``locked``,
+``time``; when a sub-env's episode ends it also carries ``stopping_distance``, ``limit_distance``, ``ratio``,
+``lock_seen``, ``stopped`` and ``v0`` (masked to the sub-envs that ended), the keys of the single env's info.
+
+Per-env roads: ``road`` may be one road spec for all sub-envs or a sequence of ``num_envs`` specs (names or
+:class:`~fricenv.plants.tire.MagicFormula`); ``reset(options={"road": [...]})`` does the same for one reset.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Sequence
+from typing import Any, ClassVar
+
+import numpy as np
+from gymnasium import spaces
+from gymnasium.utils import seeding
+from gymnasium.vector import AutoresetMode, VectorEnv
+from gymnasium.vector.utils import batch_space
+
+from fricenv.envs import braking_core as core
+from fricenv.plants.tire import MagicFormula
+
+__all__ = ["CONFIG_KWARGS", "FINAL_INFO_KEYS", "STEP_INFO_KEYS", "BrakingVectorEnv"]
+
+# Keyword arguments that go to BrakingConfig (the same names as BrakingEnv's); dt is fixed by the env.
+CONFIG_KWARGS = tuple(f.name for f in dataclasses.fields(core.BrakingConfig) if f.name != "dt")
+STEP_INFO_KEYS = ("v", "slip", "mu", "distance", "road", "torque", "locked", "time")
+FINAL_INFO_KEYS = ("stopping_distance", "limit_distance", "ratio", "lock_seen", "stopped", "v0")
+RESET_MASK_KEY = "reset_mask"
+
+
+def _is_per_env(spec: Any) -> bool:
+    """Whether a road spec is a per-env sequence (a list/tuple of names or MagicFormulas) rather than one spec."""
+    return isinstance(spec, (list, tuple)) and not isinstance(spec, MagicFormula)
+
+
+class BrakingVectorEnv(VectorEnv):
+    """``num_envs`` Braking-v0 sub-envs stepped together (see the module docstring for autoreset and info).
+
+    :param num_envs: number of sub-envs.
+    :param road: road spec for all sub-envs, or a sequence of ``num_envs`` specs (see ``BrakingEnv``).
+    :param v0: initial speed [m/s] or (low, high) range, for all sub-envs.
+    :param change_distance: friction-change distance [m] or range, for all sub-envs.
+    :param autoreset_mode: an :class:`gymnasium.vector.AutoresetMode` or its value (``"NextStep"``,
+        ``"SameStep"``, ``"Disabled"``).
+    :param max_episode_steps: optional truncation in control steps (overrides ``time_limit``); passed by
+        ``make_vec`` when the registration has one.
+    :param render_mode: only None (the vector env does not render; use single envs for videos).
+    :param config_kwargs: ``BrakingConfig`` fields, the same keyword arguments as ``BrakingEnv``
+        (``action_mode``, ``observation``, ``t_max``, ``physics_dt``, ...).
+    """
+
+    metadata: ClassVar[dict[str, Any]] = {"render_modes": [], "autoreset_mode": AutoresetMode.NEXT_STEP}
+
+    def __init__(self, num_envs: int = 1, *, road: str | MagicFormula | Sequence = "dry",
+                 v0: float | tuple[float, float] = core.V0_DEFAULT,
+                 change_distance: float | tuple[float, float] | None = None,
+                 autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
+                 max_episode_steps: int | None = None, render_mode: str | None = None, **config_kwargs):
+        if not isinstance(num_envs, (int, np.integer)) or isinstance(num_envs, bool) or num_envs < 1:
+            raise ValueError(f"num_envs must be an int >= 1, got {num_envs!r}")
+        unknown = sorted(set(config_kwargs) - set(CONFIG_KWARGS))
+        if unknown:
+            raise TypeError(f"unknown argument(s) {unknown} for BrakingVectorEnv; valid: "
+                            f"num_envs, road, v0, change_distance, autoreset_mode, max_episode_steps, "
+                            f"render_mode, {', '.join(CONFIG_KWARGS)}")
+        if render_mode is not None:
+            raise ValueError(f"BrakingVectorEnv does not render (render_mode must be None, got {render_mode!r}); "
+                             f"use single envs with render_mode='rgb_array'")
+        try:
+            self.autoreset_mode = AutoresetMode(autoreset_mode)
+        except ValueError:
+            raise ValueError(f"unknown autoreset_mode {autoreset_mode!r}; valid: "
+                             f"{', '.join(m.value for m in AutoresetMode)}") from None
+        if max_episode_steps is not None:
+            if not isinstance(max_episode_steps, (int, np.integer)) or max_episode_steps < 1:
+                raise ValueError(f"max_episode_steps must be an int >= 1 or None, got {max_episode_steps!r}")
+            config_kwargs["time_limit"] = int(max_episode_steps) * core.CONTROL_DT
+        self.num_envs = n = int(num_envs)
+        self.config = core.BrakingConfig(**config_kwargs)
+        self._env_roads = self._per_env_roads(road, "road")
+        first_road = self._env_roads[0] if self._env_roads is not None else road
+        self.sim = core.BrakingSim(n, self.config, road=first_road, v0=v0, change_distance=change_distance,
+                                   scalar=n == 1)  # one car: the Python-float path
+        if self._env_roads is not None:  # validate every per-env road now, not at the first reset
+            for spec in self._env_roads:
+                core.resolve_scenario(spec, v0, change_distance, self.config.v_stop, np.random.default_rng(0))
+        self.render_mode = None
+        self.metadata = {**type(self).metadata, "autoreset_mode": self.autoreset_mode}
+        self.dt = self.config.dt
+        self.observation_fields = self.sim.layout
+        self.single_action_space = spaces.Box(-1.0, 1.0, shape=(1,), dtype=np.float32)
+        self.single_observation_space = spaces.Box(
+            low=np.array([f.low for f in self.observation_fields], dtype=np.float32),
+            high=np.array([f.high for f in self.observation_fields], dtype=np.float32),
+            dtype=np.float32,
+        )
+        self.action_space = batch_space(self.single_action_space, n)
+        self.observation_space = batch_space(self.single_observation_space, n)
+        self._autoreset = np.zeros(n, dtype=bool)
+        self._road_names = np.full(n, "", dtype=object)
+        self._was_reset = False
+
+    # ------------------------------------------------------------------ helpers
+    def _per_env_roads(self, road: Any, name: str) -> list | None:
+        """A per-env road list checked for length, or None when ``road`` is one spec for all sub-envs."""
+        if not _is_per_env(road):
+            return None
+        if len(road) != self.num_envs:
+            raise ValueError(f"{name} given per sub-env must have num_envs={self.num_envs} entries, got {len(road)}")
+        return list(road)
+
+    def _car_options(self, idx: np.ndarray, options: dict[str, Any] | None) -> list[dict[str, Any]]:
+        """One reset-options dict per car in ``idx``: the per-env road, then the given options."""
+        opts = dict(options or {})
+        roads = self._per_env_roads(opts.pop("road"), "options['road']") if _is_per_env(opts.get("road")) else None
+        per_car = []
+        for i in idx:
+            o = {}
+            if self._env_roads is not None:
+                o["road"] = self._env_roads[i]
+            o.update(opts)
+            if roads is not None:
+                o["road"] = roads[i]
+            per_car.append(o)
+        return per_car
+
+    def _reset_cars(self, idx: np.ndarray, rngs=None, options: dict[str, Any] | None = None) -> None:
+        self.sim.reset_cars(idx, rngs, self._car_options(idx, options))
+        names = self.sim.names
+        for i in idx:
+            self._road_names[i] = names[i]
+
+    def _infos(self, mask: np.ndarray | None = None) -> dict[str, Any]:
+        """The per-step info keys of every car (arrays), with masks (all True unless ``mask`` is given)."""
+        s = self.sim
+        values = (s.v.copy(), s.slip.copy(), s.mu.copy(), s.x.copy(), self._road_names.copy(), s.torque.copy(),
+                  s.locked.copy(), s.t * self.dt)
+        mask = np.ones(self.num_envs, dtype=bool) if mask is None else mask.copy()
+        infos: dict[str, Any] = {}
+        for key, value in zip(STEP_INFO_KEYS, values):  # the keys share one mask array (read-only by convention)
+            infos[key] = value
+            infos["_" + key] = mask
+        return infos
+
+    def _final_values(self) -> tuple[np.ndarray, ...]:
+        """Episode figures of every car (meaningful where the episode ended), in FINAL_INFO_KEYS order."""
+        s = self.sim
+        return (s.stop_distance.copy(), s.limit.copy(), s.stop_distance / s.limit, s.lock_seen.copy(),
+                s.stopped.copy(), s.v0.copy())
+
+    # ------------------------------------------------------------------ Gymnasium API
+    def reset(self, *, seed: int | Sequence[int | None] | None = None, options: dict[str, Any] | None = None):
+        """Reset all sub-envs (or those in ``options["reset_mask"]``).
+
+        :param seed: None (keep each sub-env's generator; fresh entropy on the first reset), an int ``s`` (sub-env
+            ``i`` gets ``s + i``) or a list of ``num_envs`` ints/None.
+        :param options: reset options for the sub-envs (``road``, ``v0``, ``change_distance``; ``road`` may be a
+            list with one spec per sub-env), plus ``reset_mask`` (bool array (num_envs,)) to reset only some.
+        :return: (observations (num_envs, obs_dim) float32, infos).
+        """
+        n = self.num_envs
+        if options is not None and not isinstance(options, dict):
+            raise ValueError(f"options must be a dict with keys from {core.RESET_OPTION_KEYS + (RESET_MASK_KEY,)}, "
+                             f"got {type(options).__name__}")
+        if seed is None:
+            seeds = [None] * n
+        elif isinstance(seed, (int, np.integer)) and not isinstance(seed, bool):
+            super().reset(seed=int(seed))
+            seeds = [int(seed) + i for i in range(n)]
+        else:
+            seeds = list(seed)
+            if len(seeds) != n:
+                raise ValueError(f"seed given as a list must have num_envs={n} entries, got {len(seeds)}")
+        options = dict(options) if options is not None else None
+        mask = None
+        if options is not None and RESET_MASK_KEY in options:
+            mask = np.asarray(options.pop(RESET_MASK_KEY))
+            if mask.shape != (n,) or mask.dtype != np.bool_:
+                raise ValueError(f"options['{RESET_MASK_KEY}'] must be a bool array of shape ({n},), "
+                                 f"got dtype {mask.dtype}, shape {mask.shape}")
+            if not mask.any():
+                raise ValueError(f"options['{RESET_MASK_KEY}'] must select at least one sub-env")
+            if not self._was_reset and not mask.all():
+                raise ValueError("the first reset must reset every sub-env (no partial reset_mask)")
+        idx = np.arange(n) if mask is None else np.flatnonzero(mask)
+        rngs = []
+        for i in idx:
+            if seeds[i] is not None:
+                rngs.append(seeding.np_random(int(seeds[i]))[0])
+            else:
+                rngs.append(self.sim.rngs[i] if self.sim.rngs[i] is not None else seeding.np_random()[0])
+        self._reset_cars(idx, rngs, options)
+        self._autoreset[idx] = False
+        self._was_reset = True
+        return self.sim.observe().copy(), self._infos(mask)
+
+    def step(self, actions):
+        """Step every sub-env with its action (shape (num_envs, 1) or (num_envs,)); see the module docstring.
+
+        :return: (observations, rewards, terminations, truncations, infos).
+        """
+        if not self._was_reset:
+            raise RuntimeError("call reset() before step()")
+        a = np.asarray(actions)
+        if a.dtype.kind not in "fiu":
+            raise ValueError(f"actions must be numeric, got dtype {a.dtype}")
+        n, s = self.num_envs, self.sim
+        if a.shape not in ((n, 1), (n,)):
+            raise ValueError(f"actions must have shape ({n}, 1) (one command per sub-env), got {a.shape}")
+        mode = self.autoreset_mode
+        pending = np.flatnonzero(self._autoreset) if mode is AutoresetMode.NEXT_STEP else None
+        # Cars pending a next-step autoreset are advanced with the rest (one batched call) and their result is
+        # thrown away; `resetting` keeps that step from drawing on their generators.
+        obs = s.step(a.reshape(n), resetting=pending if pending is not None and pending.size else None)[0]
+        reward = s.reward.copy()
+        terminated = s.terminated.copy()
+        truncated = s.truncated.copy()
+        done = terminated | truncated
+        final = None
+        if mode is AutoresetMode.SAME_STEP and done.any():
+            idx = np.flatnonzero(done)
+            final_obs = np.full(n, None, dtype=object)
+            for i in idx:
+                final_obs[i] = obs[i].copy()
+            final_info = self._infos(done)
+            for key, value in zip(FINAL_INFO_KEYS, self._final_values()):
+                final_info[key], final_info["_" + key] = value, done.copy()
+            final = (final_obs, final_info)
+            self._reset_cars(idx)
+        elif pending is not None and pending.size:
+            self._reset_cars(pending)
+            reward[pending] = 0.0
+            terminated[pending] = False
+            truncated[pending] = False
+            done[pending] = False
+        infos = self._infos()
+        if mode is not AutoresetMode.SAME_STEP and done.any():
+            for key, value in zip(FINAL_INFO_KEYS, self._final_values()):
+                infos[key], infos["_" + key] = value, done.copy()
+        if final is not None:
+            infos["final_obs"], infos["_final_obs"] = final[0], done.copy()
+            infos["final_info"], infos["_final_info"] = final[1], done.copy()
+        if mode is AutoresetMode.NEXT_STEP:
+            self._autoreset = done
+        return obs.copy(), reward, terminated, truncated, infos  # the buffer: resets updated their rows
+
+    def close_extras(self, **kwargs: Any) -> None:
+        pass
