@@ -59,12 +59,13 @@ def make_scalar_substep(h: float, p: qc.QuarterCarParams = qc.PAPER_PARAMS):
     hg_m, hg_r2_J, hg_r_J = hg / m, hg * r * r / J, hg * r / J
     h_m, h_r_J, h_J = h / m, h * r / J, h / J
     floor = SLIP_SPEED_FLOOR
+    inv_tol = qc.INVARIANT_TOL
     atan, sin, cos = math.atan, math.sin, math.cos
 
     def substep(v: float, w: float, Tb: float, road: tuple[float, ...]) -> tuple[float, float]:
         B, C, E, fz_theta, fz_theta_cb, one_minus_E, slide = road
         # Point 1: force and slope (eq. (2), (3)).
-        wr = w * r
+        wr = wr0 = w * r
         vw = v if v >= wr else wr  # noqa: FURB136 (a builtin call costs more in this hot loop)
         denom = vw if vw > floor else floor  # noqa: FURB136
         bs = B * (v - wr) / denom
@@ -97,7 +98,14 @@ def make_scalar_substep(h: float, p: qc.QuarterCarParams = qc.PAPER_PARAMS):
             frac = w / max(w - w_new, _TINY)
             v_new = v + frac * (v_new - v) - (1.0 - frac) * slide
             w_new = 0.0
-        return (v_new if v_new > 0.0 else 0.0), w_new  # noqa: FURB136
+        if v_new < 0.0:
+            v_new = 0.0
+        if Tb >= 0.0 and wr0 <= v and (w_new * r > v_new + inv_tol * (1.0 + v) or v_new > v + inv_tol * (1.0 + v)):
+            # quarter_car.braking_invariant_broken: redo this rare substep the reference way, in finer parts.
+            vf, wf = qc.step(np.array([v]), np.array([w]), np.array([Tb]), np.array([B, C, E, fz_theta / p.Fz]),
+                             h, p, qc.REFINE_PARTS)
+            return float(vf[0]), float(wf[0])
+        return v_new, w_new
 
     return substep
 
@@ -147,6 +155,7 @@ class Ros2Batch:
         self._hg_r_tb_J = z()  # gamma h r T_b / J
         self._h_tb_J = z()  # h T_b / J [rad/s]
         self._h_r_tb_J = z()  # h r T_b / J [m/s]
+        self._Tb = z()  # brake torques [N m]
 
     def set_road(self, idx, road: np.ndarray) -> None:
         """Set the road constants of cars ``idx`` (index array, mask or slice) from rows (B, C, E, theta)."""
@@ -162,6 +171,7 @@ class Ros2Batch:
     def set_torque(self, Tb: np.ndarray) -> None:
         """Set the brake torques [N m] of all cars (held over the following substeps)."""
         p = self.p
+        np.copyto(self._Tb, Tb)
         np.multiply(Tb, self.h * ROS2_GAMMA * p.r / p.J, out=self._hg_r_tb_J)
         np.multiply(Tb, self.h / p.J, out=self._h_tb_J)
         np.multiply(Tb, self.h * p.r / p.J, out=self._h_r_tb_J)
@@ -273,4 +283,9 @@ class Ros2Batch:
                 np.copyto(v_new, v_lock, where=crossing)
             np.maximum(w_new, 0.0, out=w_new)
         np.maximum(v_new, 0.0, out=v_new)
+        bad = qc.braking_invariant_broken(v, w, v_new, w_new, self._Tb, r)
+        if bad.any():  # rare: redo those cars the reference way, in finer parts
+            idx = np.flatnonzero(bad)
+            road = np.column_stack([self.B[idx], self.C[idx], self.E[idx], self.theta[idx]])
+            v_new[idx], w_new[idx] = qc.step(v[idx], w[idx], self._Tb[idx], road, self.h, self.p, qc.REFINE_PARTS)
         return v_new, w_new

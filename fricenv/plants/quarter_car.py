@@ -45,10 +45,15 @@ __all__ = [
     "slip_form_derivatives",
     "step",
     "physical_limit_distance",
+    "braking_invariant_broken",
+    "refine_where_unphysical",
 ]
 
 # ROS2 constant: gamma = 1 + 1/sqrt(2) makes the method L-stable and of order 2.
 _ROS2_GAMMA = 1.0 + 1.0 / np.sqrt(2.0)
+REFINE_PARTS = 8  # a substep that breaks the braking invariant is redone in this many parts ...
+REFINE_MIN_STEP = 1e-5  # ... recursively, down to this step [s]
+INVARIANT_TOL = 1e-9  # relative tolerance of the invariant check (rounding at free rolling)
 
 
 @dataclass(frozen=True)
@@ -184,8 +189,41 @@ def step(v, omega, Tb, road, dt: float, p: QuarterCarParams = PAPER_PARAMS, subs
         k2v, k2w = _solve_w(a11, a12, a21, a22, hg, f2v - 2.0 * k1v, f2w - 2.0 * k1w)
         v_new = v + h * (1.5 * k1v + 0.5 * k2v)
         w_new = omega + h * (1.5 * k1w + 0.5 * k2w)
-        v, omega = _lock_event(v, omega, v_new, w_new, road, h, p)
+        v_new, w_new = _lock_event(v, omega, v_new, w_new, road, h, p)
+        v, omega = refine_where_unphysical(v, omega, v_new, w_new, Tb, road, h, p)
     return v, omega
+
+
+def braking_invariant_broken(v0, w0, v1, w1, Tb, r: float):
+    """Where a step from (v0, w0) to (v1, w1) broke the braking invariant of eq. (1).
+
+    With ``T_b >= 0`` and a wheel no faster than the car (``omega r <= v``), the tire force is >= 0 all along:
+    the wheel cannot overtake the car and the car cannot speed up. A linearly implicit step can break this when
+    it linearises across the friction peak while the slip dynamics are much faster than the step (low speed,
+    brake released past the peak): it overshoots to traction slip and pushes the car forward.
+    """
+    tol = INVARIANT_TOL * (1.0 + v0)
+    return (Tb >= 0.0) & (w0 * r <= v0) & ((w1 * r > v1 + tol) | (v1 > v0 + tol))
+
+
+def refine_where_unphysical(v0, w0, v1, w1, Tb, road, h: float, p: QuarterCarParams = PAPER_PARAMS):
+    """Redo, in :data:`REFINE_PARTS` shorter steps, every car whose step broke :func:`braking_invariant_broken`.
+
+    The check is a few array operations; the refinement (recursive, down to :data:`REFINE_MIN_STEP`) runs only
+    for the rare cars that need it, so the common step costs nothing more.
+    """
+    if h <= REFINE_MIN_STEP:
+        return v1, w1
+    v0, w0 = np.asarray(v0, dtype=float), np.asarray(w0, dtype=float)
+    Tb = np.broadcast_to(np.asarray(Tb, dtype=float), v0.shape)
+    bad = braking_invariant_broken(v0, w0, v1, w1, Tb, p.r)
+    if not np.any(bad):
+        return v1, w1
+    road = np.asarray(road, dtype=float)
+    v_fine, w_fine = step(v0[bad], w0[bad], Tb[bad], road[bad] if road.ndim == 2 else road, h, p, REFINE_PARTS)
+    v1, w1 = np.array(v1, dtype=float), np.array(w1, dtype=float)
+    v1[bad], w1[bad] = v_fine, w_fine
+    return v1, w1
 
 
 def _lock_event(v, omega, v_new, w_new, road, h, p: QuarterCarParams):
