@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from fricenv.gap.payload_diagnose import CHANNELS, PayloadDiagnosis, _fmt
-from fricenv.gap.report import PLOT_REGIMES, PLOT_TIME, write_report
+from fricenv.gap.report import PLOT_REGIMES, PLOT_TIME, plot_regimes, write_report
 
 __all__ = ["payload_markdown", "payload_plots", "write_payload_report"]
 
@@ -97,21 +97,7 @@ def payload_plots(dg: PayloadDiagnosis, report: dict, out_dir: Path) -> None:
     fig.savefig(out_dir / PLOT_TIME, dpi=100)
     plt.close(fig)
 
-    regimes = report["where"]["regimes"]
-    names = [k for k, r in regimes.items() if r["samples"]]
-    x = np.arange(len(names))
-    fig, ax = plt.subplots(figsize=(8, 3.5))
-    ax.bar(x - 0.2, [regimes[k]["gap"] for k in names], 0.4, label="before")
-    if dg.chosen is not None:
-        ax.bar(x + 0.2, [regimes[k].get("gap_after") or 0.0 for k in names], 0.4, label="after")
-    ax.set_xticks(x)
-    ax.set_xticklabels(names, rotation=30, ha="right", fontsize=8)
-    ax.set_ylabel("gap (noise units)")
-    ax.legend(fontsize=8)
-    ax.set_title("gap by regime")
-    fig.tight_layout()
-    fig.savefig(out_dir / PLOT_REGIMES, dpi=100)
-    plt.close(fig)
+    plot_regimes(report, dg.chosen is not None, out_dir / PLOT_REGIMES)
 
 
 def write_payload_report(dg: PayloadDiagnosis, out_dir, plots: bool = True) -> dict:

@@ -121,12 +121,22 @@ def _plots(dg: Diagnosis, report: dict, tmpdir: Path) -> None:
     fig.savefig(tmpdir / PLOT_TIME, dpi=100)
     plt.close(fig)
 
+    plot_regimes(report, "after" in dg.residuals, tmpdir / PLOT_REGIMES)
+
+
+def plot_regimes(report: dict, with_after: bool, path) -> None:
+    """Bar chart of the gap per regime of ``report["where"]["regimes"]``, before (and after) the verdict's effect."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
     regimes = report["where"]["regimes"]
     names = [k for k, r in regimes.items() if r["samples"]]
     x = np.arange(len(names))
     fig, ax = plt.subplots(figsize=(8, 3.5))
     ax.bar(x - 0.2, [regimes[k]["gap"] for k in names], 0.4, label="before")
-    if "after" in dg.residuals:
+    if with_after:
         ax.bar(x + 0.2, [regimes[k].get("gap_after") or 0.0 for k in names], 0.4, label="after")
     ax.set_xticks(x)
     ax.set_xticklabels(names, rotation=30, ha="right", fontsize=8)
@@ -134,7 +144,7 @@ def _plots(dg: Diagnosis, report: dict, tmpdir: Path) -> None:
     ax.legend(fontsize=8)
     ax.set_title("gap by operating regime")
     fig.tight_layout()
-    fig.savefig(tmpdir / PLOT_REGIMES, dpi=100)
+    fig.savefig(path, dpi=100)
     plt.close(fig)
 
 
