@@ -221,8 +221,7 @@ class BrakingEnv(gym.Env):
     # ------------------------------------------------------------------ helpers
     def decode_observation(self, obs) -> dict[str, float]:
         """Physical values (units of :attr:`observation_fields`) of an observation, by name."""
-        obs = np.asarray(obs, dtype=float)
-        return {f.name: float(obs[j] * f.scale) for j, f in enumerate(self.observation_fields)}
+        return core.decode_observation(self.observation_fields, obs)
 
     @property
     def road(self) -> MagicFormula | None:

@@ -45,6 +45,7 @@ __all__ = [
     "BrakingConfig",
     "BrakingSim",
     "ObsField",
+    "decode_observation",
     "Scenario",
     "limit_distance",
     "observation_layout",
@@ -153,6 +154,12 @@ class ObsField:
     def decode(self, x):
         """Physical value [unit] of a scaled observation entry."""
         return np.asarray(x, dtype=float) * self.scale
+
+
+def decode_observation(fields: Sequence[ObsField], obs) -> dict[str, float]:
+    """Physical values (units of ``fields``) of an observation vector, by name."""
+    obs = np.asarray(obs, dtype=float)
+    return {f.name: float(obs[j] * f.scale) for j, f in enumerate(fields)}
 
 
 G_STD = 9.81  # scaling of accelerations [m/s^2 per observation unit]

@@ -13,7 +13,7 @@ import numpy as np
 from gymnasium import spaces
 
 from estimators.fms_rls import FmsRLS
-from fricenv.envs.braking_core import ObsField
+from fricenv.envs.braking_core import ObsField, decode_observation
 from fricenv.plants import payload as pl
 
 __all__ = ["PayloadExcitationEnv", "RESET_OPTION_KEYS", "CALIBRATIONS", "ESTIMATOR_OPTIONS"]
@@ -282,8 +282,7 @@ class PayloadExcitationEnv(gym.Env):
     # ------------------------------------------------------------------ helpers
     def decode_observation(self, obs) -> dict[str, float]:
         """Physical values (units of :attr:`observation_fields`) of an observation, by name."""
-        obs = np.asarray(obs, dtype=float)
-        return {f.name: float(obs[j] * f.scale) for j, f in enumerate(self.observation_fields)}
+        return decode_observation(self.observation_fields, obs)
 
     @staticmethod
     def _check_calibration(calibration) -> None:
