@@ -35,8 +35,9 @@ _MAX_ACCEL = 30.0  # |a_x| [m/s^2], about 3 g
 _MAX_TORQUE = 2.0e4  # |T_b| [N m]
 _OMEGA_R_OVER_V = (0.5, 1.5)  # omega r / v while rolling, if v is logged
 _ROLLING_PERCENTILE = 95.0  # of omega r / v over the moving samples
-_MAX_POSITION = 10.0  # |X|, |Y| [m] of the payload
-_MAX_ANGLE = 4 * np.pi  # |theta| [rad]
+# Payload: median rates; a pose in degrees or mm (with its vision noise) moves 57x or 1000x "faster".
+_MAX_ANGULAR_RATE = 50.0  # median |theta'| [rad/s]
+_MAX_LINEAR_RATE = 20.0  # median |X'|, |Y'| [m/s]
 _NOMINAL_RADIUS = 0.345  # [m], Table I; only used for the unit checks
 
 
@@ -195,10 +196,22 @@ def _check_quarter_car(path: Path, cols: dict[str, np.ndarray], lines: np.ndarra
         _check_range(path, "a_x", cols["a_x"], lines, _MAX_ACCEL, "expected m/s^2")
 
 
+def _check_rate(path: Path, name: str, x: np.ndarray, t: np.ndarray, lines: np.ndarray, limit: float,
+                hint: str) -> None:
+    """The median rate |dx/dt| must be plausible; a median, so a free body may drift far over a long log."""
+    rates = np.abs(np.diff(x)) / np.diff(t)
+    rate = float(np.median(rates))
+    if rate > limit:
+        first = int(np.flatnonzero(rates > limit)[0]) + 1
+        raise LogFormatError(f"{path}:{lines[first]}: column {name!r}: median rate {rate:.4g} per s is implausible "
+                             f"({hint}, limit {limit:g}; first exceeded here)")
+
+
 def _check_payload(path: Path, cols: dict[str, np.ndarray], lines: np.ndarray) -> None:
-    _check_range(path, "theta", cols["theta"], lines, _MAX_ANGLE, "expected rad; is it in degrees?")
+    t = cols["t"]
+    _check_rate(path, "theta", cols["theta"], t, lines, _MAX_ANGULAR_RATE, "expected rad; is it in degrees?")
     for name in ("X", "Y"):
-        _check_range(path, name, cols[name], lines, _MAX_POSITION, "expected m; is it in mm?")
+        _check_rate(path, name, cols[name], t, lines, _MAX_LINEAR_RATE, "expected m; is it in mm?")
 
 
 def read_log(path: str | os.PathLike, plant: str = "quarter-car") -> QuarterCarLog | PayloadLog:

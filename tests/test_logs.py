@@ -125,9 +125,19 @@ def test_payload_log_and_degree_check(tmp_path):
     rows = [f"{k * 0.001:.3f},0.1,1,2,{0.01 * k:.3f},0.01,0.02" for k in range(20)]
     log = read_log(_write(tmp_path, [header] + rows), plant="payload")
     assert isinstance(log, PayloadLog) and log.dt == pytest.approx(0.001)
-    rows[4] = rows[4].replace(",0.040,", ",45.0,")
+    deg = [f"{k * 0.001:.3f},0.1,1,2,{np.degrees(0.01 * k):.4f},0.01,0.02" for k in range(20)]
     with pytest.raises(LogFormatError, match=r"column 'theta'.*degrees"):
-        read_log(_write(tmp_path, [header] + rows, "deg.csv"), plant="payload")
+        read_log(_write(tmp_path, [header] + deg, "deg.csv"), plant="payload")
+    mm = [f"{k * 0.001:.3f},0.1,1,2,0.0,{1000 * 0.5 * k * 0.001:.4f},0.0" for k in range(20)]  # 0.5 m/s in mm
+    with pytest.raises(LogFormatError, match=r"column 'X'.*mm"):
+        read_log(_write(tmp_path, [header] + mm, "mm.csv"), plant="payload")
+
+
+def test_long_drifting_payload_log_is_valid(tmp_path):
+    header = "t,M,f_x,f_y,theta,X,Y"
+    rows = [f"{k * 0.01:.2f},0.1,1,2,{0.65 * k * 0.01:.4f},{0.2 * k * 0.01:.4f},0.0" for k in range(30000)]
+    log = read_log(_write(tmp_path, [header] + rows), plant="payload")  # 300 s: theta 195 rad, X 60 m
+    assert log.theta[-1] > 190
 
 
 def test_failed_write_leaves_previous_file(tmp_path):
