@@ -108,32 +108,11 @@ def parse_payload_effects(names: list[str], params: list[str]) -> list:
     return [make_payload_effect(n, **values[n]) for n in names]
 
 
-# random payload wrench: eq. (13)'s terms with frequencies scaled in this range and uniform random phases
-RANDOM_FREQ_SCALE = (0.7, 1.4)
-
-
 def payload_wrench(kind: str, rng):
-    """The true wrench ``w(t)`` of a simulated payload log: ``paper`` (eq. 13) or ``random``."""
-    import numpy as np
+    """The true wrench ``w(t)`` of a simulated payload log (see :func:`fricenv.plants.payload.multisine_wrench`)."""
+    from fricenv.plants.payload import multisine_wrench
 
-    from fricenv.plants import payload as pl
-
-    if kind == "paper":
-        return pl.paper_wrench
-    if kind != "random":
-        raise ValueError(f"unknown --wrench {kind!r}; valid: paper, random")
-    terms = [[(a, w * rng.uniform(*RANDOM_FREQ_SCALE), rng.uniform(0, 2 * np.pi)) for a, w, _, _ in row]
-             for row in pl.PAPER_WRENCH_TERMS]
-
-    def wrench(t):
-        t = np.asarray(t, dtype=float)
-        out = np.zeros(t.shape + (3,))
-        for i, row in enumerate(terms):
-            for a, w, ph in row:
-                out[..., i] += a * np.sin(w * t + ph)
-        return out
-
-    return wrench
+    return multisine_wrench(kind, rng)
 
 
 def _names(effect) -> list[str]:

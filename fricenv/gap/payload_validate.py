@@ -34,7 +34,6 @@ PAYLOAD_CATEGORIES = tuple(PAYLOAD_EFFECTS) + (NONE, OUT)
 DURATION = 8.0  # log length [s]
 DTS = (1e-3, 2e-3)  # sample times drawn [s]
 PARAM_TOLERANCE = 0.15  # relative parameter error counted as right [-]
-FREQ_SCALE = (0.7, 1.4)  # random wrench: eq. (13)'s frequencies scaled in this range [-]
 DAMPING_LIN = (0.3, 0.8)  # out-of-library viscous damping, translation [N s/m]
 DAMPING_ROT = (0.05, 0.15)  # rotation [N m s/rad]
 ODE_TOL = 1e-9  # relative tolerance of the damped reference integration
@@ -50,23 +49,6 @@ class PayloadCase:
     wrench: str  # "paper" or "random"
     dt: float
     seed: int
-
-
-def _wrench(kind: str, rng: np.random.Generator):
-    if kind == "paper":
-        return pl.paper_wrench
-    terms = [[(a, w * rng.uniform(*FREQ_SCALE), rng.uniform(0, 2 * np.pi)) for a, w, _, _ in row]
-             for row in pl.PAPER_WRENCH_TERMS]
-
-    def wrench(t):
-        t = np.asarray(t, dtype=float)
-        out = np.zeros(t.shape + (3,))
-        for i, row in enumerate(terms):
-            for a, w, ph in row:
-                out[..., i] += a * np.sin(w * t + ph)
-        return out
-
-    return wrench
 
 
 def _random_effect(category: str, rng: np.random.Generator):
@@ -127,7 +109,7 @@ def run_payload_case(case: PayloadCase, cfg: PayloadDiagnoseConfig | None = None
     """Simulate, write, re-read and diagnose one case blind; score it."""
     cfg = cfg or PayloadDiagnoseConfig()
     rng = as_generator(case.seed)
-    wrench = _wrench(case.wrench, rng)
+    wrench = pl.multisine_wrench(case.wrench, rng)
     if case.damping is not None:
         log = _damped_log(case, rng, wrench)
     else:

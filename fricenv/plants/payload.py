@@ -401,3 +401,34 @@ def to_log(traj: Trajectory) -> PayloadLog:
     """The measurements of a trajectory as a :class:`fricenv.logs.PayloadLog` (raw readings and vision)."""
     return PayloadLog(t=traj.t, M=traj.w_hat[:, 0], f_x=traj.w_hat[:, 1], f_y=traj.w_hat[:, 2],
                       theta=traj.pose[:, 0], X=traj.pose[:, 1], Y=traj.pose[:, 2])
+
+
+# Random excitation: eq. (13)'s terms with frequencies scaled in this range [-] and uniform random phases.
+RANDOM_WRENCH_FREQ_SCALE = (0.7, 1.4)
+WRENCH_KINDS = ("paper", "random")
+
+
+def multisine_wrench(kind: str, rng: np.random.Generator):
+    """A true wrench ``w(t)``: the paper's multi-sine, eq. (13), or a random variant of it.
+
+    :param kind: ``"paper"`` or ``"random"`` (eq. (13)'s amplitudes, frequencies scaled by a factor drawn in
+        :data:`RANDOM_WRENCH_FREQ_SCALE`, random phases).
+    :param rng: generator for the random variant.
+    :return: a function of time ``t`` (array) returning ``(..., 3)`` wrenches (M, f_x, f_y).
+    """
+    if kind == "paper":
+        return paper_wrench
+    if kind != "random":
+        raise ValueError(f"unknown wrench {kind!r}; valid: {', '.join(WRENCH_KINDS)}")
+    terms = [[(a, w * rng.uniform(*RANDOM_WRENCH_FREQ_SCALE), rng.uniform(0, 2 * np.pi)) for a, w, _, _ in row]
+             for row in PAPER_WRENCH_TERMS]
+
+    def wrench(t):
+        t = np.asarray(t, dtype=float)
+        out = np.zeros(t.shape + (3,))
+        for i, row in enumerate(terms):
+            for a, w, ph in row:
+                out[..., i] += a * np.sin(w * t + ph)
+        return out
+
+    return wrench
