@@ -32,7 +32,6 @@ def run(args: argparse.Namespace) -> int:
     from fricenv.gap.diagnose import DiagnoseConfig, diagnose_file
     from fricenv.gap.report import summary_line, write_report
     from fricenv.logs import LogFormatError
-    from fricenv.utils import write_json
 
     if args.plant == "payload":
         return _run_payload(args)
@@ -45,13 +44,19 @@ def run(args: argparse.Namespace) -> int:
         cfg = DiagnoseConfig(jobs=args.jobs, candidates=tuple(c.strip() for c in args.candidates.split(",")))
     try:
         dg = diagnose_file(args.log, args.plant, args.params, cfg)
-    except LogFormatError as exc:
+    except (LogFormatError, ValueError, TypeError) as exc:  # bad log, params file or option
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    report = write_report(dg, args.out, args.plant, plots=not args.no_plots)
+    return _report(args, dg, write_report(dg, args.out, args.plant, plots=not args.no_plots), summary_line(dg))
+
+
+def _report(args: argparse.Namespace, dg, report: dict, summary: str) -> int:
+    """Write --json and print the short summary (both plants)."""
+    from fricenv.utils import write_json
+
     if args.json:
         write_json(args.json, report)
-    print(summary_line(dg))
+    print(summary)
     top = ", ".join(f"{c['effect']} {c['gap_after']:.3g}" for c in report["candidates"][:3])
     print(f"best candidates (held-out gap): {top}")
     print(f"report: {args.out}/report.json, report.md ({dg.seconds:.1f} s)")
@@ -64,7 +69,6 @@ def _run_payload(args: argparse.Namespace) -> int:
     from fricenv.gap.payload_diagnose import PayloadDiagnoseConfig, diagnose_payload_file, summary_line
     from fricenv.gap.payload_report import write_payload_report
     from fricenv.logs import LogFormatError
-    from fricenv.utils import write_json
 
     try:
         cfg = PayloadDiagnoseConfig() if not args.candidates else PayloadDiagnoseConfig(
@@ -73,11 +77,4 @@ def _run_payload(args: argparse.Namespace) -> int:
     except (LogFormatError, ValueError, TypeError) as exc:  # bad log, params file or option
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    report = write_payload_report(dg, args.out, plots=not args.no_plots)
-    if args.json:
-        write_json(args.json, report)
-    print(summary_line(dg))
-    top = ", ".join(f"{c['effect']} {c['gap_after']:.3g}" for c in report["candidates"][:3])
-    print(f"best candidates (held-out gap): {top}")
-    print(f"report: {args.out}/report.json, report.md ({dg.seconds:.1f} s)")
-    return 0
+    return _report(args, dg, write_payload_report(dg, args.out, plots=not args.no_plots), summary_line(dg))

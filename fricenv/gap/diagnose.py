@@ -726,6 +726,28 @@ def _regimes(nominal: CandidateFit, d: Data, r_ch: dict, r_after: dict | None = 
     return {"regimes": regimes, "channels": channels, "peak_slip": road.peak_slip, "labels": labels}
 
 
+def decide_verdict(significant: list, fits: list, explains, joint_wins: bool, nominal_gap: float,
+                   gap_none: float) -> tuple[str, object, list]:
+    """The verdict rule shared by every plant's diagnosis (DESIGN.md: none / an effect / unexplained).
+
+    The best significant candidate is the verdict if it explains the gap, or if fitting it together with the
+    second one does (two effects at once: the larger is the verdict, the other follows in candidates). A real gap
+    (``nominal_gap > gap_none``) that no candidate explains is ``unexplained``; otherwise ``none``.
+
+    :param significant: the significant candidates, best first.
+    :param fits: all candidates, best first.
+    :param explains: ``fit -> bool``, whether a fit closes a clear share of the gap on held-out data.
+    :param joint_wins: whether the joint fit of the two best is significant, explains, and beats the best alone.
+    :param nominal_gap: held-out gap of the calibrated nominal model (noise units).
+    :param gap_none: gap below which the nominal model fits within the noise.
+    :return: (verdict, chosen fit or None, candidates with the chosen one first).
+    """
+    if significant and (explains(significant[0]) or joint_wins):
+        chosen = significant[0]
+        return chosen.effect, chosen, [chosen] + [f for f in fits if f is not chosen]
+    return ("unexplained" if nominal_gap > gap_none else "none"), None, fits
+
+
 def diagnose(log: QuarterCarLog, p: qc.QuarterCarParams = qc.PAPER_PARAMS,
              cfg: DiagnoseConfig = DiagnoseConfig()) -> Diagnosis:
     """Diagnose the sim-to-real gap of a quarter-car log (see the module docstring).
@@ -777,22 +799,9 @@ def diagnose(log: QuarterCarLog, p: qc.QuarterCarParams = qc.PAPER_PARAMS,
     def explains(f: CandidateFit) -> bool:
         return f.gap <= cfg.ratio_explained * nominal.gap or f.gap <= cfg.gap_none
 
-    verdict, chosen = "none", None
-    if significant:
-        best = significant[0]
-        if explains(best):
-            verdict, chosen = best.effect, best
-        elif joint is not None and _significant(joint, nominal, cfg) and explains(joint) and \
-                joint.test_mse < best.test_mse:
-            # two effects at once: the larger single effect is the verdict, the other follows in candidates
-            verdict, chosen = best.effect, best
-        elif nominal.gap > cfg.gap_none:
-            verdict = "unexplained"
-    elif nominal.gap > cfg.gap_none:
-        verdict = "unexplained"
-    if chosen is not None:
-        # the verdict first, then the other candidates by held-out error
-        fits = [chosen] + [f for f in fits if f is not chosen]
+    joint_wins = joint is not None and _significant(joint, nominal, cfg) and explains(joint) and \
+        bool(significant) and joint.test_mse < significant[0].test_mse
+    verdict, chosen, fits = decide_verdict(significant, fits, explains, joint_wins, nominal.gap, cfg.gap_none)
 
     # localisation: nominal residuals on all windows
     r_all, r_ch = window_residuals([], nominal.names, nominal.x, d, per_channel=True)

@@ -45,7 +45,7 @@ from scipy.optimize import minimize_scalar
 from scipy.signal import butter, sosfilt, sosfiltfilt
 
 from fricenv.effects.payload import PAYLOAD_EFFECTS
-from fricenv.gap.diagnose import estimate_noise, gap_of
+from fricenv.gap.diagnose import decide_verdict, estimate_noise, gap_of
 from fricenv.logs import PayloadLog, read_log
 from fricenv.plants import payload as pl
 
@@ -511,19 +511,9 @@ def diagnose_payload(log: PayloadLog, S_known=pl.PAPER_S, p: pl.PayloadParams = 
             warnings.simplefilter("ignore", RuntimeWarning)
             joint = fit_payload_candidate([sig[0].effect, sig[1].effect], d, cfg)
         joint.z = improvement_z(nominal, joint, d)
-    verdict, chosen = "none", None
-    if sig:
-        best = sig[0]
-        two_at_once = joint is not None and significant(joint) and explains(joint) and \
-            joint.penalised < best.penalised
-        if explains(best) or two_at_once:  # two effects at once: the larger is the verdict, the other follows
-            verdict, chosen = best.effect, best
-        elif nominal.gap > cfg.gap_none:
-            verdict = "unexplained"
-    elif nominal.gap > cfg.gap_none:
-        verdict = "unexplained"
-    if chosen is not None:
-        fits = [chosen] + [f for f in fits if f is not chosen]
+    joint_wins = joint is not None and significant(joint) and explains(joint) and bool(sig) and \
+        joint.penalised < sig[0].penalised
+    verdict, chosen, fits = decide_verdict(sig, fits, explains, joint_wins, nominal.gap, cfg.gap_none)
     loc = _where(d, nominal, chosen)
     n_scored = int(np.count_nonzero(d.block >= 0))
     where = {
