@@ -7,7 +7,9 @@ Method (every error measure is computed on data not used for fitting):
    signal). No assumption on the log writer's noise values.
 2. **States from data.** The log is cut into prediction windows of ``horizon`` samples (0.1 s: beyond the
    friction peak the wheel dynamics are unstable, so longer open-loop predictions measure the timing of a lock-up
-   rather than the model); every ``test_every``-th window is held out. A window starts from a state estimated from
+   rather than the model); the windows are dealt in turn into ``folds`` folds for cross-fitting: every model is fitted
+   once per fold on the other folds' windows, so every window is predicted by a fit that did not see it (all error
+   measures below are these held-out predictions). A window starts from a state estimated from
    data: the wheel speed (and the speed, when ``v`` is logged; and the transient slip of a relaxation model) as
    per-window nuisance states fitted by two Gauss-Newton steps on that window's measurements; when ``v`` is not
    logged, the speed is reconstructed by integrating the model's vehicle equation
@@ -15,7 +17,7 @@ Method (every error measure is computed on data not used for fitting):
    ``v(0) = r omega`` (the nominal model is a dynamic model; this fits the initial state from omega alone). Effect
    states with a known input (brake-lag filter, delay buffer) run over the logged command.
 3. **Calibrate.** The nominal model's road ``(B, C, E, theta)`` is fitted by least squares on the training windows
-   (multi-start from the road presets). The road is always treated as unknown.
+   of each fold (multi-start from the road presets). The road is always treated as unknown.
 4. **Gap.** Held-out residuals over all logged channels, each divided by its noise level (the smaller of the
    difference-based estimate and the calibrated nominal model's training residual: both over-estimate). A window's
    mean squared normalised residual counts at most ``WINDOW_MSE_CAP``. ``gap`` is the model part of the held-out
@@ -24,13 +26,16 @@ Method (every error measure is computed on data not used for fitting):
 5. **Localise.** Nominal residuals by window (worst time segments), by regime (slip below/above the fitted road's
    peak, brake apply/hold/release, speed bands) and by channel, before and after.
 6. **Candidates.** Every library effect is fitted (road + effect parameters, multi-start; ``mu_change`` by a
-   change-point search) on the training windows, in parallel processes, and scored on the held-out windows. A
-   candidate is significant when its held-out improvement of the squared normalised error, without its single
-   largest window, exceeds ``sig_z`` standard deviations of that sum under pure noise: a richer model cannot win
-   by fitting noise (the improvement is measured on data it was not fitted to), nor by one lucky window.
-7. **Verdict.** An effect when it is significant and closes a clear share of the gap (held-out gap at most
-   ``ratio_explained`` of the nominal one, or within ``gap_none``); ``unexplained`` when the nominal gap exceeds
-   ``gap_none`` and no candidate does; ``none`` otherwise. The two best significant candidates are also fitted
+   change-point search over the road shapes) per fold, in parallel processes, and scored on the held-out windows.
+   A candidate is significant when its held-out improvement of the squared normalised error, without its single
+   largest window, exceeds ``sig_z`` times its spread under the measurement noise (twice the norm of the two
+   models' prediction difference, :func:`paired_z`): a richer model cannot win by fitting noise (the improvement
+   is measured on data it was not fitted to), nor by one lucky window, and an effect that shows in few windows
+   is still seen.
+7. **Verdict.** An effect when it is significant and closes a clear share of the gap (robust held-out gap, the
+   worst ``TRIM_SHARE`` of windows left out, at most ``ratio_explained`` of the nominal one, or below
+   ``gap_within_noise``); ``unexplained`` when the gap is real (robust nominal gap above ``gap_none``, or a
+   significant candidate) and no candidate closes it; ``none`` otherwise. The two best significant candidates are also fitted
    jointly; if only the joint model closes the gap, the larger single effect is the verdict and the other follows
    in ``candidates`` (the joint fit is reported under ``where["joint_fit"]``).
 """
@@ -72,8 +77,11 @@ __all__ = [
 ]
 
 ROAD_NAMES = ("B", "C", "E", "theta")
-# Road parameter bounds for the fit: wide enough for every preset and for unknown roads.
-ROAD_BOUNDS = {"B": (2.0, 40.0), "C": (0.5, 3.0), "E": (-12.0, 1.0), "theta": (0.03, 1.6)}
+# Road parameter bounds for the fit: wide enough for every preset and for unknown roads. B and theta: wide.
+# C and E: the physically plausible range of longitudinal Magic Formula shapes (the presets span C 0.9-2.3,
+# E -6.4-1). A wider range lets the nominal road take unphysical shapes that absorb an effect (a flat curve with
+# E = -12 hides a rolling-radius error on ice).
+ROAD_BOUNDS = {"B": (2.0, 40.0), "C": (0.8, 2.8), "E": (-8.0, 1.0), "theta": (0.03, 1.6)}
 # Effect parameter bounds (SI units) and the starting values of the multi-start.
 EFFECT_BOUNDS = {
     "tau": (1e-3, 0.4), "delay": (0.0, 0.25), "gain": (0.3, 3.0), "sigma": (0.01, 3.0), "r_eff": (0.25, 0.45),
@@ -85,7 +93,7 @@ EFFECT_STARTS = {
     "brake_gain": [{"gain": v} for v in (0.8, 0.9, 1.1, 1.25)],
     "relaxation_length": [{"sigma": v} for v in (0.1, 0.3, 0.6, 1.2)],
     "radius_error": [{"r_eff": f} for f in (0.96, 0.98, 1.02, 1.04)],  # times the nominal radius
-    "mu_change": [],  # grid over t_change, see _mu_change_starts
+    "mu_change": [],  # change-point search, see _mu_change_start
     "drag": [{"c0": a, "c2": b} for a, b in ((50.0, 0.0), (200.0, 0.0), (0.0, 0.3), (100.0, 0.2), (400.0, 0.5))],
 }
 # Finite-difference steps of the fit Jacobian, per parameter (absolute).
@@ -112,6 +120,8 @@ RELAX_STATE_FROM_FILTER = True
 WINDOW_MSE_CAP = 25.0
 # Robust loss of the fits: residuals beyond this many noise std count linearly (soft L1).
 FIT_LOSS_SCALE = 3.0
+# Share of the held-out windows (the worst) left out when judging how much of the gap a candidate closes.
+TRIM_SHARE = 0.05
 MU_CHANGE_FACTORS = np.geomspace(0.35, 2.0, 16)  # theta grid of the change-point search, times the nominal theta
 APPLY_RATE = 0.5  # |dT_b/dt| above this share of max |T_b| per second counts as apply/release [1/s]
 
@@ -121,11 +131,12 @@ class DiagnoseConfig:
     """Settings of the diagnosis."""
 
     horizon: int = 10  # prediction window [samples]
-    test_every: int = 2  # every test_every-th window is held out [-]
+    folds: int = 2  # cross-fitting folds: window i belongs to fold i % folds; each fold is held out once [-]
     max_nfev: int = 30  # least-squares iterations per start [-]
     sig_z: float = 4.0  # robust held-out improvement (noise standard deviations) a candidate must exceed [-]
     ratio_explained: float = 0.35  # a verdict leaves at most this share: gap_after <= ratio * gap_before [-]
     gap_none: float = 1.1  # nominal gap (noise units) below which the model fits within noise [-]
+    gap_within_noise: float = 0.3  # a candidate leaving a robust held-out gap below this explains the gap [-]
     substeps: int = DEFAULT_SUBSTEPS  # physics substeps per sample
     jobs: int | None = None  # processes for the candidate fits (None: min(2, available cores))
     joint: bool = True  # also fit the two best significant candidates together
@@ -145,7 +156,8 @@ class Data:
     sigma: dict  # noise std per logged channel
     v_smooth: np.ndarray | None
     starts: np.ndarray  # window start indices
-    test: np.ndarray  # bool per window: held out
+    fold: np.ndarray  # cross-fitting fold of each window
+    test: np.ndarray  # bool per window: held out in the fit at hand (the others are its training windows)
     horizon: int
     free_end: int  # first sample after the free-rolling stretch
     p: qc.QuarterCarParams
@@ -173,7 +185,10 @@ class CandidateFit:
     gap: float = 0.0  # held-out gap, noise units
     t_stat: float = 0.0  # paired test against the nominal model on held-out windows
     z: float = 0.0  # robust held-out improvement in noise standard deviations
+    z_paired: float = 0.0  # the same improvement over its noise spread given the two models' prediction difference
     seconds: float = 0.0
+    resid: np.ndarray | None = None  # (windows, samples) normalised residuals of all windows
+    x_folds: tuple = ()  # the per-fold fits of a cross-fitted candidate (x is their mean)
 
     def effect_params(self) -> dict[str, float]:
         return {k: float(v) for k, v in zip(self.names, self.x) if k not in ROAD_NAMES}
@@ -240,12 +255,14 @@ def _prepare(log: QuarterCarLog, p: qc.QuarterCarParams, cfg: DiagnoseConfig) ->
     braking = np.flatnonzero(np.abs(T) > FREE_ROLL_TORQUE * tmax)
     free_end = int(braking[0]) if braking.size else n
     starts = np.arange(0, n - H + 1, H)
-    idx = np.arange(len(starts))
-    test = (idx % cfg.test_every) == (cfg.test_every - 2 if cfg.test_every > 1 else 0)
+    if int(cfg.folds) != cfg.folds or cfg.folds < 2:
+        raise ValueError(f"DiagnoseConfig.folds must be an integer >= 2, got {cfg.folds!r}")
+    fold = np.arange(len(starts)) % int(cfg.folds)
+    test = fold == 0
     return Data(t0=float(log.t[0]), dt=log.dt, Tb=T, omega=np.asarray(log.omega, dtype=float),
                 v=None if log.v is None else np.asarray(log.v, dtype=float),
                 a_x=None if log.a_x is None else np.asarray(log.a_x, dtype=float), sigma=sigma, v_smooth=v_smooth,
-                starts=starts, test=test, horizon=H, free_end=free_end, p=p, substeps=cfg.substeps)
+                starts=starts, fold=fold, test=test, horizon=H, free_end=free_end, p=p, substeps=cfg.substeps)
 
 
 # --------------------------------------------------------------------------------------------- models
@@ -508,7 +525,7 @@ def _score(effect: str, effects: Sequence[str], names, x, d: Data, seconds: floa
     wm = np.minimum(np.mean(r**2, axis=-1), WINDOW_MSE_CAP)
     return CandidateFit(effect=effect, names=tuple(names), x=np.asarray(x, dtype=float),
                         train_mse=float(np.mean(wm[~d.test])), test_mse=float(np.mean(wm[d.test])), window_mse=wm,
-                        seconds=seconds)
+                        seconds=seconds, resid=r)
 
 
 def _road_starts(d: Data) -> np.ndarray:
@@ -527,52 +544,39 @@ def _mu_change_start(road: np.ndarray, d: Data) -> np.ndarray:
     """Start of the mu_change fit by a change-point search; t_change only moves the windows it falls in, so it is
     searched, not differentiated.
 
-    Every training window is scored with the nominal road at a grid of theta values; the best split into a before
-    and an after theta (exact over the grid, by cumulative sums) locates the change between two training windows;
-    the switching time is then refined at single-sample resolution over that stretch.
+    Every training window is scored at a grid of theta values, for the nominal fit's road shape (B, C, E) and for
+    each preset's (the nominal fit's shape has absorbed part of the change, so it can be far from the true one); the
+    best split into a before and an after theta (exact over the grid, by cumulative sums) locates the change between
+    two training windows; the switching time is then refined at single-sample resolution over that stretch.
     """
     train = np.flatnonzero(~d.test)
     names = _param_names([])
     lo_t, hi_t = ROAD_BOUNDS["theta"]
     thetas = np.clip(road[3] * MU_CHANGE_FACTORS, lo_t, hi_t)
-    X = np.repeat(road[None], len(thetas), axis=0)
-    X[:, 3] = thetas
+    shapes = np.vstack([road[None], _road_starts(d)])
+    X = np.repeat(shapes, len(thetas), axis=0)
+    X[:, 3] = np.tile(thetas, len(shapes))
     r = window_residuals([], names, X, d, train)
-    c = np.sum(np.minimum(r**2, FIT_LOSS_SCALE**2 * 4), axis=-1)  # (F, Wtrain), outliers bounded
-    c = np.where(np.isfinite(c), c, np.inf)
-    cum = np.cumsum(c, axis=1)
-    total = cum[:, -1:]
-    best = (np.inf, 1, 0, 0)
-    for s_ in range(1, len(train)):
-        before = cum[:, s_ - 1]
-        after = (total[:, 0] - cum[:, s_ - 1])
-        i, j = int(np.argmin(before)), int(np.argmin(after))
-        cost = before[i] + after[j]
-        if cost < best[0]:
-            best = (cost, s_, i, j)
-    _, split, i, j = best
+    c = np.sum(np.minimum(r**2, FIT_LOSS_SCALE**2 * 4), axis=-1)  # (S F, Wtrain), outliers bounded
+    c = np.where(np.isfinite(c), c, np.inf).reshape(len(shapes), len(thetas), -1)
+    cum = np.cumsum(c, axis=2)  # (S, F, Wtrain)
+    before = cum[:, :, :-1].min(axis=1)  # (S, splits): best theta before each split
+    after = (cum[:, :, -1:] - cum[:, :, :-1]).min(axis=1)
+    shape, split0 = np.unravel_index(int(np.argmin(before + after)), before.shape)
+    split = int(split0) + 1  # first training window after the change
+    i = int(np.argmin(cum[shape, :, split - 1]))
+    j = int(np.argmin(cum[shape, :, -1] - cum[shape, :, split - 1]))
     mnames = _param_names(["mu_change"])
     lo, hi = _bounds(mnames, d)
     t_lo = d.t0 + d.dt * (d.starts[train[split - 1]] + d.horizon // 2)
     t_hi = d.t0 + d.dt * (d.starts[train[split]] + d.horizon // 2)
     fine_t = np.clip(np.arange(t_lo, t_hi + 1e-9, d.dt), lo[4], hi[4])
-    base = road.copy()
+    base = shapes[shape].copy()
     base[3] = thetas[i]
     fine = np.array([np.concatenate([base, [tc, thetas[j]]]) for tc in fine_t])
     r = window_residuals(["mu_change"], mnames, fine, d, train)
     cost = np.sum(np.minimum(r.reshape(len(fine), -1) ** 2, FIT_LOSS_SCALE**2 * 4), axis=1)
     return fine[int(np.argmin(np.where(np.isfinite(cost), cost, np.inf)))]
-
-
-def _mu_change_starts(road: np.ndarray, d: Data) -> np.ndarray:
-    """Grid of (t_change, theta_after): every half window, theta_after at five shares of the fitted theta."""
-    lo, hi = _bounds(_param_names(["mu_change"]), d)
-    times = np.arange(lo[4], hi[4] + 1e-9, d.dt * max(d.horizon // 2, 1))
-    rows = []
-    for tc in times:
-        for f in (0.4, 0.7, 0.85, 1.2, 1.5):
-            rows.append(np.concatenate([road, [tc, f * road[3]]]))
-    return np.array(rows)
 
 
 def _effect_start_matrix(effects: Sequence[str], road: np.ndarray, d: Data, seeds: dict | None = None) -> np.ndarray:
@@ -639,7 +643,7 @@ def paired_t(base: CandidateFit, cand: CandidateFit, d: Data) -> float:
     The per-window statistic is the log ratio of the mean squared normalised residuals, which keeps the test robust
     to the few windows whose error is dominated by a wheel lock-up predicted slightly early or late.
     """
-    diff = np.log(base.window_mse[d.test]) - np.log(cand.window_mse[d.test])
+    diff = np.log(base.window_mse) - np.log(cand.window_mse)
     if diff.size < 2:
         return 0.0
     sd = float(np.std(diff, ddof=1))
@@ -666,17 +670,101 @@ def improvement_z(base: CandidateFit, cand: CandidateFit, d: Data) -> float:
     """Held-out improvement of the sum of squared normalised residuals, without its single largest window, in units
     of that sum's standard deviation under pure noise (sqrt(2 n)); one lucky window cannot make it large."""
     m = d.horizon * len(d.channels)
-    gain = (base.window_mse[d.test] - cand.window_mse[d.test]) * m
+    gain = (base.window_mse - cand.window_mse) * m
     if gain.size == 0:
         return 0.0
     robust = float(np.sum(gain) - max(float(np.max(gain)), 0.0))
     return robust / np.sqrt(2.0 * gain.size * m)
 
 
+def paired_z(base: CandidateFit, cand: CandidateFit, d: Data) -> float:
+    """Held-out improvement of ``cand`` over ``base`` in units of its spread under the measurement noise.
+
+    With normalised residuals ``r_b = e + a`` and ``r_c = e + b`` (``e`` unit white noise, ``a``, ``b`` the models'
+    errors), the per-sample gain ``r_b^2 - r_c^2 = a^2 - b^2 + 2 e (a - b)`` has noise spread ``2 |a - b|``, and
+    ``a - b = r_b - r_c`` is the difference of the two predictions, known exactly. The statistic is the held-out gain
+    over ``2 ||r_b - r_c||``: a z score that is large when the data prefer the candidate however few windows carry the
+    difference, and about ``-||a - b|| / 2 + N(0, 1)`` when the base model is right. Per window the gain and the
+    squared difference are capped (``WINDOW_MSE_CAP``), and the window of largest gain is left out, as in
+    :func:`improvement_z`.
+    """
+    if base.resid is None or cand.resid is None:
+        return 0.0
+    m = d.horizon * len(d.channels)
+    gain = (base.window_mse - cand.window_mse) * m
+    diff2 = np.minimum(np.sum((base.resid - cand.resid) ** 2, axis=-1), m * WINDOW_MSE_CAP)
+    if gain.size < 2:
+        return 0.0
+    drop = int(np.argmax(gain))
+    keep = np.arange(gain.size) != drop
+    spread = 2.0 * np.sqrt(float(np.sum(diff2[keep])))
+    return float(np.sum(gain[keep]) / spread) if spread > 0 else 0.0
+
+
 def _significant(f: CandidateFit, nominal: CandidateFit, cfg: DiagnoseConfig) -> bool:
-    """A large robust held-out improvement (the paired t statistic is reported, not required: an effect that shows
-    only in the transients improves few windows, which a t test over all windows does not see)."""
-    return f.z > cfg.sig_z and f.test_mse < nominal.test_mse
+    """A held-out improvement well beyond what the measurement noise could make (:func:`paired_z`); the robust
+    :func:`improvement_z` and the paired t statistic are reported, not required."""
+    return f.z_paired > cfg.sig_z and f.test_mse < nominal.test_mse
+
+
+def robust_gap(f: CandidateFit) -> float:
+    """Held-out gap with the worst ``TRIM_SHARE`` of the windows left out: a wheel lock-up that starts a few
+    milliseconds earlier or later than any model predicts costs a window its whole error whatever the model, so the
+    share of the gap a candidate closes is judged without those few windows."""
+    wm = np.sort(f.window_mse)
+    keep = wm.size - int(np.ceil(TRIM_SHARE * wm.size))
+    return gap_of(float(np.mean(wm[:max(keep, 1)])))
+
+
+def _fold_data(d: Data, j: int) -> Data:
+    """The data with fold ``j`` held out and the other folds as training windows."""
+    return replace(d, test=d.fold == j)
+
+
+def _cross_fitted(fits: Sequence[CandidateFit], d: Data) -> CandidateFit:
+    """Combine per-fold fits (fit ``j`` trained without fold ``j``) into one candidate whose window errors and
+    residuals are held out on every window; its parameters are the mean of the folds'."""
+    f0 = fits[0]
+    wm = np.empty_like(f0.window_mse)
+    resid = np.empty_like(f0.resid)
+    for j, f in enumerate(fits):
+        held = d.fold == j
+        wm[held] = f.window_mse[held]
+        resid[held] = f.resid[held]
+    return CandidateFit(effect=f0.effect, names=f0.names, x=np.mean([f.x for f in fits], axis=0),
+                        train_mse=float(np.mean([f.train_mse for f in fits])), test_mse=float(np.mean(wm)),
+                        window_mse=wm, gap=gap_of(float(np.mean(wm))), seconds=float(sum(f.seconds for f in fits)),
+                        resid=resid, x_folds=tuple(f.x for f in fits))
+
+
+def _run_fits(tasks: list, jobs: int) -> list:
+    """Candidate fits, in worker processes when there are several (longest fits first keeps the workers busy)."""
+    if jobs > 1 and len(tasks) > 1:
+        order = sorted(range(len(tasks)), key=lambda i: -sum(len(EFFECT_PARAMS[e]) for e in tasks[i][0]))
+        with ProcessPoolExecutor(max_workers=min(jobs, len(tasks))) as pool:
+            done = dict(zip(order, pool.map(_fit_worker, [tasks[i] for i in order])))
+        return [done[i] for i in range(len(tasks))]
+    return [_fit_worker(t) for t in tasks]
+
+
+def _nested_nominal(nominal: CandidateFit, fits: Sequence[CandidateFit], d: Data, cfg: DiagnoseConfig) \
+        -> CandidateFit:
+    """The nominal fit, refitted from the candidates' roads when one of them fits the training windows better.
+
+    The nominal model is every candidate with its effect switched off, so its best road is at least as good as any
+    candidate's road; a candidate whose multi-start found a better road optimum than the nominal fit would
+    otherwise look like an effect (a ``brake_gain`` of 1.000 beating the nominal model).
+    """
+    starts = np.vstack([nominal.x[None]] + [f.x[None, :4] for f in fits])
+    x = _fit([], nominal.names, starts, d, cfg)
+    better = _score("nominal", [], nominal.names, x, d, nominal.seconds)
+    return better if better.train_mse < nominal.train_mse else nominal
+
+
+def _test_against(nominal: CandidateFit, f: CandidateFit, d: Data) -> None:
+    f.t_stat = paired_t(nominal, f, d)
+    f.z = improvement_z(nominal, f, d)
+    f.z_paired = paired_z(nominal, f, d)
 
 
 def _jobs(cfg: DiagnoseConfig) -> int:
@@ -687,6 +775,11 @@ def _jobs(cfg: DiagnoseConfig) -> int:
     except AttributeError:  # pragma: no cover - non-Linux
         avail = os.cpu_count() or 1
     return max(min(2, avail), 1)
+
+
+def _by_channel(resid: np.ndarray, d: Data) -> dict:
+    """Split (windows, samples) residuals into their channel blocks, dict channel -> (windows, horizon)."""
+    return {c: resid[:, i * d.horizon:(i + 1) * d.horizon] for i, c in enumerate(d.channels)}
 
 
 def _regimes(nominal: CandidateFit, d: Data, r_ch: dict, r_after: dict | None = None) -> dict:
@@ -726,26 +819,26 @@ def _regimes(nominal: CandidateFit, d: Data, r_ch: dict, r_after: dict | None = 
     return {"regimes": regimes, "channels": channels, "peak_slip": road.peak_slip, "labels": labels}
 
 
-def decide_verdict(significant: list, fits: list, explains, joint_wins: bool, nominal_gap: float,
-                   gap_none: float) -> tuple[str, object, list]:
+def decide_verdict(significant: list, fits: list, explains, joint_wins: bool, gap_is_real: bool) \
+        -> tuple[str, object, list]:
     """The verdict rule shared by every plant's diagnosis (DESIGN.md: none / an effect / unexplained).
 
     The best significant candidate is the verdict if it explains the gap, or if fitting it together with the
     second one does (two effects at once: the larger is the verdict, the other follows in candidates). A real gap
-    (``nominal_gap > gap_none``) that no candidate explains is ``unexplained``; otherwise ``none``.
+    that no candidate explains is ``unexplained``; otherwise ``none``.
 
     :param significant: the significant candidates, best first.
     :param fits: all candidates, best first.
     :param explains: ``fit -> bool``, whether a fit closes a clear share of the gap on held-out data.
     :param joint_wins: whether the joint fit of the two best is significant, explains, and beats the best alone.
-    :param nominal_gap: held-out gap of the calibrated nominal model (noise units).
-    :param gap_none: gap below which the nominal model fits within the noise.
+    :param gap_is_real: whether the nominal model does not fit within the noise (its held-out gap is large, or a
+        candidate beats it significantly on held-out data).
     :return: (verdict, chosen fit or None, candidates with the chosen one first).
     """
     if significant and (explains(significant[0]) or joint_wins):
         chosen = significant[0]
         return chosen.effect, chosen, [chosen] + [f for f in fits if f is not chosen]
-    return ("unexplained" if nominal_gap > gap_none else "none"), None, fits
+    return ("unexplained" if gap_is_real else "none"), None, fits
 
 
 def diagnose(log: QuarterCarLog, p: qc.QuarterCarParams = qc.PAPER_PARAMS,
@@ -762,58 +855,55 @@ def diagnose(log: QuarterCarLog, p: qc.QuarterCarParams = qc.PAPER_PARAMS,
     if unknown:
         raise ValueError(f"unknown candidate effect(s) {', '.join(unknown)}; valid effects: {', '.join(EFFECTS)}")
     d = _prepare(log, p, cfg)
+    folds = [_fold_data(d, j) for j in range(int(cfg.folds))]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
-        nominal = fit_nominal(d, cfg)
-        _refine_noise(nominal, d)
-        nominal = _score("nominal", [], nominal.names, nominal.x, d, nominal.seconds)
-    nominal.gap = gap_of(nominal.test_mse)
-    road = nominal.x[:4]
+        first = fit_nominal(folds[0], cfg)
+        _refine_noise(first, folds[0])  # the folds share the noise levels (one dict)
+        nominal_folds = [_score("nominal", [], first.names, first.x, folds[0], first.seconds)]
+        nominal_folds += [fit_nominal(f, cfg) for f in folds[1:]]
+    nominal = _cross_fitted(nominal_folds, d)
     jobs = _jobs(cfg)
-    tasks = [([c], road, d, cfg, None) for c in cfg.candidates]
-    if jobs > 1 and len(tasks) > 1:
-        # longest fits first keeps both workers busy
-        order = sorted(range(len(tasks)), key=lambda i: -len(EFFECT_PARAMS[cfg.candidates[i]]))
-        with ProcessPoolExecutor(max_workers=min(jobs, len(tasks))) as pool:
-            done = dict(zip(order, pool.map(_fit_worker, [tasks[i] for i in order])))
-        fits = [done[i] for i in range(len(tasks))]
-    else:
-        fits = [_fit_worker(t) for t in tasks]
+    tasks = [([c], nf.x[:4], f, cfg, None) for c in cfg.candidates for f, nf in zip(folds, nominal_folds)]
+    per_fold = _run_fits(tasks, jobs)
+    k = len(folds)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        nominal_folds = [_nested_nominal(nf, per_fold[j::k], f, cfg)
+                         for j, (f, nf) in enumerate(zip(folds, nominal_folds))]
+    nominal = _cross_fitted(nominal_folds, d)
+    fits = [_cross_fitted(per_fold[i * k:(i + 1) * k], d) for i in range(len(cfg.candidates))]
     for f in fits:
-        f.gap = gap_of(f.test_mse)
-        f.t_stat = paired_t(nominal, f, d)
-        f.z = improvement_z(nominal, f, d)
+        _test_against(nominal, f, d)
     fits.sort(key=lambda f: f.test_mse)
     significant = [f for f in fits if _significant(f, nominal, cfg)]
     joint = None
     if cfg.joint and len(significant) >= 2:
         a, b = significant[0], significant[1]
         seeds = {a.effect: a.effect_params(), b.effect: b.effect_params()}
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", RuntimeWarning)
-            joint = fit_candidate([a.effect, b.effect], a.x[:4], d, cfg, seeds)
-        joint.gap = gap_of(joint.test_mse)
-        joint.t_stat = paired_t(nominal, joint, d)
-        joint.z = improvement_z(nominal, joint, d)
+        joint = _cross_fitted(_run_fits([([a.effect, b.effect], af[:4], f, cfg, seeds)
+                                         for f, af in zip(folds, a.x_folds)], jobs), d)
+        _test_against(nominal, joint, d)
 
     def explains(f: CandidateFit) -> bool:
-        return f.gap <= cfg.ratio_explained * nominal.gap or f.gap <= cfg.gap_none
+        return robust_gap(f) <= cfg.ratio_explained * robust_gap(nominal) or robust_gap(f) <= cfg.gap_within_noise
 
     joint_wins = joint is not None and _significant(joint, nominal, cfg) and explains(joint) and \
         bool(significant) and joint.test_mse < significant[0].test_mse
-    verdict, chosen, fits = decide_verdict(significant, fits, explains, joint_wins, nominal.gap, cfg.gap_none)
+    # the gap is real when the nominal model misses by more than the noise, or when a candidate beats it
+    # significantly on data it was not fitted to (then the nominal model cannot be within the noise either)
+    gap_is_real = robust_gap(nominal) > cfg.gap_none or bool(significant)
+    verdict, chosen, fits = decide_verdict(significant, fits, explains, joint_wins, gap_is_real)
 
-    # localisation: nominal residuals on all windows
-    r_all, r_ch = window_residuals([], nominal.names, nominal.x, d, per_channel=True)
-    r_ch = {c: v[0] for c, v in r_ch.items()}
-    residuals = {"before": np.sqrt(np.mean(r_all[0] ** 2, axis=-1)), "before_samples": r_ch}
+    # localisation: the nominal model's held-out residuals on all windows
+    r_ch = _by_channel(nominal.resid, d)
+    residuals = {"before": np.sqrt(np.mean(nominal.resid ** 2, axis=-1)), "before_samples": r_ch}
     gap_after = nominal.gap
     params: dict = {}
     r_after_ch = None
     if chosen is not None:
-        r_after, r_after_ch = window_residuals(chosen.effect.split("+"), chosen.names, chosen.x, d, per_channel=True)
-        r_after_ch = {c: v[0] for c, v in r_after_ch.items()}
-        residuals["after"] = np.sqrt(np.mean(r_after[0] ** 2, axis=-1))
+        r_after_ch = _by_channel(chosen.resid, d)
+        residuals["after"] = np.sqrt(np.mean(chosen.resid ** 2, axis=-1))
         residuals["after_samples"] = r_after_ch
         gap_after = chosen.gap
         params = chosen.effect_params()
@@ -822,7 +912,7 @@ def diagnose(log: QuarterCarLog, p: qc.QuarterCarParams = qc.PAPER_PARAMS,
     wm = nominal.window_mse
     order = np.argsort(-wm)[:3]
     segments = [{"t_start": float(d.t0 + d.dt * d.starts[i]), "t_end": float(d.t0 + d.dt * (d.starts[i] + d.horizon)),
-                 "gap": gap_of(float(wm[i])), "held_out": bool(d.test[i])} for i in order]
+                 "gap": gap_of(float(wm[i])), "held_out": True} for i in order]
     missing = [c for c in ("v", "a_x") if c not in d.channels]
     certainty = ("all channels logged" if not missing else
                  f"{' and '.join(missing)} not logged: "
@@ -837,10 +927,12 @@ def diagnose(log: QuarterCarLog, p: qc.QuarterCarParams = qc.PAPER_PARAMS,
         "fitted_peak_slip": loc["peak_slip"],
         "nominal_road": nominal.road(),
         "data": {"channels": d.channels, "samples": d.n, "windows": len(d.starts),
-                 "held_out_windows": int(np.count_nonzero(d.test)), "horizon_s": d.horizon * d.dt,
+                 "held_out_windows": len(d.starts), "folds": int(cfg.folds), "horizon_s": d.horizon * d.dt,
                  "speed_source": "logged v (smoothed)" if d.v is not None else "reconstructed from omega",
                  "certainty": certainty},
-        "tests": {f.effect: {"t_stat": f.t_stat, "z": f.z, "significant": bool(f in significant)} for f in fits},
+        "tests": {f.effect: {"t_stat": f.t_stat, "z": f.z, "z_paired": f.z_paired, "robust_gap": robust_gap(f),
+                             "significant": bool(f in significant)} for f in fits},
+        "robust_gap_before": robust_gap(nominal),
     }
     if joint is not None:
         where["joint_fit"] = {"effects": joint.effect.split("+"), "params": joint.effect_params(),

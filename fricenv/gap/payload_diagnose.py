@@ -513,7 +513,7 @@ def diagnose_payload(log: PayloadLog, S_known=pl.PAPER_S, p: pl.PayloadParams = 
         joint.z = improvement_z(nominal, joint, d)
     joint_wins = joint is not None and significant(joint) and explains(joint) and bool(sig) and \
         joint.penalised < sig[0].penalised
-    verdict, chosen, fits = decide_verdict(sig, fits, explains, joint_wins, nominal.gap, cfg.gap_none)
+    verdict, chosen, fits = decide_verdict(sig, fits, explains, joint_wins, nominal.gap > cfg.gap_none)
     loc = _where(d, nominal, chosen)
     n_scored = int(np.count_nonzero(d.block >= 0))
     where = {

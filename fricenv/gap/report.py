@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fricenv.gap.diagnose import CandidateFit, Diagnosis
+from fricenv.gap.diagnose import TRIM_SHARE, CandidateFit, Diagnosis
 from fricenv.utils import atomic_write, to_jsonable, write_json
 
 __all__ = ["CANDIDATE_KEYS", "REPORT_KEYS", "report_dict", "report_markdown", "summary_line", "write_report"]
@@ -60,7 +60,7 @@ def report_markdown(dg: Diagnosis, report: dict) -> str:
              f"- held-out gap after:  {report['gap_after']:.3f}",
              (f"- data: {w['data']['samples']} samples, channels {', '.join(w['data']['channels'])}; "
               f"{w['data']['windows']} prediction windows of {w['data']['horizon_s']:.2f} s, "
-              f"{w['data']['held_out_windows']} held out; speed: {w['data']['speed_source']}"),
+              f"each held out once ({w['data']['folds']}-fold cross-fitting); speed: {w['data']['speed_source']}"),
              f"- certainty: {w['data']['certainty']}",
              "- calibrated nominal road: " + ", ".join(f"{k}={v:.4g}" for k, v in w["nominal_road"].items()),
              f"- diagnosis time: {dg.seconds:.1f} s", "",
@@ -76,23 +76,28 @@ def report_markdown(dg: Diagnosis, report: dict) -> str:
     for name, c in w["channels"].items():
         after = c.get("gap_after")
         lines.append(f"| {name} | {c['noise_std']:.4g} | {c['gap']:.2f} | {'-' if after is None else f'{after:.2f}'} |")
-    lines += ["", "## Candidates (fitted on training windows, scored on held-out windows)", "",
-              "| effect | params | gap after | score | t | z | significant |", "| --- | --- | --- | --- | --- | --- | --- |"]
+    lines += ["", "## Candidates (each window predicted by a fit that did not see it)", "",
+              "| effect | params | gap after | robust gap after | score | t | z | z paired | significant |",
+              "| --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
     for c in report["candidates"]:
         t = w["tests"].get(c["effect"], {})
         params = ", ".join(f"{k}={v:.4g}" for k, v in c["params"].items())
-        lines.append(f"| {c['effect']} | {params} | {c['gap_after']:.3f} | {c['score']:.3f} | "
-                     f"{t.get('t_stat', float('nan')):.2f} | {t.get('z', float('nan')):.1f} | "
-                     f"{t.get('significant', False)} |")
+        lines.append(f"| {c['effect']} | {params} | {c['gap_after']:.3f} | {t.get('robust_gap', float('nan')):.3f} "
+                     f"| {c['score']:.3f} | {t.get('t_stat', float('nan')):.2f} | {t.get('z', float('nan')):.1f} | "
+                     f"{t.get('z_paired', float('nan')):.1f} | {t.get('significant', False)} |")
     if "joint_fit" in w:
         j = w["joint_fit"]
         lines += ["", f"Joint fit of {' + '.join(j['effects'])}: gap after {j['gap_after']:.3f}, params {j['params']}"]
     lines += ["", ("Score: share of the nominal model's held-out excess squared error the candidate closes. "
-                   "z: held-out improvement of the squared normalised error without its largest window, in noise "
-                   "standard deviations (significant above the configured threshold); t: paired t statistic of the "
-                   "per-window log error ratio (reported only). A verdict needs a significant z and a held-out gap "
-                   "of at most 35 % of the nominal one or within the noise (DiagnoseConfig.ratio_explained, "
-                   "gap_none)."), "", f"![residual over time]({PLOT_TIME})", "",
+                   "z paired: held-out improvement of the squared normalised error (without its largest window) "
+                   "over its spread under the measurement noise given the two models' prediction difference; a "
+                   "candidate is significant above DiagnoseConfig.sig_z. z: the same improvement over the spread "
+                   "of a sum of squares of noise, and t: paired t statistic of the per-window log error ratio "
+                   "(both reported only). A verdict needs a significant candidate whose robust held-out gap (the "
+                   f"worst {TRIM_SHARE:.0%} of windows left out, for every model alike) is at most "
+                   "DiagnoseConfig.ratio_explained of the nominal one, or below gap_within_noise. The robust "
+                   f"nominal gap is {w.get('robust_gap_before', float('nan')):.3f}."), "",
+              f"![residual over time]({PLOT_TIME})", "",
               f"![residual by regime]({PLOT_REGIMES})", ""]
     return "\n".join(lines)
 
@@ -109,8 +114,8 @@ def _plots(dg: Diagnosis, report: dict, tmpdir: Path) -> None:
     ax.step(t_mid, dg.residuals["before"], where="mid", label="nominal (before)")
     if "after" in dg.residuals:
         ax.step(t_mid, dg.residuals["after"], where="mid", label=f"with {dg.verdict} (after)")
-    held = d.test
-    ax.plot(t_mid[held], np.zeros(held.sum()) + 0.05, "k|", label="held-out windows")
+    first = d.fold == 0
+    ax.plot(t_mid[first], np.zeros(first.sum()) + 0.05, "k|", label="fold 1 (the others: fold 2)")
     ax.axhline(1.0, color="gray", lw=0.8, ls="--", label="noise level")
     ax.set_yscale("log")
     ax.set_xlabel("t [s]")

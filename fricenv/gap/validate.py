@@ -147,7 +147,7 @@ def _detectable(case: Case, dg, cfg: DiagnoseConfig) -> bool:
     """Oracle check (for the summary only): does the TRUE model (true road and effect) improve the held-out error
     over the calibrated nominal model by the diagnosis' own significance rule? If not, the effect is below the
     noise in this log and no tool could name it from these data."""
-    from fricenv.gap.diagnose import _param_names, _score, improvement_z
+    from fricenv.gap.diagnose import _param_names, _score, paired_z
 
     e = case.effects[0]
     names = _param_names([e.name])
@@ -156,7 +156,7 @@ def _detectable(case: Case, dg, cfg: DiagnoseConfig) -> bool:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         true_fit = _score(e.name, [e.name], names, x, dg.data, 0.0)
-    return bool(improvement_z(dg.nominal, true_fit, dg.data) > cfg.sig_z)
+    return bool(paired_z(dg.nominal, true_fit, dg.data) > cfg.sig_z)
 
 
 def _run(args):
