@@ -33,7 +33,9 @@ _MAX_WHEEL_SURFACE_SPEED = 100.0  # |omega| r above this [m/s] (360 km/h) means 
 _MAX_SPEED = 100.0  # [m/s]
 _MAX_ACCEL = 30.0  # |a_x| [m/s^2], about 3 g
 _MAX_TORQUE = 2.0e4  # |T_b| [N m]
-_OMEGA_R_OVER_V = (0.5, 1.5)  # omega r / v while rolling, if v is logged
+# omega r / v while rolling, if v is logged: rpm gives ~9.5 and v in km/h ~0.28 or ~3.6; the upper bound leaves
+# room for the traction overshoot of a wheel spinning up after a brake release (relaxation length at low speed)
+_OMEGA_R_OVER_V = (0.5, 2.5)
 _ROLLING_PERCENTILE = 95.0  # of omega r / v over the moving samples
 # Payload: median rates; a pose in degrees or mm (with its vision noise) moves 57x or 1000x "faster".
 _MAX_ANGULAR_RATE = 50.0  # median |theta'| [rad/s]

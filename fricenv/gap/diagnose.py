@@ -34,7 +34,7 @@ Method (every error measure is computed on data not used for fitting):
    is still seen.
 7. **Verdict.** An effect when it is significant and closes a clear share of the gap (robust held-out gap, the
    worst ``TRIM_SHARE`` of windows left out, at most ``ratio_explained`` of the nominal one, or below
-   ``gap_within_noise``); ``unexplained`` when the gap is real (robust nominal gap above ``gap_none``, or a
+   ``gap_within_noise``); ``unexplained`` when the gap is real (nominal gap above ``gap_none``, or a
    significant candidate) and no candidate closes it; ``none`` otherwise. The two best significant candidates are also fitted
    jointly; if only the joint model closes the gap, the larger single effect is the verdict and the other follows
    in ``candidates`` (the joint fit is reported under ``where["joint_fit"]``).
@@ -892,7 +892,7 @@ def diagnose(log: QuarterCarLog, p: qc.QuarterCarParams = qc.PAPER_PARAMS,
         bool(significant) and joint.test_mse < significant[0].test_mse
     # the gap is real when the nominal model misses by more than the noise, or when a candidate beats it
     # significantly on data it was not fitted to (then the nominal model cannot be within the noise either)
-    gap_is_real = robust_gap(nominal) > cfg.gap_none or bool(significant)
+    gap_is_real = nominal.gap > cfg.gap_none or bool(significant)
     verdict, chosen, fits = decide_verdict(significant, fits, explains, joint_wins, gap_is_real)
 
     # localisation: the nominal model's held-out residuals on all windows
