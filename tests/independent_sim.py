@@ -596,29 +596,13 @@ def write_independent_log(path: str | os.PathLike, case: IndependentCase) -> dic
 
 
 # ----------------------------------------------------------------------------------------------------- measurement
-DRAG_REFERENCE_SPEED = 15.0  # drag's single error figure: the force at this speed [m/s]
 EXPECTED = {NONE: "none", OUT: "unexplained"}
-
-
-def main_error(category: str, truth: dict, fitted: dict) -> tuple[float, dict]:
-    """Relative errors of the fitted parameters and the headline one (drag: force at 15 m/s; mu_change: theta_after)."""
-    errs = {k: abs(fitted[k] - v) / abs(v) for k, v in truth.items() if k in fitted and v != 0}
-    if category == "mu_change":
-        errs["t_change_abs_s"] = abs(fitted.get("t_change", np.nan) - truth["t_change"])
-        return errs.get("theta_after", np.nan), errs
-    if category == "drag":
-        ref = DRAG_REFERENCE_SPEED**2
-        f_true = truth["c0"] + truth["c2"] * ref
-        f_fit = fitted.get("c0", np.nan) + fitted.get("c2", np.nan) * ref
-        key = f"force_at_{DRAG_REFERENCE_SPEED:g}_m_s"
-        errs[key] = abs(f_fit - f_true) / f_true
-        return errs[key], errs
-    return next(iter(errs.values()), np.nan), errs
 
 
 def diagnose_case(case: IndependentCase) -> dict:
     """Write the case's log to a temporary directory and diagnose it blind; returns a result row."""
     from fricenv.gap.diagnose import DiagnoseConfig, diagnose_file
+    from fricenv.gap.validate import main_error
 
     expected = EXPECTED.get(case.category, case.category)
     with tempfile.TemporaryDirectory() as tmp:

@@ -28,7 +28,7 @@ from fricenv.plants import quarter_car as qc
 from fricenv.plants.tire import ROADS, MagicFormula
 from fricenv.utils import as_generator, progress
 
-__all__ = ["CATEGORIES", "PARAM_TOLERANCE", "Case", "draw_case", "run_case", "summarize", "validate"]
+__all__ = ["CATEGORIES", "PARAM_TOLERANCE", "Case", "draw_case", "main_error", "run_case", "summarize", "validate"]
 
 NONE, OUT = "none", "out_of_library"
 CATEGORIES = tuple(EFFECTS) + (NONE, OUT)
@@ -93,7 +93,7 @@ def draw_case(category: str, rng: np.random.Generator, drop_optional: bool = Fal
     return Case(category, effects, road, driver, int(rng.integers(2**31)), drop_optional)
 
 
-def _main_error(category: str, truth: dict, fitted: dict) -> tuple[float, dict]:
+def main_error(category: str, truth: dict, fitted: dict) -> tuple[float, dict]:
     """Relative errors of the fitted parameters, and the single figure the 15 % target is checked on."""
     errs = {}
     for k, v in truth.items():
@@ -139,7 +139,7 @@ def run_case(case: Case, cfg: DiagnoseConfig | None = None, via_file: bool = Tru
         out["ratio"] = dg.gap_after / dg.gap_before if dg.gap_before > 0 else np.nan
         out["detectable"] = _detectable(case, dg, cfg)
         if out["right"]:
-            out["param_error"], out["param_errors"] = _main_error(case.category, out["true_params"], dg.params)
+            out["param_error"], out["param_errors"] = main_error(case.category, out["true_params"], dg.params)
     return out
 
 
