@@ -11,7 +11,7 @@ from typing import Any, Iterator
 
 import numpy as np
 
-__all__ = ["as_generator", "atomic_write", "write_json", "progress", "to_jsonable"]
+__all__ = ["as_generator", "atomic_write", "progress", "read_json_object", "to_jsonable", "write_json"]
 
 
 def as_generator(seed: int | np.random.Generator | None) -> np.random.Generator:
@@ -65,6 +65,23 @@ def write_json(path: str | os.PathLike, obj: Any) -> None:
     with atomic_write(path) as fh:
         json.dump(to_jsonable(obj), fh, indent=2)
         fh.write("\n")
+
+
+def read_json_object(path: str | os.PathLike, what: str) -> dict:
+    """A JSON file that must hold one object (e.g. a ``--params`` file).
+
+    :param path: the file.
+    :param what: what the object holds, for the error message.
+    :raises ValueError: the file is not valid JSON; :raises TypeError: it holds no JSON object.
+    """
+    with open(path) as fh:
+        try:
+            raw = json.load(fh)
+        except json.JSONDecodeError as exc:
+            raise ValueError(f"{path}: not valid JSON ({exc})") from None
+    if not isinstance(raw, dict):
+        raise TypeError(f"{path}: expected a JSON object of {what}")
+    return raw
 
 
 def progress(iterable=None, *, total: int | None = None, desc: str = "", disable: bool | None = None):

@@ -944,16 +944,11 @@ def diagnose(log: QuarterCarLog, p: qc.QuarterCarParams = qc.PAPER_PARAMS,
 
 def load_params(path) -> qc.QuarterCarParams:
     """Vehicle parameters from a JSON file (keys of :class:`QuarterCarParams`; unknown keys rejected)."""
-    import json
     from dataclasses import fields as dc_fields
 
-    with open(path) as fh:
-        try:
-            raw = json.load(fh)
-        except json.JSONDecodeError as exc:
-            raise ValueError(f"{path}: not valid JSON ({exc})") from None
-    if not isinstance(raw, dict):
-        raise ValueError(f"{path}: expected a JSON object of vehicle parameters")
+    from fricenv.utils import read_json_object
+
+    raw = read_json_object(path, "vehicle parameters")
     valid = [f.name for f in dc_fields(qc.QuarterCarParams)]
     unknown = sorted(set(raw) - set(valid))
     if unknown:

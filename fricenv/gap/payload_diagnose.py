@@ -34,7 +34,6 @@ The payload's dynamics are linear in the wrench, so the diagnosis compares accel
 
 from __future__ import annotations
 
-import json
 import time
 import warnings
 from collections.abc import Sequence
@@ -48,6 +47,7 @@ from fricenv.effects.payload import PAYLOAD_EFFECTS
 from fricenv.gap.diagnose import decide_verdict, estimate_noise, gap_of
 from fricenv.logs import PayloadLog, read_log
 from fricenv.plants import payload as pl
+from fricenv.utils import read_json_object
 
 __all__ = [
     "CHANNELS",
@@ -542,13 +542,7 @@ def diagnose_payload(log: PayloadLog, S_known=pl.PAPER_S, p: pl.PayloadParams = 
 def load_payload_params(path) -> tuple[np.ndarray, pl.PayloadParams]:
     """Known calibration ``S`` (key ``S``, 3x3 row-major) and mass properties (``m, I_G, rho_x, rho_y``) from a JSON
     file; missing keys keep the paper's values, unknown keys are rejected."""
-    with open(path) as fh:
-        try:
-            raw = json.load(fh)
-        except json.JSONDecodeError as exc:
-            raise ValueError(f"{path}: not valid JSON ({exc})") from None
-    if not isinstance(raw, dict):
-        raise TypeError(f"{path}: expected a JSON object of payload parameters")
+    raw = read_json_object(path, "payload parameters")
     unknown = sorted(set(raw) - set(PARAM_KEYS))
     if unknown:
         raise ValueError(f"{path}: unknown parameter(s) {', '.join(unknown)}; valid: {', '.join(PARAM_KEYS)}")
