@@ -318,3 +318,39 @@ def test_snow_nominal_open_loop_is_none():
     log, _ = simulate_log([], SNOW, "open-loop", seed=5, duration=3.0)
     dg = diagnose(log, cfg=CFG)
     assert dg.verdict == "none", [(c.effect, c.gap, c.t_stat, c.z) for c in dg.candidates]
+
+
+def _fit_from_residuals(resid):
+    from fricenv.gap.diagnose import CandidateFit
+
+    wm = np.mean(resid**2, axis=-1)
+    return CandidateFit(effect="x", names=(), x=np.zeros(0), train_mse=0.0, test_mse=float(np.mean(wm)),
+                        window_mse=wm, resid=resid)
+
+
+def test_paired_z_is_the_gain_over_its_noise_spread():
+    from types import SimpleNamespace
+
+    from fricenv.gap.diagnose import paired_z
+
+    rng = np.random.default_rng(0)
+    d = SimpleNamespace(horizon=10, channels=["omega"])
+    e = rng.standard_normal((200, 10))  # unit noise, 2000 samples
+    right, off = _fit_from_residuals(e), _fit_from_residuals(e + 1.0)  # a model off by one noise std
+    # closed form: gain ||a||^2 + 2 e.a over spread 2 ||a|| -> ||a|| / 2 = sqrt(2000) / 2 = 22.4, N(0, 1) about it
+    assert paired_z(off, right, d) == pytest.approx(np.sqrt(2000) / 2, abs=4.0)
+    assert paired_z(right, off, d) == pytest.approx(-np.sqrt(2000) / 2, abs=4.0)
+    assert paired_z(right, right, d) == 0.0  # identical predictions: no evidence either way
+
+
+def test_robust_gap_leaves_out_the_worst_windows_only():
+    from fricenv.gap.diagnose import TRIM_SHARE, gap_of, robust_gap
+
+    wm = np.ones(100)
+    wm[: int(TRIM_SHARE * 100)] = 25.0  # lock-up windows no model predicts
+    f = _fit_from_residuals(np.zeros((100, 1)))
+    f.window_mse = wm
+    assert robust_gap(f) == 0.0
+    assert gap_of(float(np.mean(wm))) > 1.0
+    wm[: int(TRIM_SHARE * 100) + 1] = 25.0  # one more bad window is not trimmed
+    assert robust_gap(f) > 0.5

@@ -118,7 +118,8 @@ RELAX_STATE_FROM_FILTER = True
 # A window's mean squared normalised error counts at most this much in the scores (RMS 5 noise std): a wheel lock-up
 # predicted a few milliseconds early or late is wrong whatever the size of its error, and must not decide alone.
 WINDOW_MSE_CAP = 25.0
-# Robust loss of the fits: residuals beyond this many noise std count linearly (soft L1).
+# The change-point search bounds a sample's squared residual at (2 FIT_LOSS_SCALE)^2, so that one lock-up
+# cannot place the change.
 FIT_LOSS_SCALE = 3.0
 # Share of the held-out windows (the worst) left out when judging how much of the gap a candidate closes.
 TRIM_SHARE = 0.05
