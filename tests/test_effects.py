@@ -115,6 +115,23 @@ def test_mu_change_switches_the_locked_wheel_deceleration():
     assert a[80] == pytest.approx(-P.Fz * DRY.mu(1.0) * 0.4 / P.m, rel=1e-9)
 
 
+def test_sliding_speed_friction_follows_the_locked_wheel_closed_form():
+    """Locked wheel: the sliding speed is v, so m v' = -F_z mu(1) exp(-c4 v), whose solution is
+    v(t) = ln(exp(c4 v_j) - c4 F_z mu(1) (t - t_j) / m) / c4."""
+    n, c4, j = 150, 0.03, 10
+    effect = make_effect("sliding_speed_friction", allow_out_of_library=True, c4=c4)
+    out = simulate_with_effects([effect], DRY, np.full(n, 5000.0), 25.0, n)
+    assert out["omega"][j] == 0.0  # locked
+    k = P.Fz * DRY.mu(1.0) / P.m
+    assert out["a_x"][j] == pytest.approx(-k * np.exp(-c4 * out["v"][j]), rel=1e-9)
+    t = (np.arange(n) - j) * DT
+    expected = np.log(np.exp(c4 * out["v"][j]) - c4 * k * t[j:]) / c4
+    np.testing.assert_allclose(out["v"][j:], expected, rtol=1e-4)
+    # the friction is lower at speed than at walking pace: the stop takes longer than without the effect
+    plain = simulate_with_effects([], DRY, np.full(n, 5000.0), 25.0, n)
+    assert out["v"][-1] > plain["v"][-1] + 1.0
+
+
 def test_drag_decelerates_the_free_rolling_car_by_c0_over_the_effective_mass():
     n, c0 = 200, 300.0
     out = simulate_with_effects([make_effect("drag", c0=c0, c2=0.0)], DRY, np.zeros(n), 20.0, n)

@@ -18,7 +18,7 @@ def test_cases_are_realistic_and_reproducible():
         if cat == "none":
             assert case.effects == ()
         elif cat == "out_of_library":
-            assert case.effects[0].name in ("brake_fade", "load_transfer")
+            assert case.effects[0].name in ("brake_fade", "sliding_speed_friction")
             assert case.effects[0].name not in EFFECTS
         else:
             assert case.effects[0].name == cat

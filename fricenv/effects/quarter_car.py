@@ -28,8 +28,9 @@ carry their own effect parameters (a :class:`ModelBatch`). It layers the effects
   same L-stable ROS2 scheme on the extended 3-state right-hand side :func:`relaxation_derivatives`, with the Magic
   Formula of :mod:`fricenv.plants.tire`. It is checked against ``scipy.integrate.solve_ivp`` (Radau) in the tests.
 
-Two physically real effects that are NOT in the library are provided for the gap tool's validation on withheld
-effects (:data:`OUT_OF_LIBRARY`): temperature brake fade and pitch-dynamics wheel-load transfer.
+Three physically real effects that are NOT in the library are provided for the gap tool's validation on withheld
+effects (:data:`OUT_OF_LIBRARY`): temperature brake fade, pitch-dynamics wheel-load transfer and friction that falls
+with the sliding speed (Burckhardt's velocity factor).
 """
 
 from __future__ import annotations
@@ -65,6 +66,7 @@ __all__ = [
     "MuChange",
     "RadiusError",
     "RelaxationLength",
+    "SlidingSpeedFriction",
     "make_effect",
     "relaxation_derivatives",
     "relaxation_step",
@@ -204,12 +206,29 @@ class LoadTransfer:
             raise ValueError(f"load_transfer.k must be finite, got {self.k!r}")
 
 
+@dataclass(frozen=True)
+class SlidingSpeedFriction:
+    """NOT a library effect (validation only): friction that falls with the sliding speed.
+
+    Burckhardt's tire model (Kiencke & Nielsen, Automotive Control Systems, Section 7.1) multiplies the friction
+    curve by ``exp(-c4 lambda v)``, ``lambda v = v - omega r`` being the sliding speed; ``c4`` is about 0.02-0.04 s/m
+    on asphalt. A locked wheel at 30 m/s then has about half the friction it has at walking pace.
+    """
+
+    c4: float  # friction decay per unit sliding speed [s/m]
+    name: ClassVar[str] = "sliding_speed_friction"
+
+    def __post_init__(self):
+        _check_positive(self, "c4", allow_zero=True)
+
+
 EFFECTS: dict[str, type] = {cls.name: cls for cls in (BrakeLag, BrakeDelay, BrakeGain, RelaxationLength,
                                                        RadiusError, MuChange, Drag)}
 EFFECT_PARAMS: dict[str, tuple[str, ...]] = {
     name: tuple(f.name for f in fields(cls)) for name, cls in EFFECTS.items()
 }
-OUT_OF_LIBRARY: dict[str, type] = {cls.name: cls for cls in (BrakeFade, LoadTransfer)}
+OUT_OF_LIBRARY: dict[str, type] = {cls.name: cls for cls in (BrakeFade, LoadTransfer,
+                                                              SlidingSpeedFriction)}
 
 
 def make_effect(name: str, allow_out_of_library: bool = False, **params: float):
@@ -246,7 +265,8 @@ class ModelBatch:
     """Per-element model parameters of a batch: the road and every effect's parameters, switched off by default.
 
     All arrays have shape ``(n,)`` except ``road`` ``(n, 4)``. "Off" values: ``tau = 0``, ``delay = 0``,
-    ``gain = 1``, ``sigma = 0``, ``r_eff = p.r``, ``t_change = inf``, ``c0 = c2 = 0``, ``fade = 0``, ``load = 0``.
+    ``gain = 1``, ``sigma = 0``, ``r_eff = p.r``, ``t_change = inf``, ``c0 = c2 = 0``, ``fade = 0``, ``load = 0``,
+    ``slide = 0``.
     """
 
     road: np.ndarray  # (B, C, E, theta) per element
@@ -261,6 +281,7 @@ class ModelBatch:
     c2: np.ndarray  # drag quadratic coefficient [N s^2/m^2]
     fade: np.ndarray = None  # brake fade coefficient [1/J] (out of library)
     load: np.ndarray = None  # load transfer per g [-] (out of library)
+    slide: np.ndarray = None  # friction decay per unit sliding speed [s/m] (out of library)
 
     def __post_init__(self):
         n = len(self.tau)
@@ -290,7 +311,8 @@ class ModelBatch:
         mapping = {"brake_lag": {"tau": "tau"}, "brake_delay": {"delay": "delay"}, "brake_gain": {"gain": "gain"},
                    "relaxation_length": {"sigma": "sigma"}, "radius_error": {"r_eff": "r_eff"},
                    "mu_change": {"t_change": "t_change", "theta_after": "theta_after"},
-                   "drag": {"c0": "c0", "c2": "c2"}, "brake_fade": {"k": "fade"}, "load_transfer": {"k": "load"}}
+                   "drag": {"c0": "c0", "c2": "c2"}, "brake_fade": {"k": "fade"}, "load_transfer": {"k": "load"},
+                   "sliding_speed_friction": {"c4": "slide"}}
         for effect in effects:
             if effect.name not in mapping:
                 raise ValueError(f"unknown effect {effect.name!r}; valid effects: {', '.join(mapping)}")
@@ -418,6 +440,7 @@ class EffectSimulator:
         self._any_change = bool(np.any(np.isfinite(batch.t_change)))
         self._any_fade = bool(np.any(batch.fade != 0.0))
         self._any_load = bool(np.any(batch.load != 0.0))
+        self._any_slide = bool(np.any(batch.slide != 0.0))
         self.reset(np.zeros(n), np.zeros(n))
 
     # -- state
@@ -511,7 +534,7 @@ class EffectSimulator:
     def _road_at(self, t_end: np.ndarray, h: float) -> np.ndarray:
         """Road of each element over the substep ending at ``t_end`` (theta blended in the switching substep)."""
         road = self.batch.road
-        if not (self._any_change or self._any_load):
+        if not (self._any_change or self._any_load or self._any_slide):
             return road
         road = road.copy()
         if self._any_change:
@@ -520,6 +543,9 @@ class EffectSimulator:
             road[:, 3] = road[:, 3] + frac * (self.batch.theta_after - road[:, 3])
         if self._any_load:
             road[:, 3] = road[:, 3] * np.maximum(1.0 + self.batch.load * self.pitch, 0.0)
+        if self._any_slide:  # at the substep's start state: the factor varies slowly next to the slip dynamics
+            sliding = np.maximum(self.v - self.omega * self.batch.r_eff, 0.0)
+            road[:, 3] = road[:, 3] * np.exp(-self.batch.slide * sliding)
         return road
 
     def tire_force(self) -> np.ndarray:

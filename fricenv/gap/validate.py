@@ -1,8 +1,8 @@
 """Validation of the gap diagnosis on withheld effects (issue 6, item 5).
 
 Random logs are drawn from the real stand-in: each library effect at a realistic size, logs with no effect, and logs
-with a physically real effect that is NOT in the library (temperature brake fade, or wheel-load transfer through the
-body's pitch dynamics), on random roads (the presets with their stiffness and peak factor perturbed, so the road is
+with a physically real effect that is NOT in the library (temperature brake fade, or friction that falls with the
+sliding speed as in Burckhardt's tire model), on random roads (the presets with their stiffness and peak factor perturbed, so the road is
 never one the tool could know) and random drivers. Each log is diagnosed without telling the tool anything. The
 summary has the confusion matrix, the share of right verdicts (library effect -> its name, no effect -> ``none``,
 out-of-library effect -> ``unexplained``), the median ``gap_after / gap_before`` on library-effect logs and the
@@ -78,9 +78,12 @@ def _random_effect(category: str, road: MagicFormula, rng: np.random.Generator, 
     if category == "drag":
         return make_effect(category, c0=u(100.0, 300.0), c2=u(0.2, 0.6))
     if category == OUT:
+        # Not drawn: the pitch load transfer (LoadTransfer). At the quasi-steady deceleration of a stop it scales
+        # the friction force like a higher theta, which the calibrated nominal road absorbs: no gap is left for the
+        # tool to call unexplained (measured: gap_before <= 0.3 noise units on 5 of 6 such logs).
         if rng.random() < 0.5:
             return make_effect("brake_fade", allow_out_of_library=True, k=u(3e-6, 6e-6))
-        return make_effect("load_transfer", allow_out_of_library=True, k=u(0.25, 0.45))
+        return make_effect("sliding_speed_friction", allow_out_of_library=True, c4=u(0.02, 0.04))
     raise ValueError(f"unknown category {category!r}; valid: {', '.join(CATEGORIES)}")
 
 
