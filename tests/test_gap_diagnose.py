@@ -100,6 +100,21 @@ def test_out_of_library_effect_gives_unexplained_not_a_wrong_name(diagnosed):
     assert dg.gap_before > 1.0
 
 
+def test_brake_fade_imitated_by_a_brake_gain_is_caught_by_the_drift_test():
+    """Fade on a wet road: a constant brake gain closes most of the gap, but refitted on the early and the late
+    half of the log the gain falls, as fade makes it: the verdict is unexplained, not brake_gain."""
+    fade = make_effect("brake_fade", allow_out_of_library=True, k=4e-6)
+    road = MagicFormula(B=11.7, C=2.3, E=1.0, theta=0.83, name="wet-ish")
+    log, _ = simulate_log([fade], road, "open-loop", seed=1155653965, duration=5.0)
+    dg = diagnose(log, cfg=CFG)
+    drift = dg.where["drift_test"]
+    assert drift["model"] == "brake_gain"
+    assert drift["drifts"] and drift["z_paired"] > CFG.drift_z
+    assert drift["params_early"]["gain"] > drift["params_late"]["gain"] + 0.05
+    assert dg.verdict == "unexplained" and dg.params == {}
+    assert dg.candidates[0].effect == "brake_gain"  # still the nearest library effect, listed first
+
+
 def test_noise_level_is_estimated_from_the_data():
     rng = np.random.default_rng(0)
     t = np.arange(2000) * 0.01

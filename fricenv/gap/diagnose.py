@@ -16,8 +16,10 @@ Method (every error measure is computed on data not used for fitting):
    ``m v' = -F_z mu(lambda(v, omega_meas)) - F_d`` driven by the measured wheel speed from the free-rolling start
    ``v(0) = r omega`` (the nominal model is a dynamic model; this fits the initial state from omega alone). Effect
    states with a known input (brake-lag filter, delay buffer) run over the logged command.
-3. **Calibrate.** The nominal model's road ``(B, C, E, theta)`` is fitted by least squares on the training windows
-   of each fold (multi-start from the road presets). The road is always treated as unknown.
+3. **Calibrate.** The nominal model's road ``(B, C, E, theta)`` is fitted on the training windows of each fold
+   (multi-start from the road presets) by least squares with a robust loss (``fit_loss``, soft L1 beyond
+   ``FIT_LOSS_SCALE`` noise std), so that the few windows of a lock-up, whose timing no model predicts, do not bend
+   the road away from the rest of the data. The road is always treated as unknown.
 4. **Gap.** Held-out residuals over all logged channels, each divided by its noise level (the smaller of the
    difference-based estimate and the calibrated nominal model's training residual: both over-estimate). A window's
    mean squared normalised residual counts at most ``WINDOW_MSE_CAP``. ``gap`` is the model part of the held-out
@@ -38,6 +40,12 @@ Method (every error measure is computed on data not used for fitting):
    significant candidate) and no candidate closes it; ``none`` otherwise. The two best significant candidates are also fitted
    jointly; if only the joint model closes the gap, the larger single effect is the verdict and the other follows
    in ``candidates`` (the joint fit is reported under ``where["joint_fit"]``).
+8. **Drift test.** The verdict's model is refitted on the early and on the late half of the log separately (each
+   half cross-fitted within itself). A library effect has constant parameters, so if the split model beats the
+   constant one significantly (paired z above ``drift_z``) and halves the robust gap it leaves (when that gap is
+   above the noise), the effect only imitates the cause (brake fade looks like a brake gain that drifts down) and
+   the verdict is ``unexplained``. The constant model is refitted from the split fits first, so that a better
+   optimum is not mistaken for a drift (``where["drift_test"]``).
 """
 
 from __future__ import annotations
@@ -118,11 +126,14 @@ RELAX_STATE_FROM_FILTER = True
 # A window's mean squared normalised error counts at most this much in the scores (RMS 5 noise std): a wheel lock-up
 # predicted a few milliseconds early or late is wrong whatever the size of its error, and must not decide alone.
 WINDOW_MSE_CAP = 25.0
-# The change-point search bounds a sample's squared residual at (2 FIT_LOSS_SCALE)^2, so that one lock-up
-# cannot place the change.
+# Residual scale (noise std) of the fits' robust loss; the change-point search bounds a sample's squared residual
+# at (2 FIT_LOSS_SCALE)^2. Either way one lock-up cannot place the road or the change.
 FIT_LOSS_SCALE = 3.0
+FIT_LOSSES = ("linear", "soft_l1", "cauchy")  # losses of the least-squares fits (scipy's names)
 # Share of the held-out windows (the worst) left out when judging how much of the gap a candidate closes.
 TRIM_SHARE = 0.05
+# A drift must leave at most this share of the constant model's robust gap (the split model halves it at least).
+DRIFT_SHARE = 0.5
 MU_CHANGE_FACTORS = np.geomspace(0.35, 2.0, 16)  # theta grid of the change-point search, times the nominal theta
 APPLY_RATE = 0.5  # |dT_b/dt| above this share of max |T_b| per second counts as apply/release [1/s]
 
@@ -134,6 +145,9 @@ class DiagnoseConfig:
     horizon: int = 10  # prediction window [samples]
     folds: int = 2  # cross-fitting folds: window i belongs to fold i % folds; each fold is held out once [-]
     max_nfev: int = 30  # least-squares iterations per start [-]
+    # Loss of the fits on the normalised residuals (scale FIT_LOSS_SCALE noise std). A robust loss keeps the few
+    # lock-up windows, whose timing no model predicts, from bending the road away from the bulk of the data.
+    fit_loss: str = "soft_l1"
     sig_z: float = 4.0  # robust held-out improvement (noise standard deviations) a candidate must exceed [-]
     ratio_explained: float = 0.35  # a verdict leaves at most this share: gap_after <= ratio * gap_before [-]
     gap_none: float = 1.1  # nominal gap (noise units) below which the model fits within noise [-]
@@ -141,6 +155,8 @@ class DiagnoseConfig:
     substeps: int = DEFAULT_SUBSTEPS  # physics substeps per sample
     jobs: int | None = None  # processes for the candidate fits (None: min(2, available cores))
     joint: bool = True  # also fit the two best significant candidates together
+    drift_check: bool = True  # refit the verdict's model on each half of the log; a drift makes it unexplained
+    drift_z: float = 3.0  # paired z of the early/late refit over the constant model for a drift (one test) [-]
     candidates: tuple[str, ...] = tuple(EFFECTS)  # effects to try
 
 
@@ -470,6 +486,21 @@ def _bounds(names: Sequence[str], d: Data):
     return np.array(lo), np.array(hi)
 
 
+def _fit_loss(r: np.ndarray, loss: str) -> np.ndarray:
+    """Per-sample loss of normalised residuals ``r``, as ``scipy.optimize.least_squares`` scales it with
+    ``f_scale = FIT_LOSS_SCALE`` (used to pick the best start on the same loss the fit minimises)."""
+    z = (r / FIT_LOSS_SCALE) ** 2
+    if loss == "linear":
+        rho = z
+    elif loss == "soft_l1":
+        rho = 2.0 * (np.sqrt(1.0 + z) - 1.0)
+    elif loss == "cauchy":
+        rho = np.log1p(z)
+    else:
+        raise ValueError(f"DiagnoseConfig.fit_loss must be one of {', '.join(FIT_LOSSES)}, got {loss!r}")
+    return FIT_LOSS_SCALE**2 * rho
+
+
 def _fit(effects: Sequence[str], names: Sequence[str], starts: np.ndarray, d: Data, cfg: DiagnoseConfig,
          fixed: dict | None = None) -> np.ndarray:
     """Least squares on the training windows from the best of ``starts`` (K, len(names)); ``fixed`` params held."""
@@ -477,7 +508,7 @@ def _fit(effects: Sequence[str], names: Sequence[str], starts: np.ndarray, d: Da
     lo, hi = _bounds(names, d)
     starts = np.clip(np.atleast_2d(starts), lo, hi)
     r = window_residuals(effects, names, starts, d, train)
-    cost = np.sum(r.reshape(len(starts), -1) ** 2, axis=1)
+    cost = np.sum(_fit_loss(r.reshape(len(starts), -1), cfg.fit_loss), axis=1)
     cost = np.where(np.isfinite(cost), cost, np.inf)
     x0 = starts[int(np.argmin(cost))].copy()
     fixed = fixed or {}
@@ -517,7 +548,8 @@ def _fit(effects: Sequence[str], names: Sequence[str], starts: np.ndarray, d: Da
 
     z0 = np.clip(x0[fidx], lo[fidx] + 1e-12, hi[fidx] - 1e-12)
     sol = least_squares(fun, z0, jac=jac, bounds=(lo[fidx], hi[fidx]),
-                        x_scale=np.array([X_SCALE[names[i]] for i in fidx]), max_nfev=cfg.max_nfev, method="trf")
+                        x_scale=np.array([X_SCALE[names[i]] for i in fidx]), max_nfev=cfg.max_nfev, method="trf",
+                        loss=cfg.fit_loss, f_scale=FIT_LOSS_SCALE)
     return full(sol.x)
 
 
@@ -738,6 +770,97 @@ def _cross_fitted(fits: Sequence[CandidateFit], d: Data) -> CandidateFit:
                         resid=resid, x_folds=tuple(f.x for f in fits))
 
 
+def _fit_worker_x(args):
+    """A bare :func:`_fit` (``effects, names, starts, d, cfg, fixed``) in a worker process."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        return _fit(*args)
+
+
+def _map_fits(tasks: list, jobs: int) -> list:
+    if jobs > 1 and len(tasks) > 1:
+        with ProcessPoolExecutor(max_workers=min(jobs, len(tasks))) as pool:
+            return list(pool.map(_fit_worker_x, tasks))
+    return [_fit_worker_x(task) for task in tasks]
+
+
+def _effects_of(model: CandidateFit) -> list[str]:
+    return model.effect.split("+") if model.effect != "nominal" else []
+
+
+def _fixed_of(model: CandidateFit) -> dict | None:
+    """``mu_change`` keeps its switching time in refits: it only moves the windows it falls in, so it is searched,
+    not fitted by least squares."""
+    return {"t_change": float(model.x[model.names.index("t_change")])} if "t_change" in model.names else None
+
+
+def fit_time_split(model: CandidateFit, d: Data, cfg: DiagnoseConfig, jobs: int = 1) -> CandidateFit:
+    """``model`` refitted separately on the early and on the late half of the log's windows, each half cross-fitted
+    within itself (a window is predicted by the fit of its own half that did not see it).
+
+    A library effect that is the right model has constant parameters, so letting them change once at mid-log cannot
+    improve the held-out error beyond the noise; an effect outside the library that the nearest library effect only
+    imitates (brake fade looks like a brake gain that drifts down) is caught by this test.
+
+    :return: the split model; ``x_folds`` holds its fits, early half first, ``folds`` per half.
+    """
+    t = time.perf_counter()
+    effects = _effects_of(model)
+    late = np.arange(len(d.starts)) >= len(d.starts) // 2
+    starts = np.vstack([model.x[None]] + [x[None] for x in model.x_folds])
+    halves = [(half, j) for half in (~late, late) for j in range(int(cfg.folds))]
+    xs = _map_fits([(effects, model.names, starts, replace(d, test=~(half & (d.fold != j))), cfg, _fixed_of(model))
+                    for half, j in halves], jobs)
+    resid = np.empty_like(model.resid)
+    for x, (half, j) in zip(xs, halves):
+        held = half & (d.fold == j)
+        if np.any(held):
+            resid[held] = window_residuals(effects, model.names, x, d, np.flatnonzero(held))[0]
+    wm = np.minimum(np.mean(resid**2, axis=-1), WINDOW_MSE_CAP)
+    return CandidateFit(effect=f"{model.effect} (early/late)", names=model.names, x=np.mean(xs, axis=0),
+                        train_mse=float("nan"), test_mse=float(np.mean(wm)), window_mse=wm,
+                        gap=gap_of(float(np.mean(wm))), seconds=time.perf_counter() - t, resid=resid,
+                        x_folds=tuple(xs))
+
+
+def _refit_from(model: CandidateFit, extra_starts: Sequence[np.ndarray], d: Data, cfg: DiagnoseConfig,
+                jobs: int) -> CandidateFit:
+    """``model`` refitted per fold from its own fits and ``extra_starts``: the split fits sometimes find a better
+    optimum of the constant model, which must not be mistaken for a drift."""
+    effects = _effects_of(model)
+    folds = [_fold_data(d, j) for j in range(int(cfg.folds))]
+    xs = _map_fits([(effects, model.names, np.vstack([xj[None]] + [x[None] for x in extra_starts]), f, cfg,
+                     _fixed_of(model)) for xj, f in zip(model.x_folds, folds)], jobs)
+    fits = [_score(model.effect, effects, model.names, x, f, model.seconds / len(folds)) for x, f in zip(xs, folds)]
+    return _cross_fitted(fits, d)
+
+
+def drift_test(model: CandidateFit, d: Data, cfg: DiagnoseConfig, jobs: int = 1) -> tuple[dict, CandidateFit]:
+    """Whether ``model``'s parameters drift over the log: :func:`fit_time_split` beats it significantly
+    (:func:`paired_z` above ``cfg.drift_z``) and closes a clear share of the robust gap the constant model leaves,
+    when that gap is above the noise (``gap_within_noise``). Both conditions: the paired test alone is dominated by
+    the few windows whose lock-up timing no model predicts, which a split fit can hit by chance.
+
+    :return: (the test's figures with the early and late fits, ``model`` refitted from the split fits as well).
+    """
+    split = fit_time_split(model, d, cfg, jobs)
+    refit = _refit_from(model, split.x_folds, d, cfg, jobs)
+    if refit.train_mse >= model.train_mse:
+        refit = model
+    k = int(cfg.folds)
+    z = paired_z(refit, split, d)
+
+    def params(xs):
+        return {n: float(np.mean([x[i] for x in xs])) for i, n in enumerate(model.names) if n not in ROAD_NAMES}
+
+    info = {"model": model.effect, "z_paired": z, "robust_gap": robust_gap(refit),
+            "robust_gap_split": robust_gap(split), "params_early": params(split.x_folds[:k]),
+            "params_late": params(split.x_folds[k:]), "seconds": split.seconds,
+            "drifts": bool(z > cfg.drift_z and robust_gap(refit) > cfg.gap_within_noise
+                           and robust_gap(split) <= DRIFT_SHARE * robust_gap(refit))}
+    return info, refit
+
+
 def _run_fits(tasks: list, jobs: int) -> list:
     """Candidate fits, in worker processes when there are several (longest fits first keeps the workers busy)."""
     if jobs > 1 and len(tasks) > 1:
@@ -855,6 +978,8 @@ def diagnose(log: QuarterCarLog, p: qc.QuarterCarParams = qc.PAPER_PARAMS,
     unknown = [c for c in cfg.candidates if c not in EFFECTS]
     if unknown:
         raise ValueError(f"unknown candidate effect(s) {', '.join(unknown)}; valid effects: {', '.join(EFFECTS)}")
+    if cfg.fit_loss not in FIT_LOSSES:
+        raise ValueError(f"DiagnoseConfig.fit_loss must be one of {', '.join(FIT_LOSSES)}, got {cfg.fit_loss!r}")
     d = _prepare(log, p, cfg)
     folds = [_fold_data(d, j) for j in range(int(cfg.folds))]
     with warnings.catch_warnings():
@@ -895,6 +1020,21 @@ def diagnose(log: QuarterCarLog, p: qc.QuarterCarParams = qc.PAPER_PARAMS,
     # significantly on data it was not fitted to (then the nominal model cannot be within the noise either)
     gap_is_real = nominal.gap > cfg.gap_none or bool(significant)
     verdict, chosen, fits = decide_verdict(significant, fits, explains, joint_wins, gap_is_real)
+    drift = None
+    if chosen is not None and cfg.drift_check:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            tested_joint = joint_wins and not explains(chosen)  # the model that closes the gap
+            drift, refit = drift_test(joint if tested_joint else chosen, d, cfg, jobs)
+        _test_against(nominal, refit, d)
+        if tested_joint:
+            joint = refit
+        else:
+            fits = [refit if f is chosen else f for f in fits]
+            significant = [refit if f is chosen else f for f in significant]
+            chosen = refit
+        if drift["drifts"]:  # the nearest library effect imitates something it is not: its parameters move
+            verdict, chosen = "unexplained", None
 
     # localisation: the nominal model's held-out residuals on all windows
     r_ch = _by_channel(nominal.resid, d)
@@ -932,9 +1072,11 @@ def diagnose(log: QuarterCarLog, p: qc.QuarterCarParams = qc.PAPER_PARAMS,
                  "speed_source": "logged v (smoothed)" if d.v is not None else "reconstructed from omega",
                  "certainty": certainty},
         "tests": {f.effect: {"t_stat": f.t_stat, "z": f.z, "z_paired": f.z_paired, "robust_gap": robust_gap(f),
-                             "significant": bool(f in significant)} for f in fits},
+                             "significant": any(f is s for s in significant)} for f in fits},
         "robust_gap_before": robust_gap(nominal),
     }
+    if drift is not None:
+        where["drift_test"] = drift
     if joint is not None:
         where["joint_fit"] = {"effects": joint.effect.split("+"), "params": joint.effect_params(),
                               "gap_after": joint.gap, "t_stat": joint.t_stat}

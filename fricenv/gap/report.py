@@ -88,6 +88,15 @@ def report_markdown(dg: Diagnosis, report: dict) -> str:
     if "joint_fit" in w:
         j = w["joint_fit"]
         lines += ["", f"Joint fit of {' + '.join(j['effects'])}: gap after {j['gap_after']:.3f}, params {j['params']}"]
+    if "drift_test" in w:
+        dt = w["drift_test"]
+        moved = ", ".join(f"{k} {dt['params_early'][k]:.4g} -> {dt['params_late'][k]:.4g}"
+                          for k in dt["params_early"])
+        lines += ["", (f"Drift test of `{dt['model']}` (refitted on the early and the late half of the log, each half "
+                       f"held out as above): z paired {dt['z_paired']:.1f}, robust gap {dt['robust_gap']:.3f} -> "
+                       f"{dt['robust_gap_split']:.3f}; early -> late: {moved}. "
+                       + ("Its parameters drift: the gap is caused by something this constant library effect only "
+                          "imitates, hence `unexplained`." if dt["drifts"] else "No significant drift."))]
     lines += ["", ("Score: share of the nominal model's held-out excess squared error the candidate closes. "
                    "z paired: held-out improvement of the squared normalised error (without its largest window) "
                    "over its spread under the measurement noise given the two models' prediction difference; a "
