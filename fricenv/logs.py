@@ -18,12 +18,12 @@ import numpy as np
 from fricenv.utils import atomic_write
 
 __all__ = [
+    "PLANTS",
     "LogFormatError",
-    "QuarterCarLog",
     "PayloadLog",
+    "QuarterCarLog",
     "read_log",
     "write_log",
-    "PLANTS",
 ]
 
 # Relative jitter allowed in the time step before the log counts as non-uniform.

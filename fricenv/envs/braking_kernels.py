@@ -98,8 +98,7 @@ def make_scalar_substep(h: float, p: qc.QuarterCarParams = qc.PAPER_PARAMS):
             frac = w / max(w - w_new, _TINY)
             v_new = v + frac * (v_new - v) - (1.0 - frac) * slide
             w_new = 0.0
-        if v_new < 0.0:
-            v_new = 0.0
+        v_new = max(v_new, 0.0)
         if Tb >= 0.0 and wr0 <= v and (w_new * r > v_new + inv_tol * (1.0 + v) or v_new > v + inv_tol * (1.0 + v)):
             # quarter_car.braking_invariant_broken: redo this rare substep the reference way, in finer parts.
             vf, wf = qc.step(np.array([v]), np.array([w]), np.array([Tb]), np.array([B, C, E, fz_theta / p.Fz]),

@@ -16,7 +16,7 @@ from estimators.fms_rls import FmsRLS
 from fricenv.envs.braking_core import ObsField, decode_observation
 from fricenv.plants import payload as pl
 
-__all__ = ["PayloadExcitationEnv", "RESET_OPTION_KEYS", "CALIBRATIONS", "ESTIMATOR_OPTIONS"]
+__all__ = ["CALIBRATIONS", "ESTIMATOR_OPTIONS", "RESET_OPTION_KEYS", "PayloadExcitationEnv"]
 
 CONTROL_DT = 0.02  # agent step [s] (50 Hz)
 PHYSICS_DT = 1e-3  # simulation and estimator step [s] (the paper's 1 ms)
@@ -148,8 +148,8 @@ class PayloadExcitationEnv(gym.Env):
         self.workspace_penalty = float(workspace_penalty)
         self.params = params
         self.dt = CONTROL_DT
-        self.substeps = int(round(CONTROL_DT / PHYSICS_DT))
-        self.max_steps = int(round(self.time_limit / CONTROL_DT))
+        self.substeps = round(CONTROL_DT / PHYSICS_DT)
+        self.max_steps = round(self.time_limit / CONTROL_DT)
         self.limits = np.array(WRENCH_LIMIT)
         self.rls = FmsRLS(PHYSICS_DT, params, wrench_hold="zoh",
                           vision_std=(max(self.noise.theta_std, 1e-12), max(self.noise.position_std, 1e-12)),

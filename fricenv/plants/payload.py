@@ -33,28 +33,28 @@ import numpy as np
 from fricenv.logs import PayloadLog
 
 __all__ = [
-    "PayloadParams",
+    "NO_NOISE",
+    "PAPER_NOISE",
     "PAPER_PARAMS",
     "PAPER_S",
-    "NoiseParams",
-    "PAPER_NOISE",
-    "NO_NOISE",
     "PAPER_WRENCH_AMPLITUDE",
-    "paper_wrench",
     "CalibrationSchedule",
-    "constant_calibration",
-    "table1_schedule",
-    "random_calibration",
-    "calibration_error",
+    "NoiseParams",
+    "PayloadParams",
+    "Trajectory",
     "accelerations",
+    "calibration_error",
+    "constant_calibration",
     "derivatives",
     "integrate",
-    "step",
+    "paper_wrench",
+    "random_calibration",
     "sensor_reading",
-    "vision",
-    "Trajectory",
     "simulate",
+    "step",
+    "table1_schedule",
     "to_log",
+    "vision",
 ]
 
 # The paper's calibration matrix, Section 4, item 4.
@@ -382,7 +382,7 @@ def simulate(duration: float, dt: float = 1e-3, *, wrench: Callable = paper_wren
     if not np.isfinite(dt) or dt <= 0:
         raise ValueError(f"dt must be > 0 s, got {dt!r}")
     calibration = calibration or constant_calibration()
-    n = int(round(duration / dt))
+    n = round(duration / dt)
     tq = np.arange(4 * n + 1) * (dt / 4.0)
     wq = np.asarray(wrench(tq), dtype=float)
     x0 = np.zeros(6) if state0 is None else np.asarray(state0, dtype=float)

@@ -35,18 +35,18 @@ from fricenv.plants.tire import (
 )
 
 __all__ = [
-    "QuarterCarParams",
     "PAPER_PARAMS",
-    "road_array",
-    "slip",
-    "tire_force",
+    "QuarterCarParams",
+    "braking_invariant_broken",
     "derivatives",
     "jacobian",
+    "physical_limit_distance",
+    "refine_where_unphysical",
+    "road_array",
+    "slip",
     "slip_form_derivatives",
     "step",
-    "physical_limit_distance",
-    "braking_invariant_broken",
-    "refine_where_unphysical",
+    "tire_force",
 ]
 
 # ROS2 constant: gamma = 1 + 1/sqrt(2) makes the method L-stable and of order 2.

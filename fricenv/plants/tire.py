@@ -17,17 +17,17 @@ import numpy as np
 from scipy.optimize import minimize_scalar
 
 __all__ = [
-    "MagicFormula",
-    "magic_formula",
-    "magic_formula_dslip",
-    "longitudinal_slip",
     "DRY",
-    "WET",
-    "SNOW",
     "ICE",
     "ROADS",
-    "get_road",
+    "SNOW",
+    "WET",
+    "MagicFormula",
     "UnknownRoadError",
+    "get_road",
+    "longitudinal_slip",
+    "magic_formula",
+    "magic_formula_dslip",
 ]
 
 # Below this speed [m/s] the slip denominator is held, so slip stays finite as the vehicle comes to rest.
