@@ -602,7 +602,7 @@ EXPECTED = {NONE: "none", OUT: "unexplained"}
 def diagnose_case(case: IndependentCase) -> dict:
     """Write the case's log to a temporary directory and diagnose it blind; returns a result row."""
     from fricenv.gap.diagnose import DiagnoseConfig, diagnose_file
-    from fricenv.gap.validate import main_error
+    from fricenv.gap.validate import main_error, true_model_detectable
 
     expected = EXPECTED.get(case.category, case.category)
     with tempfile.TemporaryDirectory() as tmp:
@@ -625,6 +625,9 @@ def diagnose_case(case: IndependentCase) -> dict:
            "candidates": [c.effect for c in dg.candidates[:3]]}
     if case.category in LIBRARY_EFFECTS:
         out["ratio"] = out["gap_after"] / out["gap_before"] if out["gap_before"] > 0 else float("nan")
+        # the tool's own model class with the true values: the oracle of "could any tool see it in these data"
+        out["detectable"] = true_model_detectable(case.category, truth["params"], truth["road"], dg,
+                                                  DiagnoseConfig(jobs=1))
         if out["right"]:
             out["param_error"], out["param_errors"] = main_error(case.category, truth["params"], out["params"])
     return out

@@ -358,6 +358,26 @@ def test_paired_z_is_the_gain_over_its_noise_spread():
     assert paired_z(right, right, d) == 0.0  # identical predictions: no evidence either way
 
 
+def test_paired_z_discounts_a_nuisance_state_fitted_on_each_window():
+    """A candidate that only fits one more state per window on the window's own samples (the relaxation model's
+    transient slip) removes the noise's projection on that state: about one noise variance per window, which
+    without the discount reads as z = sqrt(W) / 2 on pure noise."""
+    from types import SimpleNamespace
+
+    from fricenv.gap.diagnose import paired_z
+
+    rng = np.random.default_rng(1)
+    d = SimpleNamespace(horizon=10, channels=["omega"])
+    e = rng.standard_normal((400, 10))
+    u = rng.standard_normal(10)
+    u /= np.linalg.norm(u)  # the nuisance state's direction in a window's residual
+    base = _fit_from_residuals(e)
+    cand = _fit_from_residuals(e - np.outer(e @ u, u))
+    assert paired_z(base, cand, d) == pytest.approx(np.sqrt(400) / 2, abs=2.0)  # spurious without the discount
+    cand.nuisances = base.nuisances + 1
+    assert abs(paired_z(base, cand, d)) < 2.0
+
+
 def test_robust_gap_leaves_out_the_worst_windows_only():
     from fricenv.gap.diagnose import TRIM_SHARE, gap_of, robust_gap
 

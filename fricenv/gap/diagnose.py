@@ -123,6 +123,11 @@ SPEED_BANDS = (10.0, 20.0)  # band edges [m/s]
 # Transient slip at a window start: False = the slip of the window's start state (the wheel-speed nuisance fit then
 # absorbs the difference); True = the measured slip filtered through the relaxation equation.
 RELAX_STATE_FROM_FILTER = True
+# Whether the transient slip is also fitted per window, like the wheel speed (the filtered estimate alone predicts
+# the relaxation model's transients poorly). It is a state fitted on the window's own samples, so it lowers the
+# relaxation model's held-out error by about one noise variance per window even on pure noise; the significance
+# tests subtract that (:func:`window_nuisances`).
+RELAX_STATE_FITTED = True
 # A window's mean squared normalised error counts at most this much in the scores (RMS 5 noise std): a wheel lock-up
 # predicted a few milliseconds early or late is wrong whatever the size of its error, and must not decide alone.
 WINDOW_MSE_CAP = 25.0
@@ -206,6 +211,15 @@ class CandidateFit:
     seconds: float = 0.0
     resid: np.ndarray | None = None  # (windows, samples) normalised residuals of all windows
     x_folds: tuple = ()  # the per-fold fits of a cross-fitted candidate (x is their mean)
+    nuisances: int = 1  # states fitted per window on the window's own samples (window_nuisances)
+
+    samples: int = 1  # normalised residuals per window (horizon times channels)
+
+    @property
+    def adjusted_mse(self) -> float:
+        """Held-out mean squared normalised residual plus what the per-window nuisance states win on pure noise:
+        the figure models with different nuisances are ranked by."""
+        return self.test_mse + self.nuisances / self.samples
 
     def effect_params(self) -> dict[str, float]:
         return {k: float(v) for k, v in zip(self.names, self.x) if k not in ROAD_NAMES}
@@ -412,6 +426,13 @@ def _normalised(pred: dict, meas: dict, d: Data) -> np.ndarray:
     return np.concatenate(parts, axis=-1)
 
 
+def window_nuisances(effects: Sequence[str], d: Data) -> int:
+    """Number of states fitted per window on that window's own samples: the wheel speed, the speed when ``v`` is
+    logged, and the transient slip of a relaxation model. Each lowers a model's error on the window by about one
+    noise variance even where it explains nothing, so tests between models subtract the difference."""
+    return 1 + (d.v is not None) + ("relaxation_length" in effects and RELAX_STATE_FITTED)
+
+
 def window_residuals(effects: Sequence[str], names: Sequence[str], X: np.ndarray, d: Data,
                      widx: np.ndarray | None = None, per_channel: bool = False):
     """Normalised residuals (K, W, M) of K parameter sets on windows ``widx``, wheel-speed nuisance fitted.
@@ -433,7 +454,7 @@ def window_residuals(effects: Sequence[str], names: Sequence[str], X: np.ndarray
     if relax:
         state["lam_t"] = lt[:, s].copy() if lt is not None else \
             longitudinal_slip(state["v"], state["omega"], batch.r_eff[:, None])
-    free = ["omega"] + (["v"] if d.v is not None else []) + (["lam_t"] if relax else [])
+    free = ["omega"] + (["v"] if d.v is not None else []) + (["lam_t"] if relax and RELAX_STATE_FITTED else [])
     steps = {"omega": OMEGA0_STEP, "v": V0_STEP, "lam_t": LAMT_STEP}
     max_move = {"omega": OMEGA0_MAX_MOVE * d.sigma["omega"], "v": OMEGA0_MAX_MOVE * d.sigma.get("v", 1.0),
                 "lam_t": LAMT_MAX_MOVE}
@@ -558,7 +579,8 @@ def _score(effect: str, effects: Sequence[str], names, x, d: Data, seconds: floa
     wm = np.minimum(np.mean(r**2, axis=-1), WINDOW_MSE_CAP)
     return CandidateFit(effect=effect, names=tuple(names), x=np.asarray(x, dtype=float),
                         train_mse=float(np.mean(wm[~d.test])), test_mse=float(np.mean(wm[d.test])), window_mse=wm,
-                        seconds=seconds, resid=r)
+                        seconds=seconds, resid=r, nuisances=window_nuisances(effects, d),
+                        samples=d.horizon * len(d.channels))
 
 
 def _road_starts(d: Data) -> np.ndarray:
@@ -699,11 +721,17 @@ def _refine_noise(nominal: CandidateFit, d: Data) -> None:
         d.sigma[c] = max(min(d.sigma[c], rms), NOISE_FLOOR[c])
 
 
+def _window_gain(base: CandidateFit, cand: CandidateFit, m: int) -> np.ndarray:
+    """Per-window held-out gain of the sum of squared normalised residuals (``m`` samples per window), less what
+    ``cand``'s extra per-window nuisance states win on pure noise (one noise variance each)."""
+    return (base.window_mse - cand.window_mse) * m - (cand.nuisances - base.nuisances)
+
+
 def improvement_z(base: CandidateFit, cand: CandidateFit, d: Data) -> float:
     """Held-out improvement of the sum of squared normalised residuals, without its single largest window, in units
     of that sum's standard deviation under pure noise (sqrt(2 n)); one lucky window cannot make it large."""
     m = d.horizon * len(d.channels)
-    gain = (base.window_mse - cand.window_mse) * m
+    gain = _window_gain(base, cand, m)
     if gain.size == 0:
         return 0.0
     robust = float(np.sum(gain) - max(float(np.max(gain)), 0.0))
@@ -718,13 +746,14 @@ def paired_z(base: CandidateFit, cand: CandidateFit, d: Data) -> float:
     ``a - b = r_b - r_c`` is the difference of the two predictions, known exactly. The statistic is the held-out gain
     over ``2 ||r_b - r_c||``: a z score that is large when the data prefer the candidate however few windows carry the
     difference, and about ``-||a - b|| / 2 + N(0, 1)`` when the base model is right. Per window the gain and the
-    squared difference are capped (``WINDOW_MSE_CAP``), and the window of largest gain is left out, as in
-    :func:`improvement_z`.
+    squared difference are capped (``WINDOW_MSE_CAP``), the window of largest gain is left out, as in
+    :func:`improvement_z`, and the gain is less what ``cand``'s extra per-window nuisance states win on pure noise
+    (:func:`_window_gain`).
     """
     if base.resid is None or cand.resid is None:
         return 0.0
     m = d.horizon * len(d.channels)
-    gain = (base.window_mse - cand.window_mse) * m
+    gain = _window_gain(base, cand, m)
     diff2 = np.minimum(np.sum((base.resid - cand.resid) ** 2, axis=-1), m * WINDOW_MSE_CAP)
     if gain.size < 2:
         return 0.0
@@ -737,7 +766,7 @@ def paired_z(base: CandidateFit, cand: CandidateFit, d: Data) -> float:
 def _significant(f: CandidateFit, nominal: CandidateFit, cfg: DiagnoseConfig) -> bool:
     """A held-out improvement well beyond what the measurement noise could make (:func:`paired_z`); the robust
     :func:`improvement_z` and the paired t statistic are reported, not required."""
-    return f.z_paired > cfg.sig_z and f.test_mse < nominal.test_mse
+    return f.z_paired > cfg.sig_z and f.adjusted_mse < nominal.adjusted_mse
 
 
 def robust_gap(f: CandidateFit) -> float:
@@ -767,7 +796,8 @@ def _cross_fitted(fits: Sequence[CandidateFit], d: Data) -> CandidateFit:
     return CandidateFit(effect=f0.effect, names=f0.names, x=np.mean([f.x for f in fits], axis=0),
                         train_mse=float(np.mean([f.train_mse for f in fits])), test_mse=float(np.mean(wm)),
                         window_mse=wm, gap=gap_of(float(np.mean(wm))), seconds=float(sum(f.seconds for f in fits)),
-                        resid=resid, x_folds=tuple(f.x for f in fits))
+                        resid=resid, x_folds=tuple(f.x for f in fits), nuisances=f0.nuisances,
+                        samples=f0.samples)
 
 
 def _fit_worker_x(args):
@@ -820,7 +850,7 @@ def fit_time_split(model: CandidateFit, d: Data, cfg: DiagnoseConfig, jobs: int 
     return CandidateFit(effect=f"{model.effect} (early/late)", names=model.names, x=np.mean(xs, axis=0),
                         train_mse=float("nan"), test_mse=float(np.mean(wm)), window_mse=wm,
                         gap=gap_of(float(np.mean(wm))), seconds=time.perf_counter() - t, resid=resid,
-                        x_folds=tuple(xs))
+                        x_folds=tuple(xs), nuisances=model.nuisances, samples=model.samples)
 
 
 def _refit_from(model: CandidateFit, extra_starts: Sequence[np.ndarray], d: Data, cfg: DiagnoseConfig,
@@ -1001,7 +1031,7 @@ def diagnose(log: QuarterCarLog, p: qc.QuarterCarParams = qc.PAPER_PARAMS,
     fits = [_cross_fitted(per_fold[i * k:(i + 1) * k], d) for i in range(len(cfg.candidates))]
     for f in fits:
         _test_against(nominal, f, d)
-    fits.sort(key=lambda f: f.test_mse)
+    fits.sort(key=lambda f: f.adjusted_mse)
     significant = [f for f in fits if _significant(f, nominal, cfg)]
     joint = None
     if cfg.joint and len(significant) >= 2:
@@ -1015,7 +1045,7 @@ def diagnose(log: QuarterCarLog, p: qc.QuarterCarParams = qc.PAPER_PARAMS,
         return robust_gap(f) <= cfg.ratio_explained * robust_gap(nominal) or robust_gap(f) <= cfg.gap_within_noise
 
     joint_wins = joint is not None and _significant(joint, nominal, cfg) and explains(joint) and \
-        bool(significant) and joint.test_mse < significant[0].test_mse
+        bool(significant) and joint.adjusted_mse < significant[0].adjusted_mse
     # the gap is real when the nominal model misses by more than the noise, or when a candidate beats it
     # significantly on data it was not fitted to (then the nominal model cannot be within the noise either)
     gap_is_real = nominal.gap > cfg.gap_none or bool(significant)

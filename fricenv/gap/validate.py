@@ -28,7 +28,8 @@ from fricenv.plants import quarter_car as qc
 from fricenv.plants.tire import ROADS, MagicFormula
 from fricenv.utils import as_generator, progress
 
-__all__ = ["CATEGORIES", "PARAM_TOLERANCE", "Case", "draw_case", "main_error", "run_case", "summarize", "validate"]
+__all__ = ["CATEGORIES", "PARAM_TOLERANCE", "Case", "draw_case", "main_error", "run_case", "summarize",
+           "true_model_detectable", "validate"]
 
 NONE, OUT = "none", "out_of_library"
 CATEGORIES = tuple(EFFECTS) + (NONE, OUT)
@@ -140,25 +141,27 @@ def run_case(case: Case, cfg: DiagnoseConfig | None = None, via_file: bool = Tru
            "candidates": [c.effect for c in dg.candidates[:3]]}
     if case.category in EFFECTS:
         out["ratio"] = dg.gap_after / dg.gap_before if dg.gap_before > 0 else np.nan
-        out["detectable"] = _detectable(case, dg, cfg)
+        out["detectable"] = true_model_detectable(case.category, out["true_params"], out["road"], dg, cfg)
         if out["right"]:
             out["param_error"], out["param_errors"] = main_error(case.category, out["true_params"], dg.params)
     return out
 
 
-def _detectable(case: Case, dg, cfg: DiagnoseConfig) -> bool:
-    """Oracle check (for the summary only): does the TRUE model (true road and effect) improve the held-out error
+def true_model_detectable(effect: str, params: dict, road: dict, dg, cfg: DiagnoseConfig) -> bool:
+    """Oracle check (for the summaries only): does the TRUE model (true road and effect) improve the held-out error
     over the calibrated nominal model by the diagnosis' own significance rule? If not, the effect is below the
-    noise in this log and no tool could name it from these data."""
-    from fricenv.gap.diagnose import _param_names, _score, paired_z
+    noise in this log and no tool could name it from these data.
 
-    e = case.effects[0]
-    names = _param_names([e.name])
-    x = np.concatenate([[case.road.B, case.road.C, case.road.E, case.road.theta],
-                        [getattr(e, k) for k in names[4:]]])
+    :param effect: library effect name; :param params: its true parameters (DESIGN.md names, SI units).
+    :param road: the true road, keys ``B, C, E, theta``; :param dg: the log's :class:`Diagnosis`.
+    """
+    from fricenv.gap.diagnose import ROAD_NAMES, _param_names, _score, paired_z
+
+    names = _param_names([effect])
+    x = np.array([road[k] for k in ROAD_NAMES] + [params[k] for k in names[len(ROAD_NAMES):]], dtype=float)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        true_fit = _score(e.name, [e.name], names, x, dg.data, 0.0)
+        true_fit = _score(effect, [effect], names, x, dg.data, 0.0)
     return bool(paired_z(dg.nominal, true_fit, dg.data) > cfg.sig_z)
 
 
