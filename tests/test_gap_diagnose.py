@@ -115,6 +115,12 @@ def test_brake_fade_imitated_by_a_brake_gain_is_caught_by_the_drift_test():
     assert dg.candidates[0].effect == "brake_gain"  # still the nearest library effect, listed first
 
 
+def test_unknown_fit_loss_is_rejected_with_the_valid_ones():
+    log, _ = simulate_log([], ROAD, "abs", seed=1, duration=1.0)
+    with pytest.raises(ValueError, match="fit_loss must be one of linear, soft_l1, cauchy, got 'huber'"):
+        diagnose(log, cfg=DiagnoseConfig(fit_loss="huber"))
+
+
 def test_noise_level_is_estimated_from_the_data():
     rng = np.random.default_rng(0)
     t = np.arange(2000) * 0.01

@@ -212,7 +212,6 @@ class CandidateFit:
     resid: np.ndarray | None = None  # (windows, samples) normalised residuals of all windows
     x_folds: tuple = ()  # the per-fold fits of a cross-fitted candidate (x is their mean)
     nuisances: int = 1  # states fitted per window on the window's own samples (window_nuisances)
-
     samples: int = 1  # normalised residuals per window (horizon times channels)
 
     @property
