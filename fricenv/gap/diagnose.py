@@ -678,11 +678,20 @@ def fit_candidate(effects: Sequence[str], road: np.ndarray, d: Data, cfg: Diagno
     return _score("+".join(effects), effects, names, x, d, time.perf_counter() - t)
 
 
-def _fit_worker(args):
-    effects, road, d, cfg, seeds = args
+def _fit_worker(job):
+    """``(fn, args)`` -> ``fn(*args)`` in a worker process, the fits' RuntimeWarnings silenced."""
+    fn, args = job
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
-        return fit_candidate(effects, road, d, cfg, seeds)
+        return fn(*args)
+
+
+def _map_fits(fn, tasks: list, jobs: int) -> list:
+    """``[fn(*t) for t in tasks]``, in worker processes when there are several; results in task order."""
+    if jobs > 1 and len(tasks) > 1:
+        with ProcessPoolExecutor(max_workers=min(jobs, len(tasks))) as pool:
+            return list(pool.map(_fit_worker, [(fn, t) for t in tasks]))
+    return [_fit_worker((fn, t)) for t in tasks]
 
 
 # --------------------------------------------------------------------------------------------- scoring, verdict
@@ -727,8 +736,9 @@ def _window_gain(base: CandidateFit, cand: CandidateFit, m: int) -> np.ndarray:
 
 
 def improvement_z(base: CandidateFit, cand: CandidateFit, d: Data) -> float:
-    """Held-out improvement of the sum of squared normalised residuals, without its single largest window, in units
-    of that sum's standard deviation under pure noise (sqrt(2 n)); one lucky window cannot make it large."""
+    """Held-out improvement of the sum of squared normalised residuals (less the nuisance discount of
+    :func:`_window_gain`), without its single largest window, in units of that sum's standard deviation under pure
+    noise (sqrt(2 n)); one lucky window cannot make it large."""
     m = d.horizon * len(d.channels)
     gain = _window_gain(base, cand, m)
     if gain.size == 0:
@@ -799,20 +809,6 @@ def _cross_fitted(fits: Sequence[CandidateFit], d: Data) -> CandidateFit:
                         samples=f0.samples)
 
 
-def _fit_worker_x(args):
-    """A bare :func:`_fit` (``effects, names, starts, d, cfg, fixed``) in a worker process."""
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)
-        return _fit(*args)
-
-
-def _map_fits(tasks: list, jobs: int) -> list:
-    if jobs > 1 and len(tasks) > 1:
-        with ProcessPoolExecutor(max_workers=min(jobs, len(tasks))) as pool:
-            return list(pool.map(_fit_worker_x, tasks))
-    return [_fit_worker_x(task) for task in tasks]
-
-
 def _effects_of(model: CandidateFit) -> list[str]:
     return model.effect.split("+") if model.effect != "nominal" else []
 
@@ -838,13 +834,12 @@ def fit_time_split(model: CandidateFit, d: Data, cfg: DiagnoseConfig, jobs: int 
     late = np.arange(len(d.starts)) >= len(d.starts) // 2
     starts = np.vstack([model.x[None]] + [x[None] for x in model.x_folds])
     halves = [(half, j) for half in (~late, late) for j in range(int(cfg.folds))]
-    xs = _map_fits([(effects, model.names, starts, replace(d, test=~(half & (d.fold != j))), cfg, _fixed_of(model))
-                    for half, j in halves], jobs)
+    xs = _map_fits(_fit, [(effects, model.names, starts, replace(d, test=~(half & (d.fold != j))), cfg,
+                           _fixed_of(model)) for half, j in halves], jobs)
     resid = np.empty_like(model.resid)
-    for x, (half, j) in zip(xs, halves):
+    for x, (half, j) in zip(xs, halves):  # every window is held out in exactly one (half, fold)
         held = half & (d.fold == j)
-        if np.any(held):
-            resid[held] = window_residuals(effects, model.names, x, d, np.flatnonzero(held))[0]
+        resid[held] = window_residuals(effects, model.names, x, d, np.flatnonzero(held))[0]
     wm = np.minimum(np.mean(resid**2, axis=-1), WINDOW_MSE_CAP)
     return CandidateFit(effect=f"{model.effect} (early/late)", names=model.names, x=np.mean(xs, axis=0),
                         train_mse=float("nan"), test_mse=float(np.mean(wm)), window_mse=wm,
@@ -858,8 +853,8 @@ def _refit_from(model: CandidateFit, extra_starts: Sequence[np.ndarray], d: Data
     optimum of the constant model, which must not be mistaken for a drift."""
     effects = _effects_of(model)
     folds = [_fold_data(d, j) for j in range(int(cfg.folds))]
-    xs = _map_fits([(effects, model.names, np.vstack([xj[None]] + [x[None] for x in extra_starts]), f, cfg,
-                     _fixed_of(model)) for xj, f in zip(model.x_folds, folds)], jobs)
+    xs = _map_fits(_fit, [(effects, model.names, np.vstack([xj[None]] + [x[None] for x in extra_starts]), f, cfg,
+                           _fixed_of(model)) for xj, f in zip(model.x_folds, folds)], jobs)
     fits = [_score(model.effect, effects, model.names, x, f, model.seconds / len(folds)) for x, f in zip(xs, folds)]
     return _cross_fitted(fits, d)
 
@@ -891,13 +886,11 @@ def drift_test(model: CandidateFit, d: Data, cfg: DiagnoseConfig, jobs: int = 1)
 
 
 def _run_fits(tasks: list, jobs: int) -> list:
-    """Candidate fits, in worker processes when there are several (longest fits first keeps the workers busy)."""
-    if jobs > 1 and len(tasks) > 1:
-        order = sorted(range(len(tasks)), key=lambda i: -sum(len(EFFECT_PARAMS[e]) for e in tasks[i][0]))
-        with ProcessPoolExecutor(max_workers=min(jobs, len(tasks))) as pool:
-            done = dict(zip(order, pool.map(_fit_worker, [tasks[i] for i in order])))
-        return [done[i] for i in range(len(tasks))]
-    return [_fit_worker(t) for t in tasks]
+    """Candidate fits (:func:`fit_candidate` argument tuples), in worker processes when there are several; the
+    longest fits go first, which keeps the workers busy."""
+    order = sorted(range(len(tasks)), key=lambda i: -sum(len(EFFECT_PARAMS[e]) for e in tasks[i][0]))
+    done = dict(zip(order, _map_fits(fit_candidate, [tasks[i] for i in order], jobs)))
+    return [done[i] for i in range(len(tasks))]
 
 
 def _nested_nominal(nominal: CandidateFit, fits: Sequence[CandidateFit], d: Data, cfg: DiagnoseConfig) \
@@ -1050,7 +1043,8 @@ def diagnose(log: QuarterCarLog, p: qc.QuarterCarParams = qc.PAPER_PARAMS,
     gap_is_real = nominal.gap > cfg.gap_none or bool(significant)
     verdict, chosen, fits = decide_verdict(significant, fits, explains, joint_wins, gap_is_real)
     drift = None
-    if chosen is not None and cfg.drift_check:
+    # each half needs training windows in every fold: at least ``folds`` windows per half
+    if chosen is not None and cfg.drift_check and len(d.starts) >= 2 * int(cfg.folds):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)
             tested_joint = joint_wins and not explains(chosen)  # the model that closes the gap
