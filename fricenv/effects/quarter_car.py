@@ -431,9 +431,10 @@ class EffectSimulator:
         self._relax = batch.sigma > 0.0
         self._any_relax = bool(np.any(self._relax))
         self._std = ~self._relax
+        # elements of one rolling radius share one plant call; their parameters are made once, not per substep
         self._groups = [(float(r), np.flatnonzero((batch.r_eff == r) & self._std)) for r in np.unique(batch.r_eff)]
-        self._groups = [(r, idx) for r, idx in self._groups if idx.size]
-        self._single = len(self._groups) == 1 and self._groups[0][1].size == n
+        self._groups = [(idx, p if r == p.r else replace(p, r=r)) for r, idx in self._groups if idx.size]
+        self._single = len(self._groups) == 1 and self._groups[0][0].size == n
         self._any_drag = bool(np.any(batch.c0 != 0.0) or np.any(batch.c2 != 0.0))
         self._any_lag = bool(np.any(batch.tau > 0.0))
         self._any_delay = bool(np.any(batch.delay > 0.0))
@@ -441,7 +442,27 @@ class EffectSimulator:
         self._any_fade = bool(np.any(batch.fade != 0.0))
         self._any_load = bool(np.any(batch.load != 0.0))
         self._any_slide = bool(np.any(batch.slide != 0.0))
+        self._init_actuator()
         self.reset(np.zeros(n), np.zeros(n))
+
+    def _init_actuator(self) -> None:
+        """Per-element constants of the actuator chain over one substep (delay and lag are fixed per element)."""
+        h = self.dt / self.substeps
+        tau = self.batch.tau
+        lagged = tau > 0.0
+        safe_tau = np.where(lagged, tau, 1.0)
+        e = np.exp(-h / safe_tau)
+        # exact lag over a substep of constant input u: T_a+ = u + (T_a - u) keep, mean = u + (T_a - u) spread
+        self._lag_keep = np.where(lagged, e, 0.0)
+        self._lag_spread = np.where(lagged, safe_tau / h * (1.0 - e), 0.0)
+        # delayed sample of substep j of sample k: k + offset[j] (weight frac[j]) and the next one (1 - frac[j])
+        width = 1.0 / self.substeps
+        self._delay_offset, self._delay_frac = [], []
+        for j in range(self.substeps):
+            s_a = j * width - self.batch.delay / self.dt
+            i0 = np.floor(s_a + _INDEX_EPS).astype(int)
+            self._delay_offset.append(i0)
+            self._delay_frac.append(np.clip((i0 + 1 - s_a) / width, 0.0, 1.0))
 
     # -- state
     def reset(self, v, omega, k0=0, Ta=None, lam_t=None) -> None:
@@ -458,7 +479,7 @@ class EffectSimulator:
         self.omega = np.array(np.broadcast_to(np.asarray(omega, dtype=float), (n,)))
         self.k = np.array(np.broadcast_to(np.asarray(k0, dtype=int), (n,)))
         if Ta is None:
-            Ta = self._cmd[self._rows, np.clip(self.k, 0, self._cmd.shape[1] - 1)] if not self._record else 0.0
+            Ta = self._command_at(self.k) if not self._record else 0.0
         self.Ta = np.array(np.broadcast_to(np.asarray(Ta, dtype=float), (n,)))
         if lam_t is None:
             lam_t = longitudinal_slip(self.v, self.omega, self.batch.r_eff)
@@ -469,26 +490,29 @@ class EffectSimulator:
         self.applied = np.zeros(n)
 
     # -- actuator chain
+    def _command_at(self, idx: np.ndarray) -> np.ndarray:
+        """Logged command at sample ``idx`` of each element, held at the ends of the log."""
+        return self._cmd[self._rows, np.minimum(np.maximum(idx, 0), self._cmd.shape[1] - 1)]
+
     def _delayed(self, j: int) -> np.ndarray:
         """Command delayed by ``delay``, averaged exactly over substep ``j`` of the current sample (ZOH input)."""
-        width = 1.0 / self.substeps
-        s_a = self.k + j * width - self.batch.delay / self.dt
-        i0 = np.floor(s_a + _INDEX_EPS).astype(int)
-        f = np.clip((i0 + 1 - s_a) / width, 0.0, 1.0)
-        last = self._cmd.shape[1] - 1
-        c0 = self._cmd[self._rows, np.clip(i0, 0, last)]
-        c1 = self._cmd[self._rows, np.clip(i0 + 1, 0, last)]
-        return f * c0 + (1.0 - f) * c1
+        idx = self.k + self._delay_offset[j]
+        f = self._delay_frac[j]
+        return f * self._command_at(idx) + (1.0 - f) * self._command_at(idx + 1)
 
-    def _actuator_substep(self, j: int, h: float) -> np.ndarray:
-        """Mean applied torque over substep ``j`` (delay -> lag -> gain [-> fade]); advances the lag state."""
-        u = self._delayed(j) if self._any_delay else self._cmd[self._rows, np.clip(self.k, 0, self._cmd.shape[1] - 1)]
+    def _actuator_substep(self, j: int, held: np.ndarray | None = None) -> np.ndarray:
+        """Mean applied torque over substep ``j`` (delay -> lag -> gain [-> fade]); advances the lag state.
+
+        :param held: this sample's command without delay (read here if None; callers pass it once per sample).
+        """
+        if self._any_delay:
+            u = self._delayed(j)
+        else:
+            u = self._command_at(self.k) if held is None else held
         if self._any_lag:
-            tau = self.batch.tau
-            lagged = tau > 0.0
-            e = np.exp(-h / np.where(lagged, tau, 1.0))
-            mean = np.where(lagged, u + (self.Ta - u) * np.where(lagged, tau, 1.0) / h * (1.0 - e), u)
-            self.Ta = np.where(lagged, u + (self.Ta - u) * e, u)
+            offset = self.Ta - u
+            mean = u + offset * self._lag_spread
+            self.Ta = u + offset * self._lag_keep
         else:
             mean = u
             self.Ta = u
@@ -504,7 +528,6 @@ class EffectSimulator:
         sample is the same recursion as over the substeps composed: ``T_a+ = u + (T_a - u) exp(-dt/tau)``; that
         case runs as a linear filter (scipy ``lfilter``) per element instead of a Python loop over substeps.
         """
-        h = self.dt / self.substeps
         if not (self._any_delay or self._any_fade) and self._cmd.shape[0] == 1:
             from scipy.signal import lfilter
 
@@ -526,7 +549,7 @@ class EffectSimulator:
         for i in range(n_steps):
             out[:, i] = self.Ta
             for j in range(self.substeps):
-                self._actuator_substep(j, h)
+                self._actuator_substep(j)
             self.k = self.k + 1
         return out
 
@@ -587,8 +610,9 @@ class EffectSimulator:
             self._cmd[self._rows, col] = np.broadcast_to(np.asarray(Tb, dtype=float), (self.n,))
         h = self.dt / self.substeps
         p = self.p
+        held = None if self._any_delay else self._command_at(self.k)
         for j in range(self.substeps):
-            torque = self._actuator_substep(j, h)
+            torque = self._actuator_substep(j, held)
             t_end = self.t0 + (self.k + (j + 1) / self.substeps) * self.dt
             road = self._road_at(t_end, h)
             if self._any_fade or self._any_load:
@@ -596,11 +620,9 @@ class EffectSimulator:
             if self._any_drag:
                 self._drag_half(h)
             if self._single:
-                self.v, self.omega = qc.step(self.v, self.omega, torque, road, h, replace(p, r=self._groups[0][0])
-                                             if self._groups[0][0] != p.r else p, 1)
+                self.v, self.omega = qc.step(self.v, self.omega, torque, road, h, self._groups[0][1], 1)
             else:
-                for r, idx in self._groups:
-                    pr = p if r == p.r else replace(p, r=r)
+                for idx, pr in self._groups:
                     self.v[idx], self.omega[idx] = qc.step(self.v[idx], self.omega[idx], torque[idx], road[idx], h,
                                                            pr, 1)
                 if self._any_relax:

@@ -31,7 +31,7 @@ from fricenv.plants.tire import (
     MagicFormula,
     longitudinal_slip,
     magic_formula,
-    magic_formula_dslip,
+    magic_formula_and_dslip,
 )
 
 __all__ = [
@@ -104,7 +104,8 @@ def _force_and_partials(v, omega, road, p: QuarterCarParams):
     wr = omega * p.r
     denom = np.maximum(np.maximum(v, wr), SLIP_SPEED_FLOOR)
     lam = (v - wr) / denom
-    fz_dmu = p.Fz * magic_formula_dslip(lam, B, C, E, theta)
+    mu, dmu = magic_formula_and_dslip(lam, B, C, E, theta)
+    fz_dmu = p.Fz * dmu
     braking = v >= wr
     floored = denom <= SLIP_SPEED_FLOOR
     # braking: lam = 1 - wr/v  -> dlam/dv = wr/v^2,  dlam/dw = -r/v
@@ -112,8 +113,7 @@ def _force_and_partials(v, omega, road, p: QuarterCarParams):
     # floored denominator: lam = (v - wr)/floor -> dlam/dv = 1/floor, dlam/dw = -r/floor
     dlam_dv = np.where(floored, 1.0, np.where(braking, wr / denom, 1.0)) / denom
     dlam_dw = np.where(floored, -p.r, np.where(braking, -p.r, -v * p.r / denom)) / denom
-    Fx = p.Fz * magic_formula(lam, B, C, E, theta)
-    return Fx, fz_dmu * dlam_dv, fz_dmu * dlam_dw
+    return p.Fz * mu, fz_dmu * dlam_dv, fz_dmu * dlam_dw
 
 
 def derivatives(v, omega, Tb, road, p: QuarterCarParams = PAPER_PARAMS):
@@ -146,11 +146,16 @@ def slip_form_derivatives(v, lam, Tb, road, p: QuarterCarParams = PAPER_PARAMS):
     return vdot, lamdot
 
 
-def _solve_w(a11, a12, a21, a22, h_gamma, b1, b2):
-    """Solve (I - h gamma A) k = b for batched 2x2 A, by Cramer's rule (no inverse formed)."""
+def _ros2_matrix(a11, a12, a21, a22, h_gamma):
+    """``I - h gamma A`` for batched 2x2 A, with its determinant: (m11, m12, m21, m22, det)."""
     m11, m12 = 1.0 - h_gamma * a11, -h_gamma * a12
     m21, m22 = -h_gamma * a21, 1.0 - h_gamma * a22
-    det = m11 * m22 - m12 * m21
+    return m11, m12, m21, m22, m11 * m22 - m12 * m21
+
+
+def _solve_w(m, b1, b2):
+    """Solve ``M k = b`` for the batched 2x2 ``m`` of :func:`_ros2_matrix`, by Cramer's rule (no inverse formed)."""
+    m11, m12, m21, m22, det = m
     return (m22 * b1 - m12 * b2) / det, (m11 * b2 - m21 * b1) / det
 
 
@@ -183,11 +188,12 @@ def step(v, omega, Tb, road, dt: float, p: QuarterCarParams = PAPER_PARAMS, subs
     v = np.asarray(v, dtype=float)
     omega = np.asarray(omega, dtype=float)
     for _ in range(substeps):
-        a11, a12, a21, a22 = jacobian(v, omega, road, p)
-        f1v, f1w = derivatives(v, omega, Tb, road, p)
-        k1v, k1w = _solve_w(a11, a12, a21, a22, hg, f1v, f1w)
+        # f(x) from the force the Jacobian needs anyway: eq. (1)
+        Fx, dF_dv, dF_dw = _force_and_partials(v, omega, road, p)
+        m = _ros2_matrix(-dF_dv / p.m, -dF_dw / p.m, p.r * dF_dv / p.J, p.r * dF_dw / p.J, hg)
+        k1v, k1w = _solve_w(m, -Fx / p.m, (p.r * Fx - Tb) / p.J)
         f2v, f2w = derivatives(v + h * k1v, np.maximum(omega + h * k1w, 0.0), Tb, road, p)
-        k2v, k2w = _solve_w(a11, a12, a21, a22, hg, f2v - 2.0 * k1v, f2w - 2.0 * k1w)
+        k2v, k2w = _solve_w(m, f2v - 2.0 * k1v, f2w - 2.0 * k1w)
         v_new = v + h * (1.5 * k1v + 0.5 * k2v)
         w_new = omega + h * (1.5 * k1w + 0.5 * k2w)
         v_new, w_new = _lock_event(v, omega, v_new, w_new, road, h, p)
@@ -215,11 +221,11 @@ def refine_where_unphysical(v0, w0, v1, w1, Tb, road, h: float, p: QuarterCarPar
     """
     if h <= REFINE_MIN_STEP:
         return v1, w1
+    bad = braking_invariant_broken(v0, w0, v1, w1, Tb, p.r)
+    if not bad.any():
+        return v1, w1
     v0, w0 = np.asarray(v0, dtype=float), np.asarray(w0, dtype=float)
     Tb = np.broadcast_to(np.asarray(Tb, dtype=float), v0.shape)
-    bad = braking_invariant_broken(v0, w0, v1, w1, Tb, p.r)
-    if not np.any(bad):
-        return v1, w1
     road = np.asarray(road, dtype=float)
     v_fine, w_fine = step(v0[bad], w0[bad], Tb[bad], road[bad] if road.ndim == 2 else road, h, p, REFINE_PARTS)
     v1, w1 = np.array(v1, dtype=float), np.array(w1, dtype=float)
@@ -235,7 +241,7 @@ def _lock_event(v, omega, v_new, w_new, road, h, p: QuarterCarParams):
     first-order error that dominates the stopping-distance error at 2 ms substeps.
     """
     crossing = w_new < 0.0
-    if np.any(crossing):
+    if crossing.any():
         frac = np.where(crossing, omega / np.maximum(omega - w_new, 1e-300), 1.0)
         v_lock = v + frac * (v_new - v)
         mu_slide = magic_formula(1.0, road[..., 0], road[..., 1], road[..., 2], road[..., 3])

@@ -27,6 +27,7 @@ __all__ = [
     "get_road",
     "longitudinal_slip",
     "magic_formula",
+    "magic_formula_and_dslip",
     "magic_formula_dslip",
 ]
 
@@ -54,11 +55,17 @@ def magic_formula(slip, B, C, E, theta):
 
 def magic_formula_dslip(slip, B, C, E, theta):
     """Derivative d mu / d slip of :func:`magic_formula` (closed form, used by Jacobians)."""
+    return magic_formula_and_dslip(slip, B, C, E, theta)[1]
+
+
+def magic_formula_and_dslip(slip, B, C, E, theta):
+    """``(mu, d mu / d slip)`` of :func:`magic_formula`, sharing the arctangents (the integrators need both)."""
     bs = B * slip
     inner = bs - E * (bs - np.arctan(bs))
     # d inner / d slip = B * (1 - E + E / (1 + bs^2))
     dinner = B * (1.0 - E + E / (1.0 + bs * bs))
-    return theta * np.cos(C * np.arctan(inner)) * C * dinner / (1.0 + inner * inner)
+    angle = C * np.arctan(inner)
+    return theta * np.sin(angle), theta * np.cos(angle) * C * dinner / (1.0 + inner * inner)
 
 
 def longitudinal_slip(v, omega, r, speed_floor: float = SLIP_SPEED_FLOOR):
