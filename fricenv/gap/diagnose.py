@@ -29,15 +29,16 @@ Method (every error measure is computed on data not used for fitting):
    peak, brake apply/hold/release, speed bands) and by channel, before and after.
 6. **Candidates.** Every library effect is fitted (road + effect parameters, multi-start; ``mu_change`` by a
    change-point search over the road shapes) per fold, in parallel processes, and scored on the held-out windows.
-   A candidate is significant when its held-out improvement of the squared normalised error, without its single
-   largest window, exceeds ``sig_z`` times its spread under the measurement noise (twice the norm of the two
-   models' prediction difference, :func:`paired_z`): a richer model cannot win by fitting noise (the improvement
-   is measured on data it was not fitted to), nor by one lucky window, and an effect that shows in few windows
-   is still seen.
+   Least squares runs from the best starts of two different road shapes (``fit_starts``): started in the nominal
+   road's basin alone, it can stop there. A candidate is significant when its held-out improvement of the squared
+   normalised error, without its single largest window, exceeds ``sig_z`` times its spread under the measurement
+   noise (twice the norm of the two models' prediction difference, :func:`paired_z`): a richer model cannot win by
+   fitting noise (the improvement is measured on data it was not fitted to), nor by one lucky window, and an
+   effect that shows in few windows is still seen.
 7. **Verdict.** An effect when it is significant and closes a clear share of the gap (robust held-out gap, the
    worst ``TRIM_SHARE`` of windows left out, at most ``ratio_explained`` of the nominal one, or below
-   ``gap_within_noise``); ``unexplained`` when the gap is real (nominal gap above ``gap_none``, or a
-   significant candidate) and no candidate closes it; ``none`` otherwise. The two best significant candidates are also fitted
+   ``gap_within_noise``); ``unexplained`` when the gap is real (nominal gap above ``gap_none`` and not only in
+   the trimmed windows, or a significant candidate) and no candidate closes it; ``none`` otherwise. The two best significant candidates are also fitted
    jointly; if only the joint model closes the gap, the larger single effect is the verdict and the other follows
    in ``candidates`` (the joint fit is reported under ``where["joint_fit"]``).
 8. **Drift test.** The verdict's model is refitted on the early and on the late half of the log separately (each
@@ -150,6 +151,9 @@ class DiagnoseConfig:
     horizon: int = 10  # prediction window [samples]
     folds: int = 2  # cross-fitting folds: window i belongs to fold i % folds; each fold is held out once [-]
     max_nfev: int = 30  # least-squares iterations per start [-]
+    # Least-squares runs per candidate fit, from the best starts with distinct roads: a run started in the nominal
+    # road's basin can stop there (a non-smooth point of the windowed residuals) far from the effect's optimum [-]
+    fit_starts: int = 2
     # Loss of the fits on the normalised residuals (scale FIT_LOSS_SCALE noise std). A robust loss keeps the few
     # lock-up windows, whose timing no model predicts, from bending the road away from the bulk of the data.
     fit_loss: str = "soft_l1"
@@ -521,23 +525,42 @@ def _fit_loss(r: np.ndarray, loss: str) -> np.ndarray:
     return FIT_LOSS_SCALE**2 * rho
 
 
+def _distinct_starts(starts: np.ndarray, cost: np.ndarray, k: int) -> list[np.ndarray]:
+    """The ``k`` best of ``starts`` by ``cost`` whose road parts (B, C, E, theta) differ: a fit started from the
+    nominal model's road can stay in that road's basin, so the further starts come from other road shapes."""
+    chosen: list[np.ndarray] = []
+    for i in np.argsort(cost, kind="stable"):
+        if not np.isfinite(cost[i]) or len(chosen) == k:
+            break
+        if all(not np.allclose(starts[i, :4], c[:4]) for c in chosen):
+            chosen.append(starts[i].copy())
+    return chosen or [starts[0].copy()]
+
+
 def _fit(effects: Sequence[str], names: Sequence[str], starts: np.ndarray, d: Data, cfg: DiagnoseConfig,
-         fixed: dict | None = None) -> np.ndarray:
-    """Least squares on the training windows from the best of ``starts`` (K, len(names)); ``fixed`` params held."""
+         fixed: dict | None = None, runs: int = 1) -> np.ndarray:
+    """Least squares on the training windows from the best ``runs`` of ``starts`` (K, len(names)) with distinct
+    roads; the lowest final loss wins. ``fixed`` params are held."""
     train = np.flatnonzero(~d.test)
     lo, hi = _bounds(names, d)
     starts = np.clip(np.atleast_2d(starts), lo, hi)
+    fixed = fixed or {}
+    for k, v in fixed.items():
+        starts[:, names.index(k)] = v
     r = window_residuals(effects, names, starts, d, train)
     cost = np.sum(_fit_loss(r.reshape(len(starts), -1), cfg.fit_loss), axis=1)
     cost = np.where(np.isfinite(cost), cost, np.inf)
-    x0 = starts[int(np.argmin(cost))].copy()
-    fixed = fixed or {}
-    free = np.array([n not in fixed for n in names])
-    for k, v in fixed.items():
-        x0[names.index(k)] = v
-    fidx = np.flatnonzero(free)
+    fidx = np.flatnonzero([n not in fixed for n in names])
     if fidx.size == 0:
-        return x0
+        return starts[int(np.argmin(cost))].copy()
+    results = [_least_squares(effects, names, x0, fidx, lo, hi, train, d, cfg)
+               for x0 in _distinct_starts(starts, cost, runs)]
+    return min(results, key=lambda res: res[1])[0]
+
+
+def _least_squares(effects: Sequence[str], names: Sequence[str], x0: np.ndarray, fidx: np.ndarray, lo, hi,
+                   train: np.ndarray, d: Data, cfg: DiagnoseConfig) -> tuple[np.ndarray, float]:
+    """One trust-region least-squares run from ``x0`` over the parameters ``fidx``: (solution, final loss)."""
     steps = np.array([FD_STEP[names[i]] for i in fidx])
     cache: dict = {}
 
@@ -570,7 +593,7 @@ def _fit(effects: Sequence[str], names: Sequence[str], starts: np.ndarray, d: Da
     sol = least_squares(fun, z0, jac=jac, bounds=(lo[fidx], hi[fidx]),
                         x_scale=np.array([X_SCALE[names[i]] for i in fidx]), max_nfev=cfg.max_nfev, method="trf",
                         loss=cfg.fit_loss, f_scale=FIT_LOSS_SCALE)
-    return full(sol.x)
+    return full(sol.x), float(sol.cost)
 
 
 def _score(effect: str, effects: Sequence[str], names, x, d: Data, seconds: float) -> CandidateFit:
@@ -674,7 +697,7 @@ def fit_candidate(effects: Sequence[str], road: np.ndarray, d: Data, cfg: Diagno
         if best[4] != x[4]:
             x = _fit(effects, names, best[None], d, cfg, fixed={"t_change": float(best[4])})
     else:
-        x = _fit(effects, names, _effect_start_matrix(effects, road, d, seeds), d, cfg)
+        x = _fit(effects, names, _effect_start_matrix(effects, road, d, seeds), d, cfg, runs=int(cfg.fit_starts))
     return _score("+".join(effects), effects, names, x, d, time.perf_counter() - t)
 
 
@@ -785,6 +808,17 @@ def robust_gap(f: CandidateFit) -> float:
     wm = np.sort(f.window_mse)
     keep = wm.size - int(np.ceil(TRIM_SHARE * wm.size))
     return gap_of(float(np.mean(wm[:max(keep, 1)])))
+
+
+def gap_is_real(nominal: CandidateFit, significant: Sequence[CandidateFit], cfg: DiagnoseConfig) -> bool:
+    """Whether the nominal model misses by more than the noise.
+
+    True when its held-out gap is above ``gap_none`` beyond the few lock-up windows that no model times (the trim
+    of :func:`robust_gap`, the same that judges the candidates), or when a candidate beats it significantly on data
+    it was not fitted to (then the nominal model cannot be within the noise either).
+    """
+    misses = nominal.gap > cfg.gap_none and robust_gap(nominal) > cfg.gap_within_noise
+    return misses or bool(significant)
 
 
 def _fold_data(d: Data, j: int) -> Data:
@@ -1038,10 +1072,8 @@ def diagnose(log: QuarterCarLog, p: qc.QuarterCarParams = qc.PAPER_PARAMS,
 
     joint_wins = joint is not None and _significant(joint, nominal, cfg) and explains(joint) and \
         bool(significant) and joint.adjusted_mse < significant[0].adjusted_mse
-    # the gap is real when the nominal model misses by more than the noise, or when a candidate beats it
-    # significantly on data it was not fitted to (then the nominal model cannot be within the noise either)
-    gap_is_real = nominal.gap > cfg.gap_none or bool(significant)
-    verdict, chosen, fits = decide_verdict(significant, fits, explains, joint_wins, gap_is_real)
+    verdict, chosen, fits = decide_verdict(significant, fits, explains, joint_wins,
+                                           gap_is_real(nominal, significant, cfg))
     drift = None
     # each half needs training windows in every fold: at least ``folds`` windows per half
     if chosen is not None and cfg.drift_check and len(d.starts) >= 2 * int(cfg.folds):
