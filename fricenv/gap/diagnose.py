@@ -68,11 +68,16 @@ from fricenv.effects.quarter_car import (
     EFFECTS,
     EffectSimulator,
     ModelBatch,
-    _slip_partials,
 )
 from fricenv.logs import QuarterCarLog, read_log
 from fricenv.plants import quarter_car as qc
-from fricenv.plants.tire import ROADS, MagicFormula, longitudinal_slip, magic_formula, magic_formula_dslip
+from fricenv.plants.tire import (
+    ROADS,
+    SLIP_SPEED_FLOOR,
+    MagicFormula,
+    longitudinal_slip,
+    magic_formula_and_dslip,
+)
 
 __all__ = [
     "ROAD_NAMES",
@@ -332,29 +337,34 @@ def _reconstruct_speed(batch: ModelBatch, d: Data) -> np.ndarray:
     m0 = max(min(d.free_end, 20), 3)
     v = batch.r_eff * float(np.mean(d.omega[:m0]))
     out = np.empty((K, d.n))
-    lt = np.zeros(K)
+    r, c0, c2 = batch.r_eff, batch.c0, batch.c2
     relax = batch.sigma > 0
+    any_relax = bool(relax.any())
+    dt_over_sigma = dt / np.where(relax, batch.sigma, 1.0)
+    lt = np.zeros(K)
     road = batch.road.copy()
+    B, C, E, th = road.T  # views: th follows a mu change
     change = np.isfinite(batch.t_change)
+    any_change = bool(change.any())
+    # one Python iteration per sample over the whole batch: every numpy call here runs n times per evaluation
     for k in range(d.n):
         out[:, k] = v
-        if np.any(change):
-            t = d.t0 + k * d.dt
-            road[:, 3] = np.where(change & (t >= batch.t_change), batch.theta_after, batch.road[:, 3])
-        w = d.omega[k]
-        lam = longitudinal_slip(v, w, batch.r_eff)
-        if np.any(relax):
-            lt = np.where(relax, lam + (lt - lam) * np.exp(-np.maximum(v, 0) * dt / np.where(relax, batch.sigma, 1)),
-                          lam)
-            s = lt
+        if any_change:
+            road[:, 3] = np.where(change & (d.t0 + k * dt >= batch.t_change), batch.theta_after, batch.road[:, 3])
+        wr = d.omega[k] * r
+        denom = np.maximum(np.maximum(v, wr), SLIP_SPEED_FLOOR)
+        lam = (v - wr) / denom  # longitudinal_slip, with its denominator kept for the derivative
+        # d lambda / d v: wr / denom^2 when braking above the speed floor, 1 / denom otherwise
+        dlam_dv = np.where((v >= wr) & (denom > SLIP_SPEED_FLOOR), wr / denom, 1.0) / denom
+        if any_relax:
+            lt = np.where(relax, lam + (lt - lam) * np.exp(-np.maximum(v, 0.0) * dt_over_sigma), lam)
+            mu, dmu = magic_formula_and_dslip(lt, B, C, E, th)
+            dmu_dv = np.where(relax, 0.0, dmu * dlam_dv)  # the filtered slip lags: no implicit feedback through it
         else:
-            s = lam
-        B, C, E, th = road.T
-        F = p.Fz * magic_formula(s, B, C, E, th)
-        drag = batch.c0 + batch.c2 * v * v
-        f = -(F + drag) / p.m
-        dlam_dv, _ = _slip_partials(v, w, batch.r_eff)
-        dfdv = -(p.Fz * magic_formula_dslip(s, B, C, E, th) * np.where(relax, 0.0, dlam_dv) + 2 * batch.c2 * v) / p.m
+            mu, dmu = magic_formula_and_dslip(lam, B, C, E, th)
+            dmu_dv = dmu * dlam_dv
+        f = -(p.Fz * mu + c0 + c2 * v * v) / p.m
+        dfdv = -(p.Fz * dmu_dv + 2.0 * c2 * v) / p.m
         v = np.maximum(v + dt * f / (1.0 - dt * np.minimum(dfdv, 0.0)), 0.0)
     return out
 
