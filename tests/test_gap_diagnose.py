@@ -417,3 +417,17 @@ def test_a_gap_only_in_the_lock_up_windows_is_not_real():
     assert not gap_is_real(cases[0], [], CFG)
     assert gap_is_real(cases[1], [], CFG)
     assert gap_is_real(cases[0], [cases[1]], CFG)
+
+
+def test_least_squares_starts_come_from_distinct_roads():
+    """The second run starts from the best start of another road shape, not from the same road with another
+    effect value (that run would stay in the first one's basin); failed starts (non-finite loss) are never used."""
+    from fricenv.gap.diagnose import _distinct_starts
+
+    nominal, dry = [19.2, 2.25, 0.99, 0.95], [10.38, 1.65, 0.657, 1.0]
+    starts = np.array([nominal + [0.045], nominal + [0.025], dry + [0.045], dry + [0.025], [4.0, 2.0, 1.0, 0.1, 0.01]])
+    cost = np.array([4499.0, 6682.0, 5694.0, 8484.0, np.inf])
+    chosen = _distinct_starts(starts, cost, 2)
+    assert [list(c) for c in chosen] == [nominal + [0.045], dry + [0.045]]
+    assert len(_distinct_starts(starts, cost, 5)) == 2  # only two finite road shapes
+    assert [list(c) for c in _distinct_starts(starts, cost, 1)] == [nominal + [0.045]]
