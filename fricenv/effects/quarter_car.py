@@ -77,6 +77,11 @@ __all__ = [
 _ROS2_GAMMA = 1.0 + 1.0 / np.sqrt(2.0)
 # Physics substeps per 10 ms sample: the plant's verified setting (< 0.01 % vs Radau).
 DEFAULT_SUBSTEPS = 5
+# Rosenbrock gamma of the relaxation plant's steps: 1/2 (linearly implicit trapezoidal rule, A-stable, second
+# order) leaves the oscillatory mode of the transient slip and the wheel (about 25 Hz on dry asphalt at
+# sigma = 0.3 m) undamped, as it is; the plant's L-stable 1 + 1/sqrt(2) damps that mode numerically at 2 ms steps,
+# which a fit then reads as a relaxation length about 10 % too long.
+RELAX_GAMMA = 0.5
 # Index rounding guard when locating a delayed sample [samples].
 _INDEX_EPS = 1e-9
 # Load-transfer pitch mode: natural frequency [rad/s] and damping ratio [-] of a passenger car's pitch.
@@ -362,10 +367,12 @@ def _slip_partials(v, omega, r):
 
 
 def relaxation_step(v, omega, lam_t, Tb, road, h: float, r, sigma, c0, c2,
-                    p: qc.QuarterCarParams = qc.PAPER_PARAMS):
-    """One ROS2 step of :func:`relaxation_derivatives` (exact 3x3 Jacobian), then ``omega >= 0``, ``v >= 0``.
+                    p: qc.QuarterCarParams = qc.PAPER_PARAMS, gamma: float = RELAX_GAMMA):
+    """One two-stage Rosenbrock step of :func:`relaxation_derivatives` (exact 3x3 Jacobian; the plant's ROS2
+    scheme with ``gamma``, see :data:`RELAX_GAMMA`), then ``omega >= 0``, ``v >= 0``.
 
     :param h: step [s]; other parameters as in :func:`relaxation_derivatives` (arrays of shape (n,)).
+    :param gamma: Rosenbrock gamma (second order for any value; 1 + 1/sqrt(2) is the L-stable ROS2).
     :return: (v, omega, lambda_t) after ``h``.
     """
     road = np.asarray(road, dtype=float)
@@ -381,7 +388,7 @@ def relaxation_step(v, omega, lam_t, Tb, road, h: float, r, sigma, c0, c2,
     A[:, 2, 0] = (lam - lam_t) / sigma + v / sigma * dlam_dv
     A[:, 2, 1] = v / sigma * dlam_dw
     A[:, 2, 2] = -v / sigma
-    M = np.eye(3)[None] - h * _ROS2_GAMMA * A
+    M = np.eye(3)[None] - h * gamma * A
 
     def f(x):
         return np.stack(relaxation_derivatives(x[:, 0], np.maximum(x[:, 1], 0.0), x[:, 2], Tb, road, r, sigma,
