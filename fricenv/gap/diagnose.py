@@ -35,12 +35,12 @@ Method (every error measure is computed on data not used for fitting):
    noise (twice the norm of the two models' prediction difference, :func:`paired_z`): a richer model cannot win by
    fitting noise (the improvement is measured on data it was not fitted to), nor by one lucky window, and an
    effect that shows in few windows is still seen.
-7. **Verdict.** An effect when it is significant and closes a clear share of the gap (robust held-out gap, the
-   worst ``TRIM_SHARE`` of windows left out, at most ``ratio_explained`` of the nominal one, or below
-   ``gap_within_noise``); ``unexplained`` when the gap is real (nominal gap above ``gap_none`` and not only in
-   the trimmed windows, or a significant candidate) and no candidate closes it; ``none`` otherwise. The two best significant candidates are also fitted
-   jointly; if only the joint model closes the gap, the larger single effect is the verdict and the other follows
-   in ``candidates`` (the joint fit is reported under ``where["joint_fit"]``).
+7. **Verdict.** An effect when it is significant and closes a clear share of the gap (robust held-out gap, the worst
+   ``TRIM_SHARE`` of windows left out, at most ``ratio_explained`` of the nominal one, or below
+   ``gap_within_noise``); ``unexplained`` when the gap is real (nominal gap above ``gap_none`` and not only in the
+   trimmed windows, or a significant candidate) and no candidate closes it; ``none`` otherwise. The two best
+   significant candidates are also fitted jointly; if only the joint model closes the gap, the larger single effect
+   is the verdict and the other follows in ``candidates`` (the joint fit is reported under ``where["joint_fit"]``).
 8. **Drift test.** The verdict's model is refitted on the early and on the late half of the log separately (each
    half cross-fitted within itself). A library effect has constant parameters, so if the split model beats the
    constant one significantly (paired z above ``drift_z``) and halves the robust gap it leaves (when that gap is
