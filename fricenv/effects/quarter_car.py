@@ -43,11 +43,11 @@ import numpy as np
 
 from fricenv.plants import quarter_car as qc
 from fricenv.plants.tire import (
-    SLIP_SPEED_FLOOR,
     MagicFormula,
     longitudinal_slip,
     magic_formula,
     magic_formula_dslip,
+    slip_and_partials,
 )
 
 __all__ = [
@@ -355,17 +355,6 @@ def relaxation_derivatives(v, omega, lam_t, Tb, road, r, sigma, c0, c2, p: qc.Qu
     return -(F + drag) / p.m, (r * F - Tb) / p.J, v * (lam - lam_t) / sigma
 
 
-def _slip_partials(v, omega, r):
-    """d lambda / d v and d lambda / d omega of :func:`fricenv.plants.tire.longitudinal_slip`."""
-    wr = omega * r
-    denom = np.maximum(np.maximum(v, wr), SLIP_SPEED_FLOOR)
-    floored = denom <= SLIP_SPEED_FLOOR
-    braking = v >= wr
-    dlam_dv = np.where(floored, 1.0, np.where(braking, wr / denom, 1.0)) / denom
-    dlam_dw = np.where(floored, -r, np.where(braking, -r, -v * r / denom)) / denom
-    return dlam_dv, dlam_dw
-
-
 def relaxation_step(v, omega, lam_t, Tb, road, h: float, r, sigma, c0, c2,
                     p: qc.QuarterCarParams = qc.PAPER_PARAMS, gamma: float = RELAX_GAMMA):
     """One two-stage Rosenbrock step of :func:`relaxation_derivatives` (exact 3x3 Jacobian; the plant's ROS2
@@ -378,8 +367,7 @@ def relaxation_step(v, omega, lam_t, Tb, road, h: float, r, sigma, c0, c2,
     road = np.asarray(road, dtype=float)
     B, C, E, th = road[..., 0], road[..., 1], road[..., 2], road[..., 3]
     fz_dmu = p.Fz * magic_formula_dslip(lam_t, B, C, E, th)
-    dlam_dv, dlam_dw = _slip_partials(v, omega, r)
-    lam = longitudinal_slip(v, omega, r)
+    lam, dlam_dv, dlam_dw = slip_and_partials(v, omega, r)
     n = v.shape[0]
     A = np.zeros((n, 3, 3))
     A[:, 0, 0] = np.where(v > 0.0, -2.0 * c2 * v / p.m, 0.0)

@@ -73,10 +73,10 @@ from fricenv.logs import QuarterCarLog, read_log
 from fricenv.plants import quarter_car as qc
 from fricenv.plants.tire import (
     ROADS,
-    SLIP_SPEED_FLOOR,
     MagicFormula,
     longitudinal_slip,
     magic_formula_and_dslip,
+    slip_and_partials,
 )
 
 __all__ = [
@@ -351,11 +351,7 @@ def _reconstruct_speed(batch: ModelBatch, d: Data) -> np.ndarray:
         out[:, k] = v
         if any_change:
             road[:, 3] = np.where(change & (d.t0 + k * dt >= batch.t_change), batch.theta_after, batch.road[:, 3])
-        wr = d.omega[k] * r
-        denom = np.maximum(np.maximum(v, wr), SLIP_SPEED_FLOOR)
-        lam = (v - wr) / denom  # longitudinal_slip, with its denominator kept for the derivative
-        # d lambda / d v: wr / denom^2 when braking above the speed floor, 1 / denom otherwise
-        dlam_dv = np.where((v >= wr) & (denom > SLIP_SPEED_FLOOR), wr / denom, 1.0) / denom
+        lam, dlam_dv, _ = slip_and_partials(v, d.omega[k], r)
         if any_relax:
             lt = np.where(relax, lam + (lt - lam) * np.exp(-np.maximum(v, 0.0) * dt_over_sigma), lam)
             mu, dmu = magic_formula_and_dslip(lt, B, C, E, th)

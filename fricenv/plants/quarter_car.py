@@ -27,11 +27,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from fricenv.plants.tire import (
-    SLIP_SPEED_FLOOR,
     MagicFormula,
     longitudinal_slip,
     magic_formula,
     magic_formula_and_dslip,
+    slip_and_partials,
 )
 
 __all__ = [
@@ -100,20 +100,9 @@ def tire_force(v, omega, road, p: QuarterCarParams = PAPER_PARAMS):
 
 def _force_and_partials(v, omega, road, p: QuarterCarParams):
     """F_x and its partial derivatives with respect to v and omega."""
-    B, C, E, theta = road[..., 0], road[..., 1], road[..., 2], road[..., 3]
-    wr = omega * p.r
-    denom = np.maximum(np.maximum(v, wr), SLIP_SPEED_FLOOR)
-    lam = (v - wr) / denom
-    mu, dmu = magic_formula_and_dslip(lam, B, C, E, theta)
-    fz_dmu = p.Fz * dmu
-    braking = v >= wr
-    floored = denom <= SLIP_SPEED_FLOOR
-    # braking: lam = 1 - wr/v  -> dlam/dv = wr/v^2,  dlam/dw = -r/v
-    # traction: lam = v/wr - 1 -> dlam/dv = 1/wr,    dlam/dw = -v r/wr^2
-    # floored denominator: lam = (v - wr)/floor -> dlam/dv = 1/floor, dlam/dw = -r/floor
-    dlam_dv = np.where(floored, 1.0, np.where(braking, wr / denom, 1.0)) / denom
-    dlam_dw = np.where(floored, -p.r, np.where(braking, -p.r, -v * p.r / denom)) / denom
-    return p.Fz * mu, fz_dmu * dlam_dv, fz_dmu * dlam_dw
+    lam, dlam_dv, dlam_dw = slip_and_partials(v, omega, p.r)
+    mu, dmu = magic_formula_and_dslip(lam, road[..., 0], road[..., 1], road[..., 2], road[..., 3])
+    return p.Fz * mu, p.Fz * dmu * dlam_dv, p.Fz * dmu * dlam_dw
 
 
 def derivatives(v, omega, Tb, road, p: QuarterCarParams = PAPER_PARAMS):
@@ -130,6 +119,11 @@ def jacobian(v, omega, road, p: QuarterCarParams = PAPER_PARAMS):
     """Jacobian of :func:`derivatives` with respect to (v, omega): returns (a11, a12, a21, a22)."""
     road = np.asarray(road, dtype=float)
     _, dF_dv, dF_dw = _force_and_partials(v, omega, road, p)
+    return _jacobian_from(dF_dv, dF_dw, p)
+
+
+def _jacobian_from(dF_dv, dF_dw, p: QuarterCarParams):
+    """Jacobian of eq. (1) from the tire force's partials: (a11, a12, a21, a22)."""
     return -dF_dv / p.m, -dF_dw / p.m, p.r * dF_dv / p.J, p.r * dF_dw / p.J
 
 
@@ -190,7 +184,7 @@ def step(v, omega, Tb, road, dt: float, p: QuarterCarParams = PAPER_PARAMS, subs
     for _ in range(substeps):
         # f(x) from the force the Jacobian needs anyway: eq. (1)
         Fx, dF_dv, dF_dw = _force_and_partials(v, omega, road, p)
-        m = _ros2_matrix(-dF_dv / p.m, -dF_dw / p.m, p.r * dF_dv / p.J, p.r * dF_dw / p.J, hg)
+        m = _ros2_matrix(*_jacobian_from(dF_dv, dF_dw, p), hg)
         k1v, k1w = _solve_w(m, -Fx / p.m, (p.r * Fx - Tb) / p.J)
         f2v, f2w = derivatives(v + h * k1v, np.maximum(omega + h * k1w, 0.0), Tb, road, p)
         k2v, k2w = _solve_w(m, f2v - 2.0 * k1v, f2w - 2.0 * k1w)

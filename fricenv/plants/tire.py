@@ -29,6 +29,7 @@ __all__ = [
     "magic_formula",
     "magic_formula_and_dslip",
     "magic_formula_dslip",
+    "slip_and_partials",
 ]
 
 # Below this speed [m/s] the slip denominator is held, so slip stays finite as the vehicle comes to rest.
@@ -84,6 +85,22 @@ def longitudinal_slip(v, omega, r, speed_floor: float = SLIP_SPEED_FLOOR):
     """
     wr = omega * r
     return (v - wr) / np.maximum(np.maximum(v, wr), speed_floor)
+
+
+def slip_and_partials(v, omega, r, speed_floor: float = SLIP_SPEED_FLOOR):
+    """:func:`longitudinal_slip` with its partial derivatives: ``(lambda, d lambda / d v, d lambda / d omega)``.
+
+    braking: lambda = 1 - omega r / v      -> d/dv = omega r / v^2,   d/domega = -r / v
+    traction: lambda = v / (omega r) - 1   -> d/dv = 1 / (omega r),   d/domega = -v r / (omega r)^2
+    floored denominator: (v - omega r) / floor -> d/dv = 1 / floor,   d/domega = -r / floor
+    """
+    wr = omega * r
+    denom = np.maximum(np.maximum(v, wr), speed_floor)
+    floored = denom <= speed_floor
+    braking = v >= wr
+    dlam_dv = np.where(floored, 1.0, np.where(braking, wr / denom, 1.0)) / denom
+    dlam_dw = np.where(floored | braking, -r, -v * r / denom) / denom
+    return (v - wr) / denom, dlam_dv, dlam_dw
 
 
 @dataclass(frozen=True)
