@@ -355,6 +355,15 @@ def relaxation_derivatives(v, omega, lam_t, Tb, road, r, sigma, c0, c2, p: qc.Qu
     return -(F + drag) / p.m, (r * F - Tb) / p.J, v * (lam - lam_t) / sigma
 
 
+def _solve_relax(m, b: np.ndarray) -> np.ndarray:
+    """Solve ``M k = b`` (b: (n, 3)) for the sparse ``M = [[m00, 0, m02], [0, 1, m12], [m20, m21, m22]]`` of
+    :func:`relaxation_step` by elimination onto the transient slip (no inverse formed; ``m00 >= 1``)."""
+    m00, m02, m12, m20, m21, m22 = m
+    b0, b1, b2 = b[:, 0], b[:, 1], b[:, 2]
+    k2 = (b2 - m20 * b0 / m00 - m21 * b1) / (m22 - m20 * m02 / m00 - m21 * m12)
+    return np.stack([(b0 - m02 * k2) / m00, b1 - m12 * k2, k2], axis=1)
+
+
 def relaxation_step(v, omega, lam_t, Tb, road, h: float, r, sigma, c0, c2,
                     p: qc.QuarterCarParams = qc.PAPER_PARAMS, gamma: float = RELAX_GAMMA):
     """One two-stage Rosenbrock step of :func:`relaxation_derivatives` (exact 3x3 Jacobian; the plant's ROS2
@@ -368,23 +377,23 @@ def relaxation_step(v, omega, lam_t, Tb, road, h: float, r, sigma, c0, c2,
     B, C, E, th = road[..., 0], road[..., 1], road[..., 2], road[..., 3]
     fz_dmu = p.Fz * magic_formula_dslip(lam_t, B, C, E, th)
     lam, dlam_dv, dlam_dw = slip_and_partials(v, omega, r)
-    n = v.shape[0]
-    A = np.zeros((n, 3, 3))
-    A[:, 0, 0] = np.where(v > 0.0, -2.0 * c2 * v / p.m, 0.0)
-    A[:, 0, 2] = -fz_dmu / p.m
-    A[:, 1, 2] = r * fz_dmu / p.J
-    A[:, 2, 0] = (lam - lam_t) / sigma + v / sigma * dlam_dv
-    A[:, 2, 1] = v / sigma * dlam_dw
-    A[:, 2, 2] = -v / sigma
-    M = np.eye(3)[None] - h * gamma * A
+    hg = h * gamma
+    # I - h gamma A; the Jacobian A has zeros at (0, 1), (1, 0), (1, 1), so M is sparse the same way
+    m00 = 1.0 - hg * np.where(v > 0.0, -2.0 * c2 * v / p.m, 0.0)
+    m02 = hg * fz_dmu / p.m
+    m12 = -hg * r * fz_dmu / p.J
+    m20 = -hg * ((lam - lam_t) / sigma + v / sigma * dlam_dv)
+    m21 = -hg * v / sigma * dlam_dw
+    m22 = 1.0 + hg * v / sigma
+    m = (m00, m02, m12, m20, m21, m22)
 
     def f(x):
         return np.stack(relaxation_derivatives(x[:, 0], np.maximum(x[:, 1], 0.0), x[:, 2], Tb, road, r, sigma,
                                                c0, c2, p), axis=1)
 
     x = np.stack([v, omega, lam_t], axis=1)
-    k1 = np.linalg.solve(M, f(x)[..., None])[..., 0]
-    k2 = np.linalg.solve(M, (f(x + h * k1) - 2.0 * k1)[..., None])[..., 0]
+    k1 = _solve_relax(m, f(x))
+    k2 = _solve_relax(m, f(x + h * k1) - 2.0 * k1)
     x = x + h * (1.5 * k1 + 0.5 * k2)
     return np.maximum(x[:, 0], 0.0), np.maximum(x[:, 1], 0.0), np.clip(x[:, 2], -1.0, 1.0)
 

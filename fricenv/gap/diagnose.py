@@ -69,15 +69,10 @@ from fricenv.effects.quarter_car import (
     EffectSimulator,
     ModelBatch,
 )
+from fricenv.gap.speed import reconstruct_speed
 from fricenv.logs import QuarterCarLog, read_log
 from fricenv.plants import quarter_car as qc
-from fricenv.plants.tire import (
-    ROADS,
-    MagicFormula,
-    longitudinal_slip,
-    magic_formula_and_dslip,
-    slip_and_partials,
-)
+from fricenv.plants.tire import ROADS, MagicFormula, longitudinal_slip
 
 __all__ = [
     "ROAD_NAMES",
@@ -325,51 +320,11 @@ def _batch(effects: Sequence[str], names: Sequence[str], X: np.ndarray, p: qc.Qu
     return replace(b, **upd)
 
 
-def _reconstruct_speed(batch: ModelBatch, d: Data) -> np.ndarray:
-    """Speed (K, n) from the measured wheel speed through the model's vehicle equation (no v logged).
-
-    ``v(0) = r_eff * mean(omega)`` over the free-rolling start; then linearly implicit Euler steps of
-    ``m v' = -F_z mu(lambda) - F_d(v)``, with ``lambda`` from ``v`` and the measured wheel speed (the transient slip
-    of the relaxation model, filtered from it, where that effect is on).
-    """
-    p, dt = d.p, d.dt
-    K = len(batch)
-    m0 = max(min(d.free_end, 20), 3)
-    v = batch.r_eff * float(np.mean(d.omega[:m0]))
-    out = np.empty((K, d.n))
-    r, c0, c2 = batch.r_eff, batch.c0, batch.c2
-    relax = batch.sigma > 0
-    any_relax = bool(relax.any())
-    dt_over_sigma = dt / np.where(relax, batch.sigma, 1.0)
-    lt = np.zeros(K)
-    road = batch.road.copy()
-    B, C, E, th = road.T  # views: th follows a mu change
-    change = np.isfinite(batch.t_change)
-    any_change = bool(change.any())
-    # one Python iteration per sample over the whole batch: every numpy call here runs n times per evaluation
-    for k in range(d.n):
-        out[:, k] = v
-        if any_change:
-            road[:, 3] = np.where(change & (d.t0 + k * dt >= batch.t_change), batch.theta_after, batch.road[:, 3])
-        lam, dlam_dv, _ = slip_and_partials(v, d.omega[k], r)
-        if any_relax:
-            lt = np.where(relax, lam + (lt - lam) * np.exp(-np.maximum(v, 0.0) * dt_over_sigma), lam)
-            mu, dmu = magic_formula_and_dslip(lt, B, C, E, th)
-            dmu_dv = np.where(relax, 0.0, dmu * dlam_dv)  # the filtered slip lags: no implicit feedback through it
-        else:
-            mu, dmu = magic_formula_and_dslip(lam, B, C, E, th)
-            dmu_dv = dmu * dlam_dv
-        f = -(p.Fz * mu + c0 + c2 * v * v) / p.m
-        dfdv = -(p.Fz * dmu_dv + 2.0 * c2 * v) / p.m
-        v = np.maximum(v + dt * f / (1.0 - dt * np.minimum(dfdv, 0.0)), 0.0)
-    return out
-
-
 def _speed_states(batch: ModelBatch, d: Data) -> np.ndarray:
     """Speed estimate (K, n) used to start the windows."""
     if d.v_smooth is not None:
         return np.broadcast_to(d.v_smooth, (len(batch), d.n))
-    return _reconstruct_speed(batch, d)
+    return reconstruct_speed(batch, d.omega, d.t0, d.dt, d.free_end, d.p)
 
 
 def _effect_states(batch: ModelBatch, d: Data, vhat: np.ndarray):
@@ -925,10 +880,17 @@ def drift_test(model: CandidateFit, d: Data, cfg: DiagnoseConfig, jobs: int = 1)
     return info, refit
 
 
+def _fit_cost(effects: Sequence[str], d: Data) -> int:
+    """Relative cost of a candidate fit: each evaluation simulates (fitted parameters + 1) parameter sets, each with
+    one replica per fitted window state (``mu_change`` holds its switching time during the least squares)."""
+    fitted = len(ROAD_NAMES) + sum(len(EFFECT_PARAMS[e]) for e in effects) - (list(effects) == ["mu_change"])
+    return (fitted + 1) * (1 + window_nuisances(effects, d))
+
+
 def _run_fits(tasks: list, jobs: int) -> list:
     """Candidate fits (:func:`fit_candidate` argument tuples), in worker processes when there are several; the
     longest fits go first, which keeps the workers busy."""
-    order = sorted(range(len(tasks)), key=lambda i: -sum(len(EFFECT_PARAMS[e]) for e in tasks[i][0]))
+    order = sorted(range(len(tasks)), key=lambda i: -_fit_cost(tasks[i][0], tasks[i][2]))
     done = dict(zip(order, _map_fits(fit_candidate, [tasks[i] for i in order], jobs)))
     return [done[i] for i in range(len(tasks))]
 
