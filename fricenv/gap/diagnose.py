@@ -102,7 +102,7 @@ EFFECT_STARTS = {
     "brake_gain": [{"gain": v} for v in (0.8, 0.9, 1.1, 1.25)],
     "relaxation_length": [{"sigma": v} for v in (0.1, 0.3, 0.6, 1.2)],
     "radius_error": [{"r_eff": f} for f in (0.96, 0.98, 1.02, 1.04)],  # times the nominal radius
-    "mu_change": [],  # change-point search, see _mu_change_start
+    "mu_change": [],  # change-point search, see _mu_change_starts
     "drag": [{"c0": a, "c2": b} for a, b in ((50.0, 0.0), (200.0, 0.0), (0.0, 0.3), (100.0, 0.2), (400.0, 0.5))],
 }
 # Finite-difference steps of the fit Jacobian, per parameter (absolute).
@@ -578,14 +578,15 @@ def fit_nominal(d: Data, cfg: DiagnoseConfig) -> CandidateFit:
     return _score("nominal", [], names, x, d, time.perf_counter() - t)
 
 
-def _mu_change_start(road: np.ndarray, d: Data) -> np.ndarray:
-    """Start of the mu_change fit by a change-point search; t_change only moves the windows it falls in, so it is
-    searched, not differentiated.
+def _mu_change_starts(road: np.ndarray, d: Data, k: int) -> list[np.ndarray]:
+    """Starts of the mu_change fit by a change-point search, from the ``k`` best road shapes; t_change only moves the
+    windows it falls in, so it is searched, not differentiated.
 
     Every training window is scored at a grid of theta values, for the nominal fit's road shape (B, C, E) and for
     each preset's (the nominal fit's shape has absorbed part of the change, so it can be far from the true one); the
     best split into a before and an after theta (exact over the grid, by cumulative sums) locates the change between
-    two training windows; the switching time is then refined at single-sample resolution over that stretch.
+    two training windows for each shape; the switching time is then refined at single-sample resolution over that
+    stretch for the ``k`` shapes whose best split costs least.
     """
     train = np.flatnonzero(~d.test)
     names = _param_names([])
@@ -600,16 +601,25 @@ def _mu_change_start(road: np.ndarray, d: Data) -> np.ndarray:
     cum = np.cumsum(c, axis=2)  # (S, F, Wtrain)
     before = cum[:, :, :-1].min(axis=1)  # (S, splits): best theta before each split
     after = (cum[:, :, -1:] - cum[:, :, :-1]).min(axis=1)
-    shape, split0 = np.unravel_index(int(np.argmin(before + after)), before.shape)
-    split = int(split0) + 1  # first training window after the change
-    i = int(np.argmin(cum[shape, :, split - 1]))
-    j = int(np.argmin(cum[shape, :, -1] - cum[shape, :, split - 1]))
+    total = before + after
+    best_split = np.argmin(total, axis=1)
+    ranked = np.argsort(total[np.arange(len(shapes)), best_split])
+    return [_refine_change_time(shapes[s], thetas, cum[s], int(best_split[s]) + 1, d) for s in ranked[:k]]
+
+
+def _refine_change_time(shape: np.ndarray, thetas: np.ndarray, cum: np.ndarray, split: int, d: Data) -> np.ndarray:
+    """The mu_change start for one road shape: its best thetas before and after training window ``split`` (cum:
+    (F, Wtrain) cumulative window costs over the theta grid), and the switching time searched sample by sample
+    between the two windows around the split."""
+    train = np.flatnonzero(~d.test)
+    i = int(np.argmin(cum[:, split - 1]))
+    j = int(np.argmin(cum[:, -1] - cum[:, split - 1]))
     mnames = _param_names(["mu_change"])
     lo, hi = _bounds(mnames, d)
     t_lo = d.t0 + d.dt * (d.starts[train[split - 1]] + d.horizon // 2)
     t_hi = d.t0 + d.dt * (d.starts[train[split]] + d.horizon // 2)
     fine_t = np.clip(np.arange(t_lo, t_hi + 1e-9, d.dt), lo[4], hi[4])
-    base = shapes[shape].copy()
+    base = shape.copy()
     base[3] = thetas[i]
     fine = np.array([np.concatenate([base, [tc, thetas[j]]]) for tc in fine_t])
     r = window_residuals(["mu_change"], mnames, fine, d, train)
@@ -638,6 +648,23 @@ def _effect_start_matrix(effects: Sequence[str], road: np.ndarray, d: Data, seed
     return np.array(rows)
 
 
+def _fit_mu_change(start: np.ndarray, d: Data, cfg: DiagnoseConfig) -> np.ndarray:
+    """Least squares of the mu_change model from ``start`` with the switching time held, then one alternation:
+    re-search the switching time with the fitted road, and refit the rest if it moved."""
+    effects, names = ["mu_change"], _param_names(["mu_change"])
+    x = _fit(effects, names, start[None], d, cfg, fixed={"t_change": float(start[4])})
+    lo, hi = _bounds(names, d)
+    fine_t = np.clip(x[4] + d.dt * np.arange(-d.horizon * 3 // 2, d.horizon * 3 // 2 + 1), lo[4], hi[4])
+    fine = np.repeat(x[None], len(fine_t), axis=0)
+    fine[:, 4] = fine_t
+    r = window_residuals(effects, names, fine, d, np.flatnonzero(~d.test))
+    cost = np.sum(r.reshape(len(fine), -1) ** 2, axis=1)
+    best = fine[int(np.argmin(np.where(np.isfinite(cost), cost, np.inf)))]
+    if best[4] != x[4]:
+        x = _fit(effects, names, best[None], d, cfg, fixed={"t_change": float(best[4])})
+    return x
+
+
 def fit_candidate(effects: Sequence[str], road: np.ndarray, d: Data, cfg: DiagnoseConfig,
                   seeds: dict | None = None) -> CandidateFit:
     """Fit road + the effects' parameters on the training windows; score on all windows."""
@@ -645,18 +672,11 @@ def fit_candidate(effects: Sequence[str], road: np.ndarray, d: Data, cfg: Diagno
     effects = list(effects)
     names = _param_names(effects)
     if effects == ["mu_change"]:
-        best = _mu_change_start(road, d)
-        x = _fit(effects, names, best[None], d, cfg, fixed={"t_change": float(best[4])})
-        # one alternation: re-search the switching time with the fitted road, then refit the rest
-        lo, hi = _bounds(names, d)
-        fine_t = np.clip(x[4] + d.dt * np.arange(-d.horizon * 3 // 2, d.horizon * 3 // 2 + 1), lo[4], hi[4])
-        fine = np.repeat(x[None], len(fine_t), axis=0)
-        fine[:, 4] = fine_t
-        r = window_residuals(effects, names, fine, d, np.flatnonzero(~d.test))
-        cost = np.sum(r.reshape(len(fine), -1) ** 2, axis=1)
-        best = fine[int(np.argmin(np.where(np.isfinite(cost), cost, np.inf)))]
-        if best[4] != x[4]:
-            x = _fit(effects, names, best[None], d, cfg, fixed={"t_change": float(best[4])})
+        train = np.flatnonzero(~d.test)
+        xs = [_fit_mu_change(start, d, cfg) for start in _mu_change_starts(road, d, int(cfg.fit_starts))]
+        r = window_residuals(effects, names, np.array(xs), d, train)
+        cost = np.sum(_fit_loss(r.reshape(len(xs), -1), cfg.fit_loss), axis=1)
+        x = xs[int(np.argmin(np.where(np.isfinite(cost), cost, np.inf)))]
     else:
         x = _fit(effects, names, _effect_start_matrix(effects, road, d, seeds), d, cfg, runs=int(cfg.fit_starts))
     return _score("+".join(effects), effects, names, x, d, time.perf_counter() - t)
