@@ -1,4 +1,5 @@
-"""Benchmark targets of ``fricenv bench`` beyond the single env: reference env, vector env, estimators, PPO slice.
+"""Benchmark targets of ``fricenv bench`` beyond the single env: reference env, vector env, estimators, PPO slice,
+gap diagnosis.
 
 Each target is a function ``(args) -> dict`` of figures, merged into the ``--json`` output by
 :mod:`fricenv.commands.bench`; ``args`` carries ``repeats``, ``steps`` and ``seed``. Every figure is the median
@@ -21,6 +22,7 @@ __all__ = [
     "REFERENCE_ENV",
     "VECTOR_SIZES",
     "bench_estimators",
+    "bench_gap",
     "bench_pendulum",
     "bench_ppo",
     "bench_vector",
@@ -41,6 +43,11 @@ PPO_EPOCHS = 4
 PPO_ROLLOUTS = 2
 ESTIMATOR_MODULE = "estimators.bench"
 COARSE_PHYSICS_DT = 0.005  # [s] 2 substeps per 10 ms control step (an option, not the default 2 ms)
+# The gap benchmark's log: one 5 s wet-road ABS stop with a brake lag (the issue's example), diagnosed on 2 cores.
+GAP_EFFECT = ("brake_lag", {"tau": 0.04})
+GAP_ROAD = "wet"
+GAP_JOBS = 2
+SPEED_CALLS = 20  # speed reconstructions per repeat (one parameter set, as in a least-squares residual call)
 
 
 def _median_and_all(values: list[float]) -> tuple[float, list[float]]:
@@ -238,10 +245,74 @@ def ratios(figures: dict[str, Any]) -> dict[str, Any]:
     return {"ratio_to_pendulum": out}
 
 
+def _gap_log(seed: int, all_channels: bool):
+    from fricenv.effects.quarter_car import make_effect
+    from fricenv.gap.simulate import simulate_log
+    from fricenv.plants.tire import get_road
+
+    log, _ = simulate_log([make_effect(GAP_EFFECT[0], **GAP_EFFECT[1])], get_road(GAP_ROAD), "abs", seed=seed,
+                          write_v=all_channels, write_ax=all_channels)
+    return log
+
+
+def _speed_reconstruction_ms(log) -> tuple[float, float]:
+    """ms per call of the whole-trajectory speed reconstruction and of its sample-by-sample reference."""
+    from fricenv.effects.quarter_car import ModelBatch
+    from fricenv.gap.speed import reconstruct_speed, reconstruct_speed_sequential
+    from fricenv.plants import quarter_car as qc
+    from fricenv.plants.tire import get_road
+
+    args = (ModelBatch.nominal(get_road(GAP_ROAD), 1), log.omega, float(log.t[0]), float(log.t[1] - log.t[0]), 20,
+            qc.PAPER_PARAMS)
+    out = []
+    for fn in (reconstruct_speed, reconstruct_speed_sequential):
+        t = time.perf_counter()
+        for _ in range(SPEED_CALLS):
+            fn(*args)
+        out.append((time.perf_counter() - t) / SPEED_CALLS * 1e3)
+    return out[0], out[1]
+
+
+def bench_gap(args: argparse.Namespace) -> dict[str, Any]:
+    """Wall seconds to diagnose one 5 s log on 2 cores (all channels, and t, T_b, omega only), and ms per speed
+    reconstruction (the no-``v`` logs' inner loop) against its sample-by-sample reference."""
+    import warnings
+
+    from fricenv.gap.diagnose import DiagnoseConfig, diagnose
+
+    seconds: dict[str, list[float]] = {"all_channels": [], "required_only": []}
+    newton, sequential = [], []
+    for k in range(args.repeats):
+        for key, times in seconds.items():
+            log = _gap_log(args.seed + k, key == "all_channels")
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", RuntimeWarning)
+                t = time.perf_counter()
+                diagnose(log, cfg=DiagnoseConfig(jobs=GAP_JOBS))
+                times.append(time.perf_counter() - t)
+        a, b = _speed_reconstruction_ms(_gap_log(args.seed + k, False))
+        newton.append(a)
+        sequential.append(b)
+    out = {"gap_diagnose_seconds": {key: statistics.median(v) for key, v in seconds.items()},
+           "gap_diagnose_seconds_all": seconds,
+           "speed_reconstruction_ms": {"newton": statistics.median(newton),
+                                       "sequential": statistics.median(sequential)}}
+    out["speed_reconstruction_ms"]["ratio"] = out["speed_reconstruction_ms"]["sequential"] / \
+        out["speed_reconstruction_ms"]["newton"]
+    s, r = out["gap_diagnose_seconds"], out["speed_reconstruction_ms"]
+    print(f"gap: one 5 s log diagnosed in {s['all_channels']:.1f} s with all channels, {s['required_only']:.1f} s "
+          f"with t, T_b, omega only ({GAP_JOBS} processes, median of {args.repeats}); speed reconstruction "
+          f"{r['newton']:.2f} ms per call, sample-by-sample {r['sequential']:.2f} ms ({r['ratio']:.1f}x)")
+    return out
+
+
 # Targets added to `fricenv bench` (name -> function(args) -> figures).
 TARGETS: dict[str, Callable[[argparse.Namespace], dict]] = {
     "pendulum": bench_pendulum,
     "vector": bench_vector,
     "estimators": bench_estimators,
     "ppo": bench_ppo,
+    "gap": bench_gap,
 }
+# Targets left out of ``fricenv bench all``: minutes per repeat.
+SLOW_TARGETS = ("gap",)

@@ -35,3 +35,20 @@ def test_bench_env_writes_medians_and_ratio(tmp_path):
     data = json.loads(out_json.read_text())
     assert data["single_steps_per_s"] > 0 and data["pendulum_steps_per_s"] > 0
     assert data["single_vs_pendulum"] == pytest.approx(data["single_steps_per_s"] / data["pendulum_steps_per_s"])
+
+
+def test_bench_all_leaves_out_the_slow_gap_target():
+    from fricenv.bench_targets import SLOW_TARGETS, TARGETS
+
+    assert "gap" in TARGETS and "gap" in SLOW_TARGETS
+
+
+@pytest.mark.slow
+def test_bench_gap_writes_diagnosis_seconds_and_speed_reconstruction(tmp_path):
+    out_json = tmp_path / "bench.json"
+    assert main(["bench", "gap", "--repeats", "1", "--json", str(out_json)]) == 0
+    data = json.loads(out_json.read_text())
+    assert set(data["gap_diagnose_seconds"]) == {"all_channels", "required_only"}
+    assert all(s > 0 for s in data["gap_diagnose_seconds"].values())
+    ms = data["speed_reconstruction_ms"]
+    assert ms["newton"] > 0 and ms["ratio"] == pytest.approx(ms["sequential"] / ms["newton"])
