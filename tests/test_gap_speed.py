@@ -77,3 +77,12 @@ def test_true_model_reconstructs_the_true_speed(road, driver, seed):
     err = np.abs(v - truth["v"])
     assert err.max() < 0.3, err.max()
     assert np.median(err) < 0.15, np.median(err)
+
+
+def test_a_diverged_newton_stretch_is_not_taken_as_converged(monkeypatch):
+    # NaN compares false with any tolerance: a Newton update that breaks down must still end in the sequential result
+    monkeypatch.setattr(speed, "affine_scan", lambda A, b: np.full_like(b, np.nan))
+    log, _ = _log(WET, "abs", 7)
+    args = (_batch(ROWS), log.omega, float(log.t[0]), float(log.t[1] - log.t[0]), 20, qc.PAPER_PARAMS)
+    np.testing.assert_allclose(speed.reconstruct_speed(*args), speed.reconstruct_speed_sequential(*args),
+                               rtol=0, atol=1e-9)

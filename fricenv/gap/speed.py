@@ -158,8 +158,7 @@ def _newton(model: _SpeedModel, X: np.ndarray) -> tuple[np.ndarray, int]:
         Y = np.stack(model.step(X[:, :-1, 0], X[:, :-1, 1], ks), axis=-1)
         R = Y - X[:, 1:]
         R[..., q:] = 0.0
-        bad = np.abs(R[..., :q]).max(axis=(0, 2)) > NEWTON_TOL
-        if not bad.any():
+        if _first_unconverged(R[..., :q]) == n - 1:
             return X, n - 1
         J = np.empty((K, n - 1, q, q))
         for i in range(q):
@@ -167,9 +166,16 @@ def _newton(model: _SpeedModel, X: np.ndarray) -> tuple[np.ndarray, int]:
             Xh[..., i] += FD_STEP
             J[..., i] = (np.stack(model.step(Xh[..., 0], Xh[..., 1], ks), axis=-1)[..., :q] - Y[..., :q]) / FD_STEP
         X[:, 1:, :q] += affine_scan(J, R[..., :q])
+        if not np.isfinite(X).all():  # a diverged stretch: leave it to the sequential finish
+            break
     Y = np.stack(model.step(X[:, :-1, 0], X[:, :-1, 1], ks), axis=-1)
-    bad = np.abs(Y - X[:, 1:])[..., :q].max(axis=(0, 2)) > NEWTON_TOL
-    return X, int(np.argmax(bad)) if bad.any() else n - 1
+    return X, _first_unconverged((Y - X[:, 1:])[..., :q])
+
+
+def _first_unconverged(R: np.ndarray) -> int:
+    """First step whose residual (K, n - 1, q) is above the tolerance or not finite; ``n - 1`` if none is."""
+    bad = ~(np.abs(R) <= NEWTON_TOL).all(axis=(0, 2))
+    return int(np.argmax(bad)) if bad.any() else R.shape[1]
 
 
 def reconstruct_speed(batch: ModelBatch, omega: np.ndarray, t0: float, dt: float, free_end: int,
