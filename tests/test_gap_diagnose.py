@@ -431,3 +431,41 @@ def test_least_squares_starts_come_from_distinct_roads():
     assert [list(c) for c in chosen] == [nominal + [0.045], dry + [0.045]]
     assert len(_distinct_starts(starts, cost, 5)) == 2  # only two finite road shapes
     assert [list(c) for c in _distinct_starts(starts, cost, 1)] == [nominal + [0.045]]
+
+
+def _fit_with(effect, values, folds=None):
+    from fricenv.effects.quarter_car import EFFECT_PARAMS
+    from fricenv.gap.diagnose import CandidateFit
+
+    names = ("B", "C", "E", "theta") + tuple(EFFECT_PARAMS[effect])
+    road = list(WET.as_array())
+    x = np.array(road + [values[n] for n in names[4:]])
+    x_folds = tuple(np.array(road + [f[n] for n in names[4:]]) for f in folds) if folds else ()
+    return CandidateFit(effect=effect, names=names, x=x, train_mse=1.0, test_mse=1.0, window_mse=np.ones(4),
+                        x_folds=x_folds)
+
+
+@pytest.mark.parametrize("effect,values,edge", [
+    ("relaxation_length", {"sigma": 2.9995}, ["sigma"]),  # a 3 m relaxation length: pressed against the range
+    ("relaxation_length", {"sigma": 0.01}, []),  # the off side: no relaxation
+    ("relaxation_length", {"sigma": 0.98}, []),
+    ("brake_lag", {"tau": 1e-3}, []),
+    ("brake_lag", {"tau": 0.4}, ["tau"]),
+    ("brake_gain", {"gain": 0.3}, ["gain"]),  # gain switches off at 1: both bounds are far
+    ("brake_gain", {"gain": 1.25}, []),
+    ("drag", {"c0": 0.0, "c2": 10.0}, ["c2"]),
+    ("mu_change", {"t_change": 1.5, "theta_after": 0.0545}, []),  # a change to ice is well inside the range
+])
+def test_a_parameter_at_the_far_bound_of_its_range_is_flagged(effect, values, edge):
+    from fricenv.gap.diagnose import at_range_edge
+    from fricenv.plants.quarter_car import PAPER_PARAMS
+
+    assert at_range_edge(_fit_with(effect, values), PAPER_PARAMS) == edge
+
+
+def test_a_range_edge_in_one_fold_is_enough():
+    from fricenv.gap.diagnose import at_range_edge
+    from fricenv.plants.quarter_car import PAPER_PARAMS
+
+    fit = _fit_with("relaxation_length", {"sigma": 1.6}, folds=[{"sigma": 0.2}, {"sigma": 3.0}])
+    assert at_range_edge(fit, PAPER_PARAMS) == ["sigma"]

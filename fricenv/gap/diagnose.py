@@ -41,6 +41,8 @@ Method (every error measure is computed on data not used for fitting):
    trimmed windows, or a significant candidate) and no candidate closes it; ``none`` otherwise. The two best
    significant candidates are also fitted jointly; if only the joint model closes the gap, the larger single effect
    is the verdict and the other follows in ``candidates`` (the joint fit is reported under ``where["joint_fit"]``).
+   A candidate whose effect parameter is pressed against the far bound of its physical range (:func:`at_range_edge`)
+   still shows that the gap is real, but cannot be the verdict: it is being stretched to imitate something else.
 8. **Drift test.** The verdict's model is refitted on the early and on the late half of the log separately (each
    half cross-fitted within itself). A library effect has constant parameters, so if the split model beats the
    constant one significantly (paired z above ``drift_z``) and halves the robust gap it leaves (when that gap is
@@ -138,6 +140,8 @@ FIT_LOSS_SCALE = 3.0
 FIT_LOSSES = ("linear", "soft_l1", "cauchy")  # losses of the least-squares fits (scipy's names)
 # Share of the held-out windows (the worst) left out when judging how much of the gap a candidate closes.
 TRIM_SHARE = 0.05
+# A fitted effect parameter within this share of its range (EFFECT_BOUNDS) from a bound sits at the bound [-]
+RANGE_EDGE = 1e-3
 # A drift must leave at most this share of the constant model's robust gap (the split model halves it at least).
 DRIFT_SHARE = 0.5
 MU_CHANGE_FACTORS = np.geomspace(0.35, 2.0, 16)  # theta grid of the change-point search, times the nominal theta
@@ -791,6 +795,27 @@ def robust_gap(f: CandidateFit) -> float:
     return gap_of(float(np.mean(wm[:max(keep, 1)])))
 
 
+def at_range_edge(f: CandidateFit, p: qc.QuarterCarParams) -> list[str]:
+    """Effect parameters of ``f`` that sit at a bound of their physical range (EFFECT_BOUNDS) in any fold's fit.
+
+    The bound on the side where the effect switches off (a lag of 1 ms, no drag) does not count: there the effect
+    is simply absent. A parameter pressed against the far bound (a 3 m relaxation length) means the effect is being
+    stretched to imitate something it is not, so such a candidate cannot be the verdict.
+    """
+    off = ModelBatch.nominal(f.x[:len(ROAD_NAMES)], 1, p)
+    out = []
+    for i, name in enumerate(f.names):
+        lo, hi = EFFECT_BOUNDS.get(name, (-np.inf, np.inf))
+        if not (np.isfinite(lo) and np.isfinite(hi)):
+            continue
+        tol = RANGE_EDGE * (hi - lo)
+        off_value = float(getattr(off, name)[0])
+        edges = [b for b, off_side in ((lo, off_value <= lo + tol), (hi, off_value >= hi - tol)) if not off_side]
+        if any(abs(x[i] - b) <= tol for x in (f.x_folds or (f.x,)) for b in edges):
+            out.append(name)
+    return out
+
+
 def gap_is_real(nominal: CandidateFit, significant: Sequence[CandidateFit], cfg: DiagnoseConfig) -> bool:
     """Whether the nominal model misses by more than the noise.
 
@@ -1047,9 +1072,11 @@ def diagnose(log: QuarterCarLog, p: qc.QuarterCarParams = qc.PAPER_PARAMS,
         _test_against(nominal, f, d)
     fits.sort(key=lambda f: f.adjusted_mse)
     significant = [f for f in fits if _significant(f, nominal, cfg)]
+    edges = {f.effect: at_range_edge(f, p) for f in fits}
+    eligible = [f for f in significant if not edges[f.effect]]  # significant, and not stretched to a bound
     joint = None
-    if cfg.joint and len(significant) >= 2:
-        a, b = significant[0], significant[1]
+    if cfg.joint and len(eligible) >= 2:
+        a, b = eligible[0], eligible[1]
         seeds = {a.effect: a.effect_params(), b.effect: b.effect_params()}
         joint = _cross_fitted(_run_fits([([a.effect, b.effect], af[:4], f, cfg, seeds)
                                          for f, af in zip(folds, a.x_folds)], jobs), d)
@@ -1059,8 +1086,8 @@ def diagnose(log: QuarterCarLog, p: qc.QuarterCarParams = qc.PAPER_PARAMS,
         return robust_gap(f) <= cfg.ratio_explained * robust_gap(nominal) or robust_gap(f) <= cfg.gap_within_noise
 
     joint_wins = joint is not None and _significant(joint, nominal, cfg) and explains(joint) and \
-        bool(significant) and joint.adjusted_mse < significant[0].adjusted_mse
-    verdict, chosen, fits = decide_verdict(significant, fits, explains, joint_wins,
+        not at_range_edge(joint, p) and joint.adjusted_mse < eligible[0].adjusted_mse
+    verdict, chosen, fits = decide_verdict(eligible, fits, explains, joint_wins,
                                            gap_is_real(nominal, significant, cfg))
     drift = None
     # each half needs training windows in every fold: at least ``folds`` windows per half
@@ -1115,7 +1142,8 @@ def diagnose(log: QuarterCarLog, p: qc.QuarterCarParams = qc.PAPER_PARAMS,
                  "speed_source": "logged v (smoothed)" if d.v is not None else "reconstructed from omega",
                  "certainty": certainty},
         "tests": {f.effect: {"t_stat": f.t_stat, "z": f.z, "z_paired": f.z_paired, "robust_gap": robust_gap(f),
-                             "significant": any(f is s for s in significant)} for f in fits},
+                             "significant": any(f is s for s in significant),
+                             "at_range_edge": edges.get(f.effect, [])} for f in fits},
         "robust_gap_before": robust_gap(nominal),
     }
     if drift is not None:
