@@ -469,3 +469,16 @@ def test_a_range_edge_in_one_fold_is_enough():
 
     fit = _fit_with("relaxation_length", {"sigma": 1.6}, folds=[{"sigma": 0.2}, {"sigma": 3.0}])
     assert at_range_edge(fit, PAPER_PARAMS) == ["sigma"]
+
+
+def test_mu_change_starts_come_from_distinct_road_shapes_and_find_the_change(diagnosed):
+    from fricenv.gap.diagnose import _fold_data, _mu_change_starts
+
+    log, dg = diagnosed("mu_change")
+    fold = _fold_data(dg.data, 0)
+    starts = _mu_change_starts(dg.nominal.x[:4], fold, 2)
+    assert len(starts) == 2
+    assert not np.allclose(starts[0][:3], starts[1][:3])  # two road shapes, not one shape twice
+    t_true = CASES["mu_change"][0]["t_change"]
+    assert abs(starts[0][4] - t_true) < 0.1  # the best split brackets the change (10 ms samples, 0.1 s windows)
+    assert starts[0][5] < starts[0][3]  # the friction drops
