@@ -86,3 +86,16 @@ def test_a_diverged_newton_stretch_is_not_taken_as_converged(monkeypatch):
     args = (_batch(ROWS), log.omega, float(log.t[0]), float(log.t[1] - log.t[0]), 20, qc.PAPER_PARAMS)
     np.testing.assert_allclose(speed.reconstruct_speed(*args), speed.reconstruct_speed_sequential(*args),
                                rtol=0, atol=1e-9)
+
+
+def test_filtered_transient_slip_matches_the_sample_by_sample_filter():
+    rng = np.random.default_rng(8)
+    lam = np.clip(0.1 + 0.05 * rng.normal(size=(3, 300)), -0.2, 1.0)
+    v = np.linspace(30.0, 2.0, 300)[None, :] * np.array([[1.0], [0.8], [1.2]])
+    dt_over_sigma = 0.01 / np.array([[0.1], [0.4], [1.5]])
+    expected = np.empty_like(lam)
+    cur = lam[:, 0].copy()
+    for k in range(lam.shape[1]):
+        expected[:, k] = cur
+        cur = lam[:, k] + (cur - lam[:, k]) * np.exp(-v[:, k] * dt_over_sigma[:, 0])
+    np.testing.assert_allclose(speed.filtered_transient_slip(lam, v, dt_over_sigma), expected, rtol=0, atol=1e-12)

@@ -71,7 +71,7 @@ from fricenv.effects.quarter_car import (
     EffectSimulator,
     ModelBatch,
 )
-from fricenv.gap.speed import reconstruct_speed
+from fricenv.gap.speed import filtered_transient_slip, reconstruct_speed
 from fricenv.logs import QuarterCarLog, read_log
 from fricenv.plants import quarter_car as qc
 from fricenv.plants.tire import ROADS, MagicFormula, longitudinal_slip
@@ -333,7 +333,6 @@ def _speed_states(batch: ModelBatch, d: Data) -> np.ndarray:
 
 def _effect_states(batch: ModelBatch, d: Data, vhat: np.ndarray):
     """Lag-filter output and transient slip (K, n) estimated from the command log and the measured slip."""
-    K = len(batch)
     Ta = None
     if np.any(batch.tau > 0):
         sim = EffectSimulator(batch, d.dt, d.n, d.p, d.substeps, d.t0, commands=d.Tb)
@@ -342,12 +341,8 @@ def _effect_states(batch: ModelBatch, d: Data, vhat: np.ndarray):
     lt = None
     if RELAX_STATE_FROM_FILTER and np.any(batch.sigma > 0):
         lam = longitudinal_slip(vhat, d.omega[None, :], batch.r_eff[:, None])
-        lt = np.empty((K, d.n))
-        cur = lam[:, 0].copy()
         sig = np.where(batch.sigma > 0, batch.sigma, 1.0)
-        for k in range(d.n):
-            lt[:, k] = cur
-            cur = lam[:, k] + (cur - lam[:, k]) * np.exp(-np.maximum(vhat[:, k], 0) * d.dt / sig)
+        lt = filtered_transient_slip(lam, vhat, d.dt / sig[:, None])
     return Ta, lt
 
 

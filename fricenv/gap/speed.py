@@ -23,11 +23,18 @@ from fricenv.effects.quarter_car import ModelBatch
 from fricenv.plants import quarter_car as qc
 from fricenv.plants.tire import magic_formula_and_dslip, slip_and_partials
 
-__all__ = ["affine_scan", "reconstruct_speed", "reconstruct_speed_sequential"]
+__all__ = ["affine_scan", "filtered_transient_slip", "reconstruct_speed", "reconstruct_speed_sequential",
+           "slip_lag_decay"]
 
 NEWTON_ITERS = 20  # Newton iterations on the trajectory before the sequential finish
 NEWTON_TOL = 1e-11  # largest accepted step residual [m/s] (transient slip: the same number, unitless)
 FD_STEP = 1e-7  # finite-difference step of the step Jacobians [m/s], [-]
+
+
+def slip_lag_decay(v, dt_over_sigma):
+    """Factor by which the transient slip's lag behind the slip decays over one sample, ``exp(-v dt / sigma)``
+    (first-order relaxation, ``(sigma / v) lambda_t' = lambda - lambda_t``, with the speed held over the sample)."""
+    return np.exp(-np.maximum(v, 0.0) * dt_over_sigma)
 
 
 @dataclass(frozen=True)
@@ -70,7 +77,7 @@ class _SpeedModel:
         p, dt = self.p, self.dt
         lam, dlam_dv, _ = slip_and_partials(v, self.omega[k], self.r)
         if self.has_relax:
-            lt = np.where(self.relax, lam + (lt - lam) * np.exp(-np.maximum(v, 0.0) * self.dt_over_sigma), lam)
+            lt = np.where(self.relax, lam + (lt - lam) * slip_lag_decay(v, self.dt_over_sigma), lam)
             mu, dmu = magic_formula_and_dslip(lt, *self.shape, self.theta[:, k])
             dmu_dv = np.where(self.relax, 0.0, dmu * dlam_dv)  # the filtered slip lags: no implicit feedback
         else:
@@ -134,6 +141,19 @@ def affine_scan(A: np.ndarray, b: np.ndarray) -> np.ndarray:
                 a[i][j][:, s:] = a_new[i][j]
         s *= 2
     return np.stack(c, axis=-1)
+
+
+def filtered_transient_slip(lam: np.ndarray, v: np.ndarray, dt_over_sigma: np.ndarray) -> np.ndarray:
+    """Transient slip (K, n) filtered from the slip ``lam`` (K, n) at the speeds ``v`` (K, n), starting at the first
+    slip: ``lt_{k+1} = lam_k + (lt_k - lam_k) a_k`` with ``a_k`` = :func:`slip_lag_decay` (``dt_over_sigma``: (K, 1)).
+
+    The recursion is affine in ``lt``, so it is composed for all samples at once by :func:`affine_scan`.
+    """
+    a = slip_lag_decay(v[:, :-1], dt_over_sigma)
+    b = (1.0 - a) * lam[:, :-1]
+    b[:, 0] += a[:, 0] * lam[:, 0]  # the start lt_0 = lam_0 enters through the first map (the scan starts at 0)
+    rest = affine_scan(a[..., None, None], b[..., None])[..., 0]
+    return np.concatenate([lam[:, :1], rest], axis=1)
 
 
 def _envelope_guess(model: _SpeedModel) -> np.ndarray:
