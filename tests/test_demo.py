@@ -37,10 +37,18 @@ def test_bench_env_writes_medians_and_ratio(tmp_path):
     assert data["single_vs_pendulum"] == pytest.approx(data["single_steps_per_s"] / data["pendulum_steps_per_s"])
 
 
-def test_bench_all_leaves_out_the_slow_gap_target():
-    from fricenv.bench_targets import SLOW_TARGETS, TARGETS
+def test_bench_all_leaves_out_the_slow_gap_target(monkeypatch):
+    from fricenv.commands import bench
 
-    assert "gap" in TARGETS and "gap" in SLOW_TARGETS
+    called = []
+    stubs = {name: (lambda args, name=name: called.append(name) or {}) for name in bench.TARGETS}
+    monkeypatch.setattr(bench, "TARGETS", stubs)
+    assert main(["bench", "--repeats", "1"]) == 0
+    assert "gap" not in called
+    assert {"env", "vector", "estimators", "ppo"} <= set(called)
+    called.clear()
+    assert main(["bench", "gap", "--repeats", "1"]) == 0
+    assert called == ["gap"]
 
 
 @pytest.mark.slow
