@@ -26,6 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from fricenv.plants import sui_johansen as sj
 from fricenv.plants.tire import (
     MagicFormula,
     longitudinal_slip,
@@ -61,11 +62,11 @@ INVARIANT_TOL = 1e-9  # relative tolerance of the invariant check (rounding at f
 class QuarterCarParams:
     """Quarter-car parameters, Table I of Sui & Johansen."""
 
-    m: float = 325.0  # quarter vehicle mass [kg]
-    J: float = 1.0  # wheel moment of inertia [kg m^2]
-    r: float = 0.345  # wheel radius [m]
-    Fz: float = 3188.0  # vertical tire load [N]
-    g: float = 9.81  # gravity [m/s^2]
+    m: float = sj.MASS  # quarter vehicle mass [kg]
+    J: float = sj.INERTIA  # wheel moment of inertia [kg m^2]
+    r: float = sj.RADIUS  # wheel radius [m]
+    Fz: float = sj.LOAD  # vertical tire load [N]
+    g: float = sj.GRAVITY  # gravity [m/s^2]
 
     def __post_init__(self):
         for name in ("m", "J", "r", "Fz", "g"):
