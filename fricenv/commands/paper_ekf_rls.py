@@ -142,6 +142,7 @@ def _plot(setup: str, runs: dict, path) -> None:
 def run(args) -> int:
     from pathlib import Path
 
+    from fricenv.plants.li_du_li import ROAD_MU
     from fricenv.utils import progress, write_json
 
     if args.seeds < 1:
@@ -184,5 +185,5 @@ def run(args) -> int:
             _plot(setup, runs, out / f"{setup}.png")
         print(f"figures: {out}/<setup>.png")
     if args.json:
-        write_json(args.json, {"seed": args.seed, "true_mu": 0.9, "cases": rows})
+        write_json(args.json, {"seed": args.seed, "true_mu": ROAD_MU, "cases": rows})
     return 0

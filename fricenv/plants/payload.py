@@ -30,8 +30,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from fricenv.logs import PayloadLog
-
 __all__ = [
     "NO_NOISE",
     "PAPER_NOISE",
@@ -53,7 +51,6 @@ __all__ = [
     "simulate",
     "step",
     "table1_schedule",
-    "to_log",
     "vision",
 ]
 
@@ -395,12 +392,6 @@ def simulate(duration: float, dt: float = 1e-3, *, wrench: Callable = paper_wren
     w_hat = sensor_reading(w, calibration.inverse_at(t), noise, rng)
     pose = vision(states, noise, rng)
     return Trajectory(t, states, w, w_hat, pose, calibration.at(t))
-
-
-def to_log(traj: Trajectory) -> PayloadLog:
-    """The measurements of a trajectory as a :class:`fricenv.logs.PayloadLog` (raw readings and vision)."""
-    return PayloadLog(t=traj.t, M=traj.w_hat[:, 0], f_x=traj.w_hat[:, 1], f_y=traj.w_hat[:, 2],
-                      theta=traj.pose[:, 0], X=traj.pose[:, 1], Y=traj.pose[:, 2])
 
 
 # Random excitation: eq. (13)'s terms with frequencies scaled in this range [-] and uniform random phases.
