@@ -68,8 +68,9 @@ def assumed_shape(estimator_name: str) -> dict[str, float]:
     if entry is None:
         return dict(NOMINAL_SHAPE)
     if entry.assumed_shape is None:
+        shaped = ", ".join(n for n, e in ESTIMATORS.items() if e.assumed_shape is not None)
         raise ValueError(f"estimator {estimator_name!r} assumes no Magic Formula shape: it cannot give a slip "
-                         f"reference; use one with a shape ({', '.join(n for n, e in ESTIMATORS.items() if e.assumed_shape)})")
+                         f"reference; use one with a shape ({shaped})")
     return dict(entry.assumed_shape)
 
 
