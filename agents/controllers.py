@@ -27,6 +27,7 @@ import numpy as np
 
 from fricenv.envs.braking_core import BrakingSim, ObsField
 from fricenv.plants.quarter_car import PAPER_PARAMS, QuarterCarParams
+from fricenv.plants.sui_johansen import OMEGA_NOISE_STD
 from fricenv.plants.tire import MagicFormula
 
 __all__ = [
@@ -220,7 +221,7 @@ class RuleABSParams:
     rate_reapply_fast: float = 9400.0  # reapply rate after a +A re-acceleration [N m/s]
     dump_fraction: float = 0.08  # step drop of the torque on entering dump, fraction of the torque [-]
     omega_margin: float = 2.0  # wheel-speed noise margin (in noise standard deviations) for v_ref [-]
-    omega_noise_std: float = 0.2 ** 0.5  # wheel-speed noise the ECU assumes [rad/s]
+    omega_noise_std: float = OMEGA_NOISE_STD  # wheel-speed noise the ECU assumes [rad/s], Sui & Johansen
 
 
 class RuleBasedABS(Controller):

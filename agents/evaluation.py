@@ -11,17 +11,9 @@ lower bound, and ``stopped`` says how many did stop), the number of episodes in 
 mean ``|slip - lambda*|`` over the stop (``lambda*`` the peak slip of the road under the car, capped at 0.4 as by
 every slip controller, :func:`agents.controllers.slip_reference`).
 
-Policies are named by a spec string (:func:`parse_policy`):
-
-=========================  ============================================================================
-spec                       policy
-=========================  ============================================================================
-``rule-abs``               :class:`agents.controllers.RuleBasedABS` (measured signals)
-``oracle-slip``            :class:`agents.controllers.OracleSlipController` (true state and road)
-``locked``                 full braking
-``pipeline:EST``           estimator EST + slip controller (:class:`agents.pipeline.EstimatorSlipPipeline`)
-``DIR``                    a trained run directory (``train.json``, ``model.zip``, ``vecnormalize.pkl``)
-=========================  ============================================================================
+Policies are named by a spec string, parsed by :func:`agents.policy_spec.parse_policy_spec` (a controller of
+:data:`agents.controllers.CONTROLLERS`, ``pipeline:EST`` for estimator EST + slip controller, or a trained run
+directory; see that module for the table).
 
 Jobs (one per policy, scenario and seed) run in ``workers`` processes.
 """
@@ -39,13 +31,14 @@ from typing import Any
 
 import numpy as np
 
+from agents.policy_spec import PIPELINE_PREFIX, PolicySpec, PolicySpecError, parse_policy_spec
 from fricenv.utils import atomic_write, write_json
 
 __all__ = [
-    "CLASSICAL",
     "ROW_KEYS",
     "SCENARIOS",
     "PolicySpec",
+    "PolicySpecError",
     "Scenario",
     "evaluate",
     "format_table",
@@ -55,8 +48,6 @@ __all__ = [
     "write_outputs",
 ]
 
-CLASSICAL = ("rule-abs", "oracle-slip", "locked")
-PIPELINE_PREFIX = "pipeline:"
 SPEEDS = (20.0, 30.0)  # initial speeds of the scenario set [m/s]
 ROAD_NAMES = ("dry", "wet", "snow", "ice")
 TRANSITIONS = ("dry->ice", "ice->dry")
@@ -82,39 +73,10 @@ SCENARIOS: tuple[Scenario, ...] = tuple(Scenario(r, v) for v in SPEEDS for r in 
     Scenario(r, v) for v in SPEEDS for r in TRANSITIONS)
 
 
-@dataclass(frozen=True)
-class PolicySpec:
-    """A policy to evaluate: its label, kind and estimator."""
-
-    label: str  # row label ("rule-abs", "ppo[ekf]", "est+slip-pi[ekf-full]", ...)
-    kind: str  # "classical" | "pipeline" | "trained"
-    estimator: str  # estimator whose outputs the policy sees ("none" for classical)
-    source: str  # the spec string
-
-
 def parse_policy(spec: str) -> PolicySpec:
-    """Parse a policy spec (see the module docstring); ValueError listing the valid forms."""
-    from fricenv.envs.estimator_observation import ESTIMATOR_NAMES
-
-    if spec in CLASSICAL:
-        return PolicySpec(spec, "classical", "none", spec)
-    if spec.startswith(PIPELINE_PREFIX):
-        est = spec[len(PIPELINE_PREFIX):]
-        valid = [n for n in ESTIMATOR_NAMES if n != "none"]
-        if est not in valid:
-            raise ValueError(f"unknown pipeline estimator {est!r}; valid: {', '.join(valid)}")
-        return PolicySpec(f"est+slip-pi[{est}]", "pipeline", est, spec)
-    path = Path(spec)
-    if (path / "train.json").is_file():
-        import json
-
-        meta = json.loads((path / "train.json").read_text())
-        if meta.get("env", "braking") != "braking":
-            raise ValueError(f"{spec} is a {meta.get('env')} policy; evaluate takes braking policies")
-        return PolicySpec(f"{meta.get('algo', 'ppo')}[{meta.get('estimator', 'none')}]", "trained",
-                          meta.get("estimator", "none"), spec)
-    raise ValueError(f"unknown policy {spec!r}; valid: {', '.join(CLASSICAL)}, pipeline:<estimator>, or a "
-                     f"training run directory (with train.json)")
+    """Parse a policy spec (:func:`agents.policy_spec.parse_policy_spec`); PolicySpecError (a ValueError) listing
+    the valid forms."""
+    return parse_policy_spec(spec)
 
 
 _POLICY_CACHE: dict[str, Any] = {}
@@ -123,7 +85,7 @@ _POLICY_CACHE: dict[str, Any] = {}
 def _controller(spec: PolicySpec, env):
     from agents.controllers import make_controller
 
-    if spec.kind == "classical":
+    if spec.kind == "controller":
         return make_controller(spec.source, env)
     if spec.kind == "pipeline":
         from agents.pipeline import EstimatorSlipPipeline
@@ -146,9 +108,8 @@ def run_episode(spec: PolicySpec, scenario: Scenario, seed: int) -> dict[str, An
     from agents.controllers import slip_reference
     from fricenv.envs.factory import make_braking
 
-    observation = "oracle" if spec.source == "oracle-slip" else "default"
     env = make_braking(spec.estimator, road=scenario.road, v0=scenario.v0, change_distance=CHANGE_DISTANCE,
-                       observation=observation)
+                       observation=spec.observation)
     ctl = _controller(spec, env)
     obs, info = env.reset(seed=seed)
     ctl.reset()

@@ -25,7 +25,9 @@ import numpy as np
 
 from agents.controllers import ControlSpec, SlipController, SlipControllerParams, slip_reference
 from estimators.base import Health
+from estimators.registry import ESTIMATORS
 from fricenv.envs.estimator_observation import EstimatorObservation
+from fricenv.plants.sui_johansen import NOMINAL_SHAPE
 from fricenv.plants.tire import MagicFormula
 
 __all__ = [
@@ -40,8 +42,6 @@ __all__ = [
 PIPELINE_NAME = "est+slip-pi"
 FIELD_V_HAT = "v_hat"
 SHAPE_NAMES = ("B", "C", "E", "theta")
-# Fixed shape of a theta-only estimator (Sui & Johansen eq. (18)).
-NOMINAL_SHAPE = {"B": 12.0, "C": 1.3, "E": 0.0, "theta": 0.6}
 USABLE = (Health.OK, Health.NOT_EXCITED)  # estimates a reference may come from (NOT_EXCITED: held near the prior)
 SHAPE_DECIMALS = 3  # estimated (B, C, E) are rounded to this many decimals to cache the peak search
 
@@ -58,13 +58,20 @@ def find_estimator_wrapper(env) -> EstimatorObservation:
 
 
 def assumed_shape(estimator_name: str) -> dict[str, float]:
-    """The curve shape an estimator assumes for what it does not estimate: the EKF/RLS maps its slip slope on the
-    dry-asphalt family (:class:`estimators.ekf_rls.MagicFormulaFamilyMap`), the EKF and MHE hold eq. (18)."""
-    if estimator_name == "ekf-rls":
-        from fricenv.plants.tire import DRY
+    """The curve shape an estimator assumes for what it does not estimate (its registry entry's
+    ``assumed_shape``: the EKF/RLS maps its slip slope on the dry-asphalt family, the EKF and MHE hold eq. (18));
+    eq. (18) for the oracle, whose estimate carries the whole true shape.
 
-        return {"B": DRY.B, "C": DRY.C, "E": DRY.E, "theta": DRY.theta}
-    return dict(NOMINAL_SHAPE)
+    :raises ValueError: an estimator without a Magic Formula shape (the EKF/RLS with the paper's linear map).
+    """
+    entry = ESTIMATORS.get(estimator_name)
+    if entry is None:
+        return dict(NOMINAL_SHAPE)
+    if entry.assumed_shape is None:
+        shaped = ", ".join(n for n, e in ESTIMATORS.items() if e.assumed_shape is not None)
+        raise ValueError(f"estimator {estimator_name!r} assumes no Magic Formula shape: it cannot give a slip "
+                         f"reference; use one with a shape ({shaped})")
+    return dict(entry.assumed_shape)
 
 
 class EstimatedPeakSource:

@@ -234,6 +234,47 @@ def _tensorboard_dir(out: Path) -> str | None:
     return str(out / "tb")
 
 
+def _checked_config(env: str, estimator: str, algo: str, steps: int, vec: str,
+                    config: PPOConfig | SACConfig | None) -> PPOConfig | SACConfig:
+    """Validate the arguments of :func:`train`; the hyperparameters to use."""
+    _check_choice(env, ENVS, "env")
+    _check_choice(algo, ALGOS, "algo")
+    _check_choice(vec, ("dummy", "subproc"), "vec")
+    if env == "braking":
+        from fricenv.envs.estimator_observation import check_estimator_name
+
+        check_estimator_name(estimator)
+    else:
+        from fricenv.envs.factory import PAYLOAD_ESTIMATOR_NAMES
+
+        _check_choice(estimator, PAYLOAD_ESTIMATOR_NAMES, "payload estimator")
+    if not isinstance(steps, int) or steps < 1:
+        raise ValueError(f"steps must be a positive int, got {steps!r}")
+    cfg = config if config is not None else DEFAULT_CONFIGS[(env, algo)]
+    expected = PPOConfig if algo == "ppo" else SACConfig
+    if not isinstance(cfg, expected):
+        raise TypeError(f"config for {algo} must be a {expected.__name__}, got {type(cfg).__name__}")
+    return cfg
+
+
+def _make_model(algo: str, cfg: PPOConfig | SACConfig, venv, tb: str | None, seed: int, verbose: int):
+    """The SB3 model (PPO or SAC, CPU) with the hyperparameters ``cfg`` on ``venv``."""
+    from stable_baselines3 import PPO, SAC
+
+    policy_kwargs: dict[str, Any] = {"net_arch": list(cfg.net_arch)}
+    if algo == "ppo":
+        policy_kwargs["log_std_init"] = cfg.log_std_init
+        return PPO("MlpPolicy", venv, n_steps=cfg.n_steps, batch_size=cfg.batch_size, n_epochs=cfg.n_epochs,
+                   learning_rate=cfg.learning_rate, gamma=cfg.gamma, gae_lambda=cfg.gae_lambda,
+                   clip_range=cfg.clip_range, ent_coef=cfg.ent_coef, vf_coef=cfg.vf_coef,
+                   max_grad_norm=cfg.max_grad_norm, policy_kwargs=policy_kwargs, tensorboard_log=tb,
+                   seed=seed, verbose=verbose, device="cpu")
+    return SAC("MlpPolicy", venv, learning_rate=cfg.learning_rate, buffer_size=cfg.buffer_size,
+               batch_size=cfg.batch_size, learning_starts=cfg.learning_starts, tau=cfg.tau, gamma=cfg.gamma,
+               train_freq=cfg.train_freq, gradient_steps=cfg.gradient_steps, ent_coef=cfg.ent_coef,
+               policy_kwargs=policy_kwargs, tensorboard_log=tb, seed=seed, verbose=verbose, device="cpu")
+
+
 def train(out: str | Path, env: str = "braking", estimator: str = "none", algo: str = "ppo", steps: int = 200_000,
           seed: int = 0, config: PPOConfig | SACConfig | None = None, vec: str = "dummy",
           progress_bar: bool = True, checkpoint_every: int = CHECKPOINT_EVERY,
@@ -254,27 +295,10 @@ def train(out: str | Path, env: str = "braking", estimator: str = "none", algo: 
     :param verbose: SB3 verbosity.
     """
     import torch
-    from stable_baselines3 import PPO, SAC
     from stable_baselines3.common.callbacks import CheckpointCallback
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecNormalize
 
-    _check_choice(env, ENVS, "env")
-    _check_choice(algo, ALGOS, "algo")
-    _check_choice(vec, ("dummy", "subproc"), "vec")
-    if env == "braking":
-        from fricenv.envs.estimator_observation import check_estimator_name
-
-        check_estimator_name(estimator)
-    else:
-        from fricenv.envs.factory import PAYLOAD_ESTIMATOR_NAMES
-
-        _check_choice(estimator, PAYLOAD_ESTIMATOR_NAMES, "payload estimator")
-    if not isinstance(steps, int) or steps < 1:
-        raise ValueError(f"steps must be a positive int, got {steps!r}")
-    cfg = config if config is not None else DEFAULT_CONFIGS[(env, algo)]
-    expected = PPOConfig if algo == "ppo" else SACConfig
-    if not isinstance(cfg, expected):
-        raise TypeError(f"config for {algo} must be a {expected.__name__}, got {type(cfg).__name__}")
+    cfg = _checked_config(env, estimator, algo, steps, vec, config)
     torch.set_num_threads(1)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -284,19 +308,7 @@ def train(out: str | Path, env: str = "braking", estimator: str = "none", algo: 
     venv.seed(seed * SEED_STRIDE)
     venv = VecNormalize(venv, norm_obs=cfg.norm_obs, norm_reward=cfg.norm_reward, gamma=cfg.gamma)
     tb = _tensorboard_dir(out)
-    policy_kwargs: dict[str, Any] = {"net_arch": list(cfg.net_arch)}
-    if algo == "ppo":
-        policy_kwargs["log_std_init"] = cfg.log_std_init
-        model = PPO("MlpPolicy", venv, n_steps=cfg.n_steps, batch_size=cfg.batch_size, n_epochs=cfg.n_epochs,
-                    learning_rate=cfg.learning_rate, gamma=cfg.gamma, gae_lambda=cfg.gae_lambda,
-                    clip_range=cfg.clip_range, ent_coef=cfg.ent_coef, vf_coef=cfg.vf_coef,
-                    max_grad_norm=cfg.max_grad_norm, policy_kwargs=policy_kwargs, tensorboard_log=tb,
-                    seed=seed, verbose=verbose, device="cpu")
-    else:
-        model = SAC("MlpPolicy", venv, learning_rate=cfg.learning_rate, buffer_size=cfg.buffer_size,
-                    batch_size=cfg.batch_size, learning_starts=cfg.learning_starts, tau=cfg.tau, gamma=cfg.gamma,
-                    train_freq=cfg.train_freq, gradient_steps=cfg.gradient_steps, ent_coef=cfg.ent_coef,
-                    policy_kwargs=policy_kwargs, tensorboard_log=tb, seed=seed, verbose=verbose, device="cpu")
+    model = _make_model(algo, cfg, venv, tb, seed, verbose)
     callbacks = []
     if checkpoint_every > 0:
         callbacks.append(CheckpointCallback(save_freq=max(checkpoint_every // cfg.n_envs, 1),

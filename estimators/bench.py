@@ -14,33 +14,18 @@ import numpy as np
 __all__ = ["BENCH_CASES", "bench_estimators"]
 
 HORIZON_WARMUP = 10  # MHE updates that only buffer samples
-# name -> (paper case, estimator factory key)
-BENCH_CASES = {
-    "mhe-theta": 1,
-    "mhe-all": 3,
-    "mhe-paper-theta": 1,
-    "mhe-paper-all": 3,
-    "mhe-literal-theta": 1,
-    "ekf-theta": 1,
-    "ekf-all": 3,
-    "ekf-rls": "ekf-rls",
+# bench name -> (estimator registry name, paper case: MHE case 1-4 or "ekf-rls"); the MHE/EKF cases set which
+# parameters are augmented (1: theta, 3: theta, B, C, E).
+BENCH_CASES: dict[str, tuple[str, int | str]] = {
+    "mhe-theta": ("mhe", 1),
+    "mhe-all": ("mhe", 3),
+    "mhe-paper-theta": ("mhe-paper", 1),
+    "mhe-paper-all": ("mhe-paper", 3),
+    "mhe-literal-theta": ("mhe-literal", 1),
+    "ekf-theta": ("ekf", 1),
+    "ekf-all": ("ekf", 3),
+    "ekf-rls": ("ekf-rls", "ekf-rls"),
 }
-
-
-def _make(name: str, estimated):
-    from estimators.ekf import QuarterCarEKF
-    from estimators.ekf_rls import QuarterCarEkfRls
-    from estimators.mhe import RegularizedMHE
-
-    if name.startswith("mhe-paper"):  # the paper's MHE: hard dynamics, beta-weighted prior
-        return RegularizedMHE(estimated=estimated, arrival="paper", model_error=None)
-    if name.startswith("mhe-literal"):
-        return RegularizedMHE(estimated=estimated, weighting="literal")
-    if name.startswith("mhe"):
-        return RegularizedMHE(estimated=estimated)
-    if name.startswith("ekf-rls"):
-        return QuarterCarEkfRls()
-    return QuarterCarEKF(estimated=estimated)
 
 
 def bench_estimators(repeats: int = 3, seed: int = 0) -> dict[str, dict[str, float]]:
@@ -50,19 +35,21 @@ def bench_estimators(repeats: int = 3, seed: int = 0) -> dict[str, dict[str, flo
     :param seed: noise seed of the generated logs.
     :return: ``{name: {"mean_us", "max_us", "cpu_mean_us", "updates"}}``.
     """
+    from estimators.registry import get_estimator
     from estimators.scenarios import ekf_rls_scenario, mhe_case
 
     if int(repeats) != repeats or repeats < 1:
         raise ValueError(f"repeats must be an integer >= 1, got {repeats!r}")
     result = {}
-    for name, case in BENCH_CASES.items():
+    for name, (estimator, case) in BENCH_CASES.items():
         pc = ekf_rls_scenario(noisy=True, seed=seed) if case == "ekf-rls" else mhe_case(case, seed=seed)
-        est = _make(name, pc.estimated)
+        entry = get_estimator(estimator)
+        est = entry.make(estimated=pc.estimated)
         log = pc.log
         cols = [np.asarray(getattr(log, c)) for c in est.measurement_columns]
         Y = np.column_stack(cols)
         U = np.asarray(log.T_b)
-        skip = HORIZON_WARMUP if name.startswith("mhe") else 0
+        skip = HORIZON_WARMUP if entry.family == "mhe" else 0
         wall, cpu = [], []
         for _ in range(int(repeats)):
             est.reset()

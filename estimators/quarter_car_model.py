@@ -30,6 +30,7 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 
+from fricenv.plants import sui_johansen as sj
 from fricenv.plants.quarter_car import PAPER_PARAMS, QuarterCarParams
 
 __all__ = [
@@ -42,8 +43,8 @@ __all__ = [
 ]
 
 PARAM_NAMES = ("theta", "B", "C", "E")
-# Sui & Johansen eq. (18): nominal values, a priori estimates or fixed values.
-NOMINAL: dict[str, float] = {"theta": 0.6, "B": 12.0, "C": 1.3, "E": 0.0}
+# Sui & Johansen eq. (18): nominal values, a priori estimates or fixed values (read-only).
+NOMINAL = sj.NOMINAL_SHAPE
 # Bounds of Section IV: v >= 0, 0 <= lambda <= 1, 0 <= theta <= 1, 9 <= B <= 15.5, 0 <= C <= 3, -7.5 <= E <= 2.
 BOUNDS: dict[str, tuple[float, float]] = {
     "v": (0.0, np.inf),
@@ -81,7 +82,7 @@ class AugmentedModel:
     """
 
     estimated: tuple[str, ...] = ("theta",)  # parameters augmented to the state
-    dt: float = 0.01  # sample time [s]
+    dt: float = sj.SAMPLE_TIME  # sample time [s]
     substeps: int = DEFAULT_SUBSTEPS  # ROS2 substeps per sample [-]
     p: QuarterCarParams = PAPER_PARAMS  # vehicle parameters
     fixed: dict = field(default_factory=lambda: dict(NOMINAL))  # values of non-estimated parameters

@@ -22,8 +22,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fricenv.logs import QuarterCarLog
+from fricenv.logs import PayloadLog, QuarterCarLog
+from fricenv.plants import li_du_li as ldl
 from fricenv.plants import quarter_car as qc
+from fricenv.plants import sui_johansen as sj
+from fricenv.plants.payload import Trajectory
 from fricenv.plants.tire import DRY, SNOW, MagicFormula
 from fricenv.utils import as_generator
 
@@ -36,14 +39,14 @@ __all__ = [
     "abs_like_torque",
     "ekf_rls_scenario",
     "mhe_case",
+    "payload_log",
     "two_axle_scenario",
 ]
 
-DT = 0.01  # sample time [s]
+DT = sj.SAMPLE_TIME  # sample time [s]
 PLANT_SUBSTEPS = 10  # plant substeps per sample (1 ms; the plant is verified at 5)
 V0 = 20.0  # initial speed [m/s]
 SLIP0 = 0.01  # initial slip [-]
-OMEGA_NOISE_VAR = 0.2  # wheel-speed noise variance [(rad/s)^2]
 MHE_DURATION = 1.5  # [s]; dry ends near 7 m/s, still well above the stiff low-speed region
 APPLY_RATE = 4.0  # torque rise rate as a multiple of r Fz mu_max per second [1/s]
 RELEASE_RATE = 8.0  # torque fall rate, same unit [1/s]
@@ -52,14 +55,14 @@ SLIP_BAND = {"dry": (0.03, 0.2), "snow": (0.03, 0.15)}  # hysteresis band of the
 DEFAULT_BAND = (0.03, 0.15)
 
 # Li, Du & Li scenario on the quarter car.
-PEAK_09 = MagicFormula(B=DRY.B, C=DRY.C, E=DRY.E, theta=0.9, name="dry-0.9")
+PEAK_09 = MagicFormula(B=DRY.B, C=DRY.C, E=DRY.E, theta=ldl.ROAD_MU, name="dry-0.9")
 EKF_RLS_V0 = 10.0  # [m/s]
 TRACTION_TIME = 8.0  # [s]
 TRACTION_TORQUE = -150.0  # drive torque [N m] (about 1.3 m/s^2)
 BRAKE_TORQUE = 600.0  # final brake torque [N m] (about 5 m/s^2)
 BRAKE_RAMP = 1.0  # [s] to reach BRAKE_TORQUE
 EKF_RLS_DURATION = 11.5  # [s]; the quarter car is then near 5 m/s (the slip estimate degrades near standstill)
-AX_NOISE = 0.05  # half-width of the uniform a_x noise [m/s^2]
+AX_NOISE = ldl.AX_NOISE  # half-width of the uniform a_x noise [m/s^2]
 # "after settling" in the EKF/RLS scenarios: 2 s after the start of traction until its end, and 1 s after the start
 # of braking until the end [s]
 SETTLE_WINDOWS = ((2.0, TRACTION_TIME), (TRACTION_TIME + 1.0, np.inf))
@@ -157,7 +160,7 @@ def mhe_case(case: int, seed=None, duration: float = MHE_DURATION, p: qc.Quarter
         return state["T"]
 
     v, w, tb, s, mu, Fx = _simulate(road, V0, V0 * (1 - SLIP0) / p.r, torque, n, PLANT_SUBSTEPS, p)
-    omega_meas = w + rng.normal(0.0, np.sqrt(OMEGA_NOISE_VAR), n)
+    omega_meas = w + rng.normal(0.0, sj.OMEGA_NOISE_STD, n)
     t = np.arange(n) * DT
     log = QuarterCarLog(t=t, T_b=tb, omega=omega_meas, v=v, a_x=-Fx / p.m)
     return PaperCase(str(case), road, estimated, log, v, s, w, mu, Fx)
@@ -246,3 +249,10 @@ def two_axle_scenario(noisy: bool = False, seed=None, duration: float = EKF_RLS_
         a_x = a_x + rng.uniform(-AX_NOISE, AX_NOISE, n)
     return TwoAxleRun(t, wf, wr, a_x, T_f, T_r, v, Sf, Sr, F, p.mu,
                       "two-axle-" + ("noisy" if noisy else "clean"))
+
+
+def payload_log(traj: Trajectory) -> PayloadLog:
+    """The measurements of a simulated payload trajectory (:func:`fricenv.plants.payload.simulate`) as a
+    :class:`fricenv.logs.PayloadLog`: the raw sensor readings and the vision pose."""
+    return PayloadLog(t=traj.t, M=traj.w_hat[:, 0], f_x=traj.w_hat[:, 1], f_y=traj.w_hat[:, 2],
+                      theta=traj.pose[:, 0], X=traj.pose[:, 1], Y=traj.pose[:, 2])

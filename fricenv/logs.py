@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from fricenv.plants.sui_johansen import RADIUS
 from fricenv.utils import atomic_write
 
 __all__ = [
@@ -40,7 +41,7 @@ _ROLLING_PERCENTILE = 95.0  # of omega r / v over the moving samples
 # Payload: median rates; a pose in degrees or mm (with its vision noise) moves 57x or 1000x "faster".
 _MAX_ANGULAR_RATE = 50.0  # median |theta'| [rad/s]
 _MAX_LINEAR_RATE = 20.0  # median |X'|, |Y'| [m/s]
-_NOMINAL_RADIUS = 0.345  # [m], Table I; only used for the unit checks
+_NOMINAL_RADIUS = RADIUS  # [m], Sui & Johansen Table I; only used for the unit checks
 
 
 class LogFormatError(ValueError):

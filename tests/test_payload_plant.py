@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
+from estimators.scenarios import payload_log
 from fricenv.logs import read_log, write_log
 from fricenv.plants import payload as pl
 
@@ -104,7 +105,7 @@ def test_table1_schedule_and_random_s():
 def test_log_round_trip(tmp_path):
     traj = pl.simulate(0.5, rng=np.random.default_rng(1))
     path = tmp_path / "payload.csv"
-    write_log(path, pl.to_log(traj))
+    write_log(path, payload_log(traj))
     log = read_log(path, plant="payload")
     np.testing.assert_allclose(log.X, traj.pose[:, 1], rtol=1e-9, atol=1e-12)
 

@@ -1,8 +1,8 @@
 """Evaluate ABS policies and classical controllers on the fixed scenario set (mean +- std over seeds).
 
 Scenarios: dry, wet, snow, ice at 20 and 30 m/s, dry->ice and ice->dry (at 15 m) at 20 and 30 m/s, sensor noise
-on. Policies: ``rule-abs``, ``oracle-slip``, ``locked``, ``pipeline:EST`` (estimator EST + slip controller) or a
-training run directory. Prints ratio to the physical limit (mean +- std), lock events and mean |slip - lambda*|;
+on. Policies (:mod:`agents.policy_spec`): a controller (``rule-abs``, ``oracle-slip``, ``slip-pi``, ``locked``),
+``pipeline:EST`` (estimator EST + slip controller) or a training run directory. Prints ratio to the physical limit (mean +- std), lock events and mean |slip - lambda*|;
 writes ``results.csv`` and ``ratios.png`` into ``--out`` and ``{"rows": [...]}`` to ``--json``.
 """
 

@@ -40,17 +40,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def _estimator(setup: str, name: str):
-    from estimators.ekf_rls import PAPER_CORRECTION_GAIN, PAPER_MAP, QuarterCarEkfRls, TwoAxleEkfRls
+    """Estimator ``name`` (a registry entry) for a set-up: on the paper's plant (Table I of the set-up's model),
+    with the a_x noise level of the set-up."""
+    from estimators.registry import get_estimator
+    from fricenv.plants.quarter_car import PAPER_PARAMS
+    from fricenv.plants.two_axle import TABLE_I
 
-    ax_std = AX_STD_NOISY if "noisy" in setup else None
-    kw = {} if ax_std is None else {"ax_std": ax_std}
-    if name == "ekf-rls-paper-loop":
-        kw["correction_gain"] = PAPER_CORRECTION_GAIN
-    if setup.startswith("two-axle"):
-        return TwoAxleEkfRls(**kw)
-    if name == "ekf-rls-paper-map":
-        kw["mu_map"] = PAPER_MAP
-    return QuarterCarEkfRls(**kw)
+    options = {"ax_std": AX_STD_NOISY} if "noisy" in setup else {}
+    params = TABLE_I if setup.startswith("two-axle") else PAPER_PARAMS
+    return get_estimator(name, ESTIMATORS).make(params, **options)
 
 
 def _data(setup: str, seed: int) -> dict:
@@ -144,6 +142,7 @@ def _plot(setup: str, runs: dict, path) -> None:
 def run(args) -> int:
     from pathlib import Path
 
+    from fricenv.plants.li_du_li import ROAD_MU
     from fricenv.utils import progress, write_json
 
     if args.seeds < 1:
@@ -186,5 +185,5 @@ def run(args) -> int:
             _plot(setup, runs, out / f"{setup}.png")
         print(f"figures: {out}/<setup>.png")
     if args.json:
-        write_json(args.json, {"seed": args.seed, "true_mu": 0.9, "cases": rows})
+        write_json(args.json, {"seed": args.seed, "true_mu": ROAD_MU, "cases": rows})
     return 0

@@ -43,21 +43,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def make_estimator(name: str, estimated: tuple[str, ...]):
-    """The estimator called ``name`` for the given augmented parameters."""
-    from estimators.ekf import QuarterCarEKF
-    from estimators.mhe import RegularizedMHE
+    """The estimator called ``name`` (an entry of :data:`estimators.registry.ESTIMATORS` among :data:`ESTIMATORS`)
+    for the given augmented parameters, on the paper's vehicle (Table I) and sample time."""
+    from estimators.registry import get_estimator
 
-    if name == "mhe":
-        return RegularizedMHE(estimated=estimated)
-    if name == "mhe-paper":
-        return RegularizedMHE(estimated=estimated, arrival="paper", model_error=None)
-    if name == "mhe-ekf":
-        return RegularizedMHE(estimated=estimated, arrival="ekf", model_error=None, gate=None)
-    if name == "mhe-literal":
-        return RegularizedMHE(estimated=estimated, weighting="literal", arrival="paper", model_error=None)
-    if name == "ekf":
-        return QuarterCarEKF(estimated=estimated)
-    raise ValueError(f"unknown estimator {name!r}; valid: {', '.join(ESTIMATORS)}")
+    return get_estimator(name, ESTIMATORS).make(estimated=estimated)
 
 
 def run_case(pc, name: str) -> dict:

@@ -23,12 +23,14 @@ one-sample lag of the speed, ``|a| dt`` = up to 0.1 m/s); ``slip_hat``, ``mu_hat
 estimate at k (one sample, 10 ms, old). At reset the estimator starts from the free-rolling speed measured by the
 wheel (``v = omega_m r``, slip 0).
 
-Estimators (:data:`ESTIMATORS`, name -> factory): ``ekf`` (:class:`estimators.ekf.QuarterCarEKF`, theta
-augmented), ``mhe`` (:class:`estimators.mhe.RegularizedMHE`, theta augmented), ``ekf-rls``
+Estimators (:data:`ESTIMATOR_NAMES`; each is an entry of :data:`estimators.registry.ESTIMATORS` built with the
+env's own plant parameters and sample time): ``ekf`` (:class:`estimators.ekf.QuarterCarEKF`, theta augmented),
+``mhe`` (:class:`estimators.mhe.RegularizedMHE`, theta augmented), ``ekf-rls``
 (:class:`estimators.ekf_rls.QuarterCarEkfRls`, which also uses ``a_x``; its ``mu_utilized`` fills ``mu_hat`` and
-its peak-friction estimate ``mu`` fills ``theta_hat``), and ``ekf-full`` / ``mhe-full`` (theta, B, C and E
-augmented, Sui & Johansen's cases 3-4; the appended layout is the same, B, C, E are in ``info`` of the estimate,
-``EstimatorObservation.last_estimate``). An unknown name raises ValueError listing the choices.
+its peak-friction estimate ``mu`` fills ``theta_hat``, as its registry entry's ``values`` say), and ``ekf-full`` /
+``mhe-full`` (theta, B, C, E augmented, Sui & Johansen's cases 3-4; the appended layout is the same, B, C, E are
+in ``info`` of the estimate, ``EstimatorObservation.last_estimate``). An unknown name raises ValueError listing
+the choices.
 
 ``oracle`` appends the truth in the same layout (true speed, slip, friction and the theta of the road under the
 car, health 0): an upper bound. ``none`` appends nothing (use the env as it is).
@@ -54,12 +56,12 @@ import numpy as np
 from gymnasium import spaces
 
 from estimators.base import Estimate, Estimator, Health
+from estimators.registry import OBSERVATION_ESTIMATORS, check_name, get_estimator
 from fricenv.envs.braking_core import ObsField
 from fricenv.plants.quarter_car import QuarterCarParams
 
 __all__ = [
     "ESTIMATE_FIELDS",
-    "ESTIMATORS",
     "ESTIMATOR_NAMES",
     "PAYLOAD_ORACLE_FIELDS",
     "EstimatorObservation",
@@ -70,7 +72,7 @@ __all__ = [
 
 SPEED_SCALE = 50.0  # [m/s per observation unit], as the env's oracle entry
 HEALTH_MAX = float(max(Health))
-# Appended entries, in order, keyed by the Estimate value name they carry.
+# Appended entries, in order, keyed by the standard quantity they carry (estimators.registry: EstimatorEntry.values).
 ESTIMATE_FIELDS: dict[str, ObsField] = {
     "v": ObsField("v_hat", "m/s", SPEED_SCALE, 0.0, 2.0, "estimated vehicle speed"),
     "slip": ObsField("slip_hat", "-", 1.0, -1.0, 1.0, "estimated wheel slip"),
@@ -81,75 +83,27 @@ HEALTH_FIELD = ObsField("health", "-", 1.0, 0.0, HEALTH_MAX, "estimator health f
 # Measured signals the wrapper can feed an estimator: estimator column name -> env observation entry.
 MEASURED_COLUMNS = {"omega": "wheel_speed", "a_x": "a_x"}
 INPUT_COLUMNS = ("T_b",)
-FULL_SHAPE = ("theta", "B", "C", "E")  # parameters the "-full" estimators augment (Sui & Johansen, case 3-4)
-
-
-def _make_ekf(dt: float, params: QuarterCarParams) -> Estimator:
-    from estimators.ekf import QuarterCarEKF
-
-    return QuarterCarEKF(estimated=("theta",), dt=dt)
-
-
-def _make_mhe(dt: float, params: QuarterCarParams) -> Estimator:
-    from estimators.mhe import RegularizedMHE
-
-    return RegularizedMHE(estimated=("theta",), dt=dt)
-
-
-def _make_ekf_rls(dt: float, params: QuarterCarParams) -> Estimator:
-    from estimators.ekf_rls import QuarterCarEkfRls
-
-    return QuarterCarEkfRls(dt=dt, p=params)
-
-
-def _make_ekf_full(dt: float, params: QuarterCarParams) -> Estimator:
-    from estimators.ekf import QuarterCarEKF
-
-    return QuarterCarEKF(estimated=FULL_SHAPE, dt=dt)
-
-
-def _make_mhe_full(dt: float, params: QuarterCarParams) -> Estimator:
-    from estimators.mhe import RegularizedMHE
-
-    return RegularizedMHE(estimated=FULL_SHAPE, dt=dt)
-
-
-# name -> factory (dt [s], vehicle params) -> Estimator; None: no estimator runs ("none" appends nothing,
-# "oracle" appends the truth).
-ESTIMATORS: dict[str, Callable[[float, QuarterCarParams], Estimator] | None] = {
-    "none": None,
-    "ekf": _make_ekf,
-    "mhe": _make_mhe,
-    "ekf-rls": _make_ekf_rls,
-    "oracle": None,
-    "ekf-full": _make_ekf_full,
-    "mhe-full": _make_mhe_full,
-}
-ESTIMATOR_NAMES: tuple[str, ...] = tuple(ESTIMATORS)
-# Which Estimate value fills each appended entry, where it is not the entry's own name. The EKF/RLS reports the
-# friction in use as ``mu_utilized`` and the road's peak friction as ``mu``; on the Magic Formula family with the
-# peak of the shape at 1 (mu = theta g, max g = 1) the peak friction is theta.
-VALUE_NAMES: dict[str, dict[str, str]] = {
-    "ekf-rls": {"mu": "mu_utilized", "theta": "mu"},
-}
+# Observation choices: "none" appends nothing, "oracle" appends the truth, the others run a registered estimator.
+NO_ESTIMATOR = "none"
+ORACLE = "oracle"
+ESTIMATOR_NAMES: tuple[str, ...] = (NO_ESTIMATOR,) + OBSERVATION_ESTIMATORS + (ORACLE,)
 
 
 def check_estimator_name(name: str, valid: tuple[str, ...] = ESTIMATOR_NAMES) -> str:
     """Return ``name`` if it is a valid estimator choice, else raise ValueError listing the choices."""
-    if not isinstance(name, str) or name not in valid:
-        raise ValueError(f"unknown estimator {name!r}; valid: {', '.join(valid)}")
-    return name
+    return check_name(name, valid)
 
 
 def make_estimator(name: str, dt: float, params: QuarterCarParams) -> Estimator | None:
-    """A fresh estimator by name (None for ``none`` and ``oracle``).
+    """A fresh estimator by name (None for ``none`` and ``oracle``), built for the env's plant.
 
     :param name: one of :data:`ESTIMATOR_NAMES`.
     :param dt: sample time [s].
-    :param params: vehicle parameters.
+    :param params: the env's vehicle parameters (the estimator's model uses its m, J, r, F_z).
     """
-    factory = ESTIMATORS[check_estimator_name(name)]
-    return None if factory is None else factory(dt, params)
+    if check_estimator_name(name) in (NO_ESTIMATOR, ORACLE):
+        return None
+    return get_estimator(name).make(params, dt)
 
 
 def _reset(est: Estimator, v0: float) -> Estimate:
@@ -178,9 +132,9 @@ class EstimatorObservation(gym.Wrapper):
         super().__init__(env)
         if estimator_factory is None:
             check_estimator_name(estimator)
-            if estimator == "none":
+            if estimator == NO_ESTIMATOR:
                 raise ValueError("estimator 'none' appends nothing: use the env unwrapped "
-                                 f"(valid here: {', '.join(n for n in ESTIMATOR_NAMES if n != 'none')})")
+                                 f"(valid here: {', '.join(n for n in ESTIMATOR_NAMES if n != NO_ESTIMATOR)})")
         elif not callable(estimator_factory):
             raise TypeError(f"estimator_factory must be callable (dt, params) -> Estimator, "
                             f"got {type(estimator_factory).__name__}")
@@ -198,7 +152,8 @@ class EstimatorObservation(gym.Wrapper):
             raise ValueError(f"the env observation lacks {missing}; has {list(self._index)}")
         self._estimator: Estimator | None = None
         self._estimator = self._build()
-        self._value_names = dict(VALUE_NAMES.get(estimator, {})) if estimator_factory is None else {}
+        self._value_names = dict(get_estimator(estimator).values) \
+            if estimator_factory is None and self._estimator is not None else {}
         if self._estimator is None:  # oracle
             self._names: tuple[str, ...] = tuple(ESTIMATE_FIELDS)
         else:
@@ -240,7 +195,7 @@ class EstimatorObservation(gym.Wrapper):
     @property
     def estimator(self) -> Estimator | None:
         """The estimator instance (None for the oracle); rebuilt lazily after unpickling."""
-        if self._estimator is None and self.estimator_name != "oracle":
+        if self._estimator is None and self.estimator_name != ORACLE:
             self._estimator = self._build()
         return self._estimator
 
@@ -289,7 +244,7 @@ class EstimatorObservation(gym.Wrapper):
         self._warned = False
         self._last_values = {}
         self.last_estimate = None
-        if self.estimator_name == "oracle" and self._factory is None:
+        if self.estimator_name == ORACLE and self._factory is None:
             values, health = self._safe(lambda: self._truth(info))
         else:
             est = self.estimator
@@ -303,7 +258,7 @@ class EstimatorObservation(gym.Wrapper):
         if self._last_obs is None:
             raise gym.error.ResetNeeded("call reset() before step()")
         obs, reward, terminated, truncated, info = self.env.step(action)
-        if self.estimator_name == "oracle" and self._factory is None:
+        if self.estimator_name == ORACLE and self._factory is None:
             values, health = self._safe(lambda: self._truth(info))
         else:
             est, prev = self.estimator, self._last_obs

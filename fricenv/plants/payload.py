@@ -30,7 +30,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from fricenv.logs import PayloadLog
+from fricenv.plants import liu_leung_tang_jia as paper
 
 __all__ = [
     "NO_NOISE",
@@ -53,32 +53,23 @@ __all__ = [
     "simulate",
     "step",
     "table1_schedule",
-    "to_log",
     "vision",
 ]
 
 # The paper's calibration matrix, Section 4, item 4.
-PAPER_S = np.array([
-    [0.6110, -0.0372, -0.1445],
-    [-0.3361, 1.0020, -0.1443],
-    [-0.1147, 0.1674, 0.9598],
-])
+PAPER_S = np.array(paper.CALIBRATION)
 
 # Table 1: diagonal (s11, s22, s33) from these start times [s]; off-diagonal entries stay those of PAPER_S.
-TABLE1_TIMES = (0.0, 100.0, 200.0)
-TABLE1_DIAGONALS = ((0.6110, 1.0020, 0.9598), (0.3847, 0.8144, 0.9169), (-0.2839, 0.5472, 1.1172))
+TABLE1_TIMES = paper.TABLE1_TIMES
+TABLE1_DIAGONALS = paper.TABLE1_DIAGONALS
 
 # Eq. (13): each wrench element is a sum of (amplitude, angular frequency [rad/s], phase [rad], is_cosine).
-PAPER_WRENCH_TERMS = (
-    ((1.0, 2.0, 0.0, False), (0.1, 10.0, 0.0, True), (0.4, np.pi, np.pi / 6, False)),  # M [N m]
-    ((1.0, 1.0, 0.0, False), (0.1, 4.5, 0.0, True), (0.4, np.pi, np.pi / 3, False)),  # f_x [N]
-    ((2.0, 3.0, 0.0, False), (0.2, 5.0, 0.0, True), (0.4, 7.0, 0.0, False)),  # f_y [N]
-)
+PAPER_WRENCH_TERMS = paper.WRENCH_TERMS
 # Amplitude of each element of eq. (13) (sum of its term amplitudes): the reference of the "5 %" sensor noise.
 PAPER_WRENCH_AMPLITUDE = np.array([sum(term[0] for term in terms) for terms in PAPER_WRENCH_TERMS])
 
 # Random calibration matrices: entries uniform in [-RANDOM_S_BOUND, RANDOM_S_BOUND] (Section 4, Fig. 3).
-RANDOM_S_BOUND = 3.0
+RANDOM_S_BOUND = paper.RANDOM_S_BOUND
 RANDOM_S_MAX_COND = 10.0  # rejection threshold on the 2-norm condition number
 RANDOM_S_MAX_TRIES = 10_000
 
@@ -87,10 +78,10 @@ RANDOM_S_MAX_TRIES = 10_000
 class PayloadParams:
     """Mass properties and sensor location of the payload (Section 4, items 1-2)."""
 
-    m: float = 2.5  # payload mass [kg]
-    I_G: float = 0.75  # moment of inertia about the z-axis through G [kg m^2]
-    rho_x: float = 0.2  # sensor interface from G, body-frame x [m]
-    rho_y: float = 0.25  # sensor interface from G, body-frame y [m]
+    m: float = paper.MASS  # payload mass [kg]
+    I_G: float = paper.INERTIA  # moment of inertia about the z-axis through G [kg m^2]
+    rho_x: float = paper.RHO_X  # sensor interface from G, body-frame x [m]
+    rho_y: float = paper.RHO_Y  # sensor interface from G, body-frame y [m]
 
     def __post_init__(self):
         for name in ("m", "I_G"):
@@ -114,9 +105,9 @@ PAPER_PARAMS = PayloadParams()
 class NoiseParams:
     """Measurement noise (standard deviations; see the module docstring for the reading of the paper)."""
 
-    wrench_rel: float = 0.05  # sensor noise std as a fraction of each wrench element's amplitude [-]
-    theta_std: float = float(np.deg2rad(0.1))  # vision orientation noise std [rad] (0.1 deg)
-    position_std: float = 1e-4  # vision position noise std [m] (0.1 mm)
+    wrench_rel: float = paper.WRENCH_NOISE_REL  # sensor noise std / each wrench element's amplitude [-]
+    theta_std: float = float(np.deg2rad(paper.THETA_NOISE_DEG))  # vision orientation noise std [rad] (0.1 deg)
+    position_std: float = paper.POSITION_NOISE  # vision position noise std [m] (0.1 mm)
     wrench_amplitude: tuple[float, float, float] = tuple(PAPER_WRENCH_AMPLITUDE)  # [N m, N, N], eq. (13)
 
     def __post_init__(self):
@@ -353,7 +344,7 @@ def _integrate_euler(state0: np.ndarray, w: np.ndarray, h: float, p: PayloadPara
 INTEGRATORS = ("rk4", "euler")
 
 
-def simulate(duration: float, dt: float = 1e-3, *, wrench: Callable = paper_wrench,
+def simulate(duration: float, dt: float = paper.SAMPLE_TIME, *, wrench: Callable = paper_wrench,
              calibration: CalibrationSchedule | None = None, noise: NoiseParams = PAPER_NOISE,
              rng: np.random.Generator | None = None, state0=None, p: PayloadParams = PAPER_PARAMS,
              integrator: str = "rk4") -> Trajectory:
@@ -395,12 +386,6 @@ def simulate(duration: float, dt: float = 1e-3, *, wrench: Callable = paper_wren
     w_hat = sensor_reading(w, calibration.inverse_at(t), noise, rng)
     pose = vision(states, noise, rng)
     return Trajectory(t, states, w, w_hat, pose, calibration.at(t))
-
-
-def to_log(traj: Trajectory) -> PayloadLog:
-    """The measurements of a trajectory as a :class:`fricenv.logs.PayloadLog` (raw readings and vision)."""
-    return PayloadLog(t=traj.t, M=traj.w_hat[:, 0], f_x=traj.w_hat[:, 1], f_y=traj.w_hat[:, 2],
-                      theta=traj.pose[:, 0], X=traj.pose[:, 1], Y=traj.pose[:, 2])
 
 
 # Random excitation: eq. (13)'s terms with frequencies scaled in this range [-] and uniform random phases.

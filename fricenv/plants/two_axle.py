@@ -29,6 +29,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from fricenv.plants import li_du_li as ldl
+
 __all__ = ["TABLE_I", "TwoAxleParams", "axle_loads", "derivatives", "dugoff_force", "slip", "step"]
 
 SLIP_SPEED_FLOOR = 0.1  # [m/s] smallest slip denominator (as in fricenv.plants.tire)
@@ -40,16 +42,16 @@ SLIP_MAX = 0.999  # |S| is clipped here so that 1 - |S| > 0
 class TwoAxleParams:
     """Table I of Li, Du & Li."""
 
-    m: float = 1298.9  # vehicle mass [kg]
-    L_f: float = 1.0  # CG to front axle [m]
-    L_r: float = 1.454  # CG to rear axle [m]
-    C_s: float = 50000.0  # longitudinal tire stiffness [N/unit slip]
-    I_z: float = 1627.0  # yaw inertia [kg m^2] (unused in straight line)
-    R_w: float = 0.35  # wheel radius [m]
-    I_w: float = 2.1  # wheel inertia [kg m^2]
-    mu: float = 0.9  # road friction coefficient [-]
-    eps_r: float = 0.015  # Dugoff velocity reduction factor [s/m]
-    C_alpha: float = 30000.0  # cornering stiffness [N/rad] (unused in straight line)
+    m: float = ldl.MASS  # vehicle mass [kg]
+    L_f: float = ldl.L_F  # CG to front axle [m]
+    L_r: float = ldl.L_R  # CG to rear axle [m]
+    C_s: float = ldl.TIRE_STIFFNESS  # longitudinal tire stiffness [N/unit slip]
+    I_z: float = ldl.YAW_INERTIA  # yaw inertia [kg m^2] (unused in straight line)
+    R_w: float = ldl.WHEEL_RADIUS  # wheel radius [m]
+    I_w: float = ldl.WHEEL_INERTIA  # wheel inertia [kg m^2]
+    mu: float = ldl.ROAD_MU  # road friction coefficient [-]
+    eps_r: float = ldl.DUGOFF_EPS_R  # Dugoff velocity reduction factor [s/m]
+    C_alpha: float = ldl.CORNERING_STIFFNESS  # cornering stiffness [N/rad] (unused in straight line)
     g: float = 9.81  # gravity [m/s^2]
 
     def __post_init__(self):
