@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from typing import Any, ClassVar
 
 import gymnasium as gym
@@ -11,6 +12,7 @@ import numpy as np
 from gymnasium import spaces
 
 from fricenv.envs import braking_core as core
+from fricenv.envs.effect_plant import effect_plant_or_none
 from fricenv.plants import quarter_car as qc
 from fricenv.plants.tire import MagicFormula
 
@@ -111,7 +113,7 @@ class BrakingEnv(gym.Env):
     ``gymnasium.make("fricenv/Braking-v0", road="dry", v0=20.0, change_distance=None, action_mode="torque",
     observation="default", render_mode=None, t_max=2500.0, torque_rate_max=25000.0, v_stop=2.0, time_limit=60.0,
     physics_dt=0.002, lock_penalty=0.01, decel_noise_std=1.0, ax_noise_std=0.1, omega_noise_var=0.2,
-    params=PAPER_PARAMS)``. Unknown arguments raise ``TypeError``; unknown values raise ``ValueError`` listing
+    params=PAPER_PARAMS, effects=None, effects_randomization=None)``. Unknown arguments raise ``TypeError``; unknown values raise ``ValueError`` listing
     the valid ones. ``reset(options=...)`` accepts ``road``, ``v0`` and ``change_distance``.
 
     ## Vectorized
@@ -122,6 +124,18 @@ class BrakingEnv(gym.Env):
     (``seed + i``) and per-env roads (``road=[...]``), and the same trajectories as ``N`` single envs. For SB3,
     :class:`fricenv.envs.sb3_vec.BrakingSB3VecEnv` is a ``VecEnv`` over it. Wrappers need
     ``vectorization_mode="sync"``.
+
+    ## The corrected simulator: effects
+
+    ``effects`` steps the quarter car with unmodelled effects (DESIGN.md effect names): a list of
+    ``{"effect": "brake_lag", "params": {"tau": 0.04}}`` entries, or the path of a ``gap diagnose`` report.json (its
+    ``effects`` list if present, else its ``verdict`` and ``params``; ``none``/``unexplained`` give no effects).
+    ``effects_randomization={"brake_lag": {"tau": (0.02, 0.08)}, ...}`` draws parameters per episode from
+    ``self.np_random`` (after the scenario's draws) for robust training; a parameter without a range keeps its value
+    from ``effects``. ``effects=[]`` (the default None too) is exactly the plain env. Unknown effect or parameter
+    names raise :class:`fricenv.envs.effect_spec.EffectSpecError` (a ``ValueError``) naming them. The plant is then
+    :class:`fricenv.envs.effect_plant.EffectPlant` (slower: numpy per substep). ``mu_change``'s ``t_change`` counts
+    from the episode start; ``radius_error`` moves free rolling, slip and the lock test to ``r_eff``.
 
     ## Version History
 
@@ -148,6 +162,8 @@ class BrakingEnv(gym.Env):
         ax_noise_std: float = core.AX_NOISE_STD,
         omega_noise_var: float = core.OMEGA_NOISE_VAR,
         params: qc.QuarterCarParams = qc.PAPER_PARAMS,
+        effects: Any = None,
+        effects_randomization: Mapping[str, Any] | None = None,
     ):
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"unknown render_mode {render_mode!r}; valid: "
@@ -158,8 +174,9 @@ class BrakingEnv(gym.Env):
             time_limit=time_limit, omega_noise_var=omega_noise_var, decel_noise_std=decel_noise_std,
             ax_noise_std=ax_noise_std, lock_penalty=lock_penalty, action_mode=action_mode,
             observation=observation, params=params)
+        plant = effect_plant_or_none(1, self.config, effects, effects_randomization)
         self.sim = core.BrakingSim(1, self.config, road=road, v0=v0, change_distance=change_distance,
-                                   scalar=True)
+                                   scalar=plant is None, plant=plant)
         self.dt = self.config.dt
         self.observation_fields = self.sim.layout
         self.observation_names = tuple(f.name for f in self.observation_fields)

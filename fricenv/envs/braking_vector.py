@@ -49,6 +49,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from fricenv.envs import braking_core as core
+from fricenv.envs.effect_plant import effect_plant_or_none
 from fricenv.plants.tire import MagicFormula
 
 __all__ = ["CONFIG_KWARGS", "FINAL_INFO_KEYS", "STEP_INFO_KEYS", "BrakingVectorEnv"]
@@ -77,6 +78,8 @@ class BrakingVectorEnv(VectorEnv):
     :param max_episode_steps: optional truncation in control steps (overrides ``time_limit``); passed by
         ``make_vec`` when the registration has one.
     :param render_mode: only None (the vector env does not render; use single envs for videos).
+    :param effects: effects of every sub-env's plant (see ``BrakingEnv``; None or [] is the plain env).
+    :param effects_randomization: per-episode effect parameter ranges, drawn from each sub-env's generator.
     :param config_kwargs: ``BrakingConfig`` fields, the same keyword arguments as ``BrakingEnv``
         (``action_mode``, ``observation``, ``t_max``, ``physics_dt``, ...).
     """
@@ -87,14 +90,15 @@ class BrakingVectorEnv(VectorEnv):
                  v0: float | tuple[float, float] = core.V0_DEFAULT,
                  change_distance: float | tuple[float, float] | None = None,
                  autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
-                 max_episode_steps: int | None = None, render_mode: str | None = None, **config_kwargs):
+                 max_episode_steps: int | None = None, render_mode: str | None = None, effects: Any = None,
+                 effects_randomization: dict[str, Any] | None = None, **config_kwargs):
         if not isinstance(num_envs, (int, np.integer)) or isinstance(num_envs, bool) or num_envs < 1:
             raise ValueError(f"num_envs must be an int >= 1, got {num_envs!r}")
         unknown = sorted(set(config_kwargs) - set(CONFIG_KWARGS))
         if unknown:
             raise TypeError(f"unknown argument(s) {unknown} for BrakingVectorEnv; valid: "
                             f"num_envs, road, v0, change_distance, autoreset_mode, max_episode_steps, "
-                            f"render_mode, {', '.join(CONFIG_KWARGS)}")
+                            f"render_mode, effects, effects_randomization, {', '.join(CONFIG_KWARGS)}")
         if render_mode is not None:
             raise ValueError(f"BrakingVectorEnv does not render (render_mode must be None, got {render_mode!r}); "
                              f"use single envs with render_mode='rgb_array'")
@@ -111,8 +115,9 @@ class BrakingVectorEnv(VectorEnv):
         self.config = core.BrakingConfig(**config_kwargs)
         self._env_roads = self._per_env_roads(road, "road")
         first_road = self._env_roads[0] if self._env_roads is not None else road
+        plant = effect_plant_or_none(n, self.config, effects, effects_randomization)
         self.sim = core.BrakingSim(n, self.config, road=first_road, v0=v0, change_distance=change_distance,
-                                   scalar=n == 1)  # one car: the Python-float path
+                                   scalar=n == 1 and plant is None, plant=plant)  # one car: the Python-float path
         if self._env_roads is not None:  # validate every per-env road now, not at the first reset
             for spec in self._env_roads:
                 core.resolve_scenario(spec, v0, change_distance, self.config.v_stop, np.random.default_rng(0))
