@@ -366,13 +366,18 @@ class BrakingSim(EpisodeSteps):
         return info
 
     def final_info(self, i: int) -> dict[str, Any]:
-        """Episode figures of car ``i``: stopping distance, limit distance, ratio, whether it ever locked."""
+        """Episode figures of car ``i``: stopping distance, limit distance, ratio, whether it ever locked.
+
+        ``stopping_distance`` and ``ratio`` are None for a car that has not stopped (a truncated episode), so the
+        final info holds no NaN (Gymnasium's ``data_equivalence`` treats NaN as unequal to itself).
+        """
+        stopped = bool(self.stopped[i])
         return {
-            "stopping_distance": float(self.stop_distance[i]),
+            "stopping_distance": float(self.stop_distance[i]) if stopped else None,
             "limit_distance": float(self.limit[i]),
-            "ratio": float(self.stop_distance[i] / self.limit[i]),
+            "ratio": float(self.stop_distance[i] / self.limit[i]) if stopped else None,
             "lock_seen": bool(self.lock_seen[i]),
-            "stopped": bool(self.stopped[i]),
+            "stopped": stopped,
             "v0": float(self.v0[i]),
         }
 
