@@ -10,7 +10,6 @@ import pytest
 
 import fricenv  # noqa: F401  (registers the envs)
 from fricenv.effects.quarter_car import make_effect
-from fricenv.envs.braking import BrakingEnv
 from fricenv.envs.braking_core import BrakingConfig
 from fricenv.envs.braking_sim import BrakingSim
 from fricenv.envs.effect_plant import EffectPlant
@@ -67,7 +66,7 @@ def test_empty_effects_is_the_plain_env_exactly():
         a = np.array([0.1], dtype=np.float32)
         o1, r1, t1, u1, i1 = plain.step(a)
         o2, r2, t2, u2, i2 = empty.step(a)
-        assert np.array_equal(o1, o2) and r1 == r2 and i1["v"] == i2["v"]
+        assert np.array_equal(o1, o2) and r1 == r2 and (t1, u1) == (t2, u2) and i1["v"] == i2["v"]
         if t1 or u1:
             break
     assert t1 and t2 and i1["stopping_distance"] == i2["stopping_distance"]
@@ -179,6 +178,8 @@ def test_vector_env_with_effects_equals_single_envs():
             if ended & (1 << i):
                 continue
             o, r, te, tr, info = env.step(a[i])
+            assert (te, tr) == (term[i], trunc[i])
+            np.testing.assert_allclose(obs[i], o, atol=1e-6)  # float32 observations
             assert rew[i] == pytest.approx(r, rel=TOL, abs=TOL)
             assert infos["v"][i] == pytest.approx(info["v"], rel=TOL, abs=TOL)
             if te or tr:

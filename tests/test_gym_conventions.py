@@ -15,6 +15,7 @@ from gymnasium.wrappers import TimeAwareObservation
 import fricenv  # noqa: F401  (registers the envs)
 from fricenv.envs import ENV_IDS
 from fricenv.envs.sb3_vec import BrakingSB3VecEnv
+from tests.test_record_video import assert_one_video
 
 SHORT = 0.3  # time limit [s] that truncates every episode of the tests below
 
@@ -78,23 +79,6 @@ def test_time_aware_observation_and_time_feature_wrapper(env_id):
     assert tf._max_steps == gym.make(env_id).spec.max_episode_steps  # the spec's, not the 1000 guess
 
 
-@pytest.mark.parametrize("env_id", ["fricenv/Braking-v0", "fricenv/BrakingEKF-v0", "fricenv/PayloadExcitation-v0"])
-def test_vector_record_video(tmp_path, env_id):
-    from gymnasium.wrappers.vector import RecordVideo
-
-    kw = {"v0": 3.0} if "Braking" in env_id else {"time_limit": 0.4}
-    with pytest.warns(UserWarning, match="SyncVectorEnv") if "Braking" in env_id else warnings.catch_warnings():
-        venv = gym.make_vec(env_id, 2, render_mode="rgb_array", **kw)
-    assert isinstance(venv, gym.vector.SyncVectorEnv)
-    venv = RecordVideo(venv, str(tmp_path / "videos"), episode_trigger=lambda ep: ep == 0, disable_logger=True)
-    venv.reset(seed=0)
-    for _ in range(25):
-        venv.step(venv.action_space.sample())
-    venv.close()
-    videos = list((tmp_path / "videos").glob("*.mp4"))
-    assert len(videos) == 1 and videos[0].stat().st_size > 1000
-
-
 def test_vector_entry_point_takes_estimator_with_a_fallback_and_keeps_native_otherwise():
     with pytest.warns(UserWarning, match="SyncVectorEnv"):
         venv = gym.make_vec("fricenv/Braking-v0", 2, estimator="ekf")
@@ -119,7 +103,6 @@ def test_sb3_vec_env_has_a_spec_and_records_video(tmp_path):
     frame = venv.render()
     assert frame.ndim == 3 and frame.shape[2] == 3 and frame.dtype == np.uint8
     rec.close()
-    videos = list(tmp_path.glob("*.mp4"))
-    assert len(videos) == 1 and videos[0].stat().st_size > 1000
+    assert_one_video(tmp_path)
     with pytest.raises(ValueError, match="render_mode"):
         BrakingSB3VecEnv(2, render_mode="human")
