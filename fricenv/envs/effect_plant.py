@@ -100,7 +100,8 @@ class EffectPlant:
         """F_x [N] of every car (through the transient slip with ``relaxation_length``, the changed theta...)."""
         return np.array([self._sim(i).tire_force()[0] for i in range(self.n)])
 
-    def friction(self) -> np.ndarray:
+    def friction(self, slip: np.ndarray | None = None) -> np.ndarray:
+        """F_x / F_z (``slip`` is not needed: with ``relaxation_length`` the force follows the transient slip)."""
         return self.tire_force() / self.p.Fz
 
     def accel(self) -> np.ndarray:

@@ -103,7 +103,8 @@ class EpisodeSteps:
         energy, travel = self._substeps_batch()
         v, w = self.v, self.omega = plant.v.copy(), plant.omega.copy()
         self.t += 1
-        self.slip, self.mu = plant.slip(), plant.friction()
+        self.slip = plant.slip()
+        self.mu = plant.friction(self.slip)
         self.lock_count = lock_count(self.lock_count, w, v, plant.r_eff, c)
         self.locked = self.lock_count > c.lock_steps
         self.lock_seen |= self.locked
@@ -199,7 +200,8 @@ class EpisodeSteps:
         v, w = plant.v, plant.omega
         self.v[0], self.omega[0], self.torque[0] = v, w, Tb
         self.t[0] = steps = self.t.item(0) + 1
-        self.slip[0], self.mu[0] = plant.slip(), plant.friction()
+        slip = plant.slip()
+        self.slip[0], self.mu[0] = slip, plant.friction(slip)
         count = lock_count(self.lock_count.item(0), w, v, plant.r_eff.item(0), c)
         self.lock_count[0] = count
         locked = count > self._lock_steps
@@ -213,20 +215,21 @@ class EpisodeSteps:
         self.reward[0] = step_reward(energy, travel, self.limit.item(0), locked, c.lock_penalty)
         self.terminated[0] = stopped
         self.truncated[0] = steps >= self._max_steps and not stopped
-        return self._observe_scalar(m0, m1, Tb, m2, v, self.slip.item(0), self.mu.item(0)), self.reward, \
+        return self._observe_scalar(m0, m1, Tb, m2, v, slip, self.mu.item(0)), self.reward, \
             self.terminated, self.truncated
 
     def _substeps_scalar(self) -> tuple[float, float]:
         """:meth:`_substeps_batch` of the one car in floats; returns (energy, travel) [m]."""
-        c, substep, v_stop, half_h = self.config, self.plant.substep, self.config.v_stop, 0.5 * self._h
-        v = self.plant.v
+        c, plant, v_stop, half_h = self.config, self.plant, self.config.v_stop, 0.5 * self._h
+        advance = plant.advance  # the substep as a pure function: the state stays local until the end
+        v, w = plant.v, plant.omega
         x = self.x.item(0)
         energy = travel = 0.0
         stopped = self.stopped.item(0)
         change = self._next_change.item(0)
         inv_2g_mu = 1.0 / (2.0 * self._p.g * self.mu_peak.item(0))
         for sub in range(self._substeps):
-            v_new = substep()[0]
+            v_new, w = advance(v, w)
             dx = half_h * (v + v_new)
             if v > v_stop:
                 if v_new <= v_stop:
@@ -244,8 +247,10 @@ class EpisodeSteps:
             v = v_new
             if x >= change:
                 self._switch_road([0])
+                advance = plant.advance
                 change = np.inf
                 inv_2g_mu = 1.0 / (2.0 * self._p.g * self.mu_peak.item(0))
+        plant.v, plant.omega = v, w
         self.x[0] = x
         self.stopped[0] = stopped
         return energy, travel

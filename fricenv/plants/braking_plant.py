@@ -15,7 +15,8 @@ member                 meaning
 ``set_road(idx, r)``   road rows (B, C, E, theta) of cars ``idx``
 ``set_torque(Tb)``     brake torque of every car [N m], held over the following substeps
 ``substep()``          advance every car by ``h``; returns the new (v, omega)
-``friction()``         friction coefficient in use of every car now, mu = F_x / F_z (eq. (2))
+``friction(slip)``     friction coefficient in use of every car now, mu = F_x / F_z (eq. (2)); ``slip``, if
+                       given, is :meth:`slip`'s value now (a plant may reuse it)
 ``tire_force()``       longitudinal tire force F_x [N] of every car now
 ``slip()``             wheel slip of every car now (:func:`fricenv.plants.tire.longitudinal_slip`)
 ``accel()``            longitudinal acceleration [m/s^2] of every car now, as an accelerometer reads it
@@ -58,7 +59,7 @@ class BrakingPlant(Protocol):
 
     def substep(self): ...
 
-    def friction(self): ...
+    def friction(self, slip=None): ...
 
     def tire_force(self): ...
 
@@ -106,9 +107,10 @@ class BatchPlant:
     def slip(self) -> np.ndarray:
         return longitudinal_slip(self.v, self.omega, self.p.r)
 
-    def friction(self) -> np.ndarray:
+    def friction(self, slip: np.ndarray | None = None) -> np.ndarray:
+        """:func:`fricenv.plants.tire.magic_formula` of the slip now (``slip`` if given: the caller's copy)."""
         k = self.kernel
-        return magic_formula(self.slip(), k.B, k.C, k.E, k.theta)
+        return magic_formula(self.slip() if slip is None else slip, k.B, k.C, k.E, k.theta)
 
     def tire_force(self) -> np.ndarray:
         return self.p.Fz * self.friction()
@@ -119,14 +121,16 @@ class BatchPlant:
 
 class ScalarPlant:
     """One nominal quarter car in Python floats: the members of :class:`BatchPlant` on floats (``v``, ``omega``,
-    ``set_torque``, ``substep``, ``slip``, ``friction``, ``tire_force``, ``accel``), which is several times faster for one car
-    than numpy on 1-element arrays. ``set_road`` and ``reset`` take the batched forms (index, rows).
+    ``set_torque``, ``substep``, ``slip``, ``friction``, ``tire_force``, ``accel``), which is several times faster
+    for one car than numpy on 1-element arrays; ``advance(v, w)`` is the substep as a pure function of the state
+    (the float driver's hot loop). ``set_road`` and ``reset`` take the batched forms (index, rows).
 
     :param h: physics substep [s].
     :param p: quarter-car parameters.
     """
 
     n = 1
+    __slots__ = ("Tb", "_mf", "_road", "_substep", "advance", "h", "omega", "p", "r_eff", "v")
 
     def __init__(self, h: float, p: qc.QuarterCarParams = qc.PAPER_PARAMS):
         self.h, self.p = float(h), p
@@ -135,15 +139,24 @@ class ScalarPlant:
         self._road: tuple[float, ...] = ()
         self._mf: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
         self.v = self.omega = self.Tb = 0.0
+        self._bind()
+
+    def _bind(self) -> None:
+        """``advance(v, w) -> (v, w)``: one substep from a given state under the torque and road set now, without
+        touching :attr:`v`/:attr:`omega` (a driver may hold the state through a control step and store it after)."""
+        fn, Tb, road = self._substep, self.Tb, self._road
+        self.advance = lambda v, w: fn(v, w, Tb, road)
 
     def __getstate__(self) -> dict:
-        state = self.__dict__.copy()
-        state["_substep"] = None  # a closure does not pickle; rebuilt from (h, p)
+        state = {k: getattr(self, k) for k in self.__slots__}
+        state["_substep"] = state["advance"] = None  # closures do not pickle; rebuilt from (h, p)
         return state
 
     def __setstate__(self, state: dict) -> None:
-        self.__dict__.update(state)
+        for k, value in state.items():
+            setattr(self, k, value)
         self._substep = make_scalar_substep(self.h, self.p)
+        self._bind()
 
     def reset(self, idx, v, omega) -> None:
         self.v, self.omega = float(np.asarray(v).flat[0]), float(np.asarray(omega).flat[0])
@@ -154,12 +167,14 @@ class ScalarPlant:
     def set_road(self, idx, road) -> None:
         self._mf = tuple(float(q) for q in np.asarray(road, dtype=float).reshape(-1, 4)[0])
         self._road = scalar_road(*self._mf, self.h, self.p)
+        self._bind()
 
     def set_torque(self, Tb: float) -> None:
         self.Tb = Tb
+        self._bind()
 
     def substep(self) -> tuple[float, float]:
-        self.v, self.omega = self._substep(self.v, self.omega, self.Tb, self._road)
+        self.v, self.omega = self.advance(self.v, self.omega)
         return self.v, self.omega
 
     def slip(self) -> float:
@@ -168,10 +183,11 @@ class ScalarPlant:
         vw = v if v >= wr else wr  # noqa: FURB136 (no builtin calls in the hot path)
         return (v - wr) / (vw if vw > SLIP_SPEED_FLOOR else SLIP_SPEED_FLOOR)  # noqa: FURB136
 
-    def friction(self) -> float:
-        """:func:`fricenv.plants.tire.magic_formula` of :meth:`slip`, in floats (tested against it)."""
+    def friction(self, slip: float | None = None) -> float:
+        """:func:`fricenv.plants.tire.magic_formula` of :meth:`slip` (or of ``slip`` if given), in floats (tested
+        against it)."""
         B, C, E, theta = self._mf
-        bs = B * self.slip()
+        bs = B * (self.slip() if slip is None else slip)
         return theta * math.sin(C * math.atan(bs - E * (bs - math.atan(bs))))
 
     def tire_force(self) -> float:
