@@ -36,7 +36,7 @@ from fricenv.envs.braking_core import (
     observation_layout,
     resolve_scenario,
 )
-from fricenv.envs.episode import EpisodeSteps, brake_torque
+from fricenv.envs.episode import EpisodeSteps, brake_torque, measure
 from fricenv.plants.braking_plant import BatchPlant, BrakingPlant, ScalarPlant
 from fricenv.plants.tire import MagicFormula
 
@@ -217,9 +217,9 @@ class BrakingSim(EpisodeSteps):
         self.terminated[idx] = False
         self.truncated[idx] = False
         noise = self._take_noise(idx)
-        self.meas[idx, 0] = self.omega[idx] + noise[:, 0]
-        self.meas[idx, 1] = noise[:, 1]
-        self.meas[idx, 2] = noise[:, 2]
+        w, v = self.omega[idx], self.v[idx]  # at rest in the ECU's view: no previous sample, no decelerations
+        for j, m in enumerate(measure(w, w, v, v, noise[:, 0], noise[:, 1], noise[:, 2], self._p.r, c.dt)):
+            self.meas[idx, j] = m
         if self.scalar or len(idx) == self.n:
             return self.observe()
         return self._observe_rows(idx)
