@@ -127,3 +127,16 @@ def test_full_flow_diagnoses_the_closed_loop_log():
     assert res["verdict"] == "brake_lag"
     assert res["augmented_effects"][0]["params"]["tau"] == pytest.approx(0.04, rel=0.15)
     assert abs(res["prediction_error_after"]) < abs(res["prediction_error_before"])
+
+
+def test_retune_picks_in_the_corrected_sim_and_measures_on_the_real_side():
+    """The retune choice is the corrected simulator's best value, and the real-side gain is measured, not assumed."""
+    res = policy_gap("rule-abs", "dry", LAG, report={"verdict": "brake_lag", "params": {"tau": 0.04}}, seeds=1,
+                     retune=True)
+    rt = res["retune"]
+    best = min(rt["grid"], key=lambda r: r["augmented"])
+    assert rt["best_augmented"] == best["value"]
+    assert rt["real_best_augmented_m"] == best["real"]
+    assert rt["real_gain_m"] == pytest.approx(res["distance_real_m"] - best["real"])
+    default = next(r for r in rt["grid"] if r["value"] == rt["default"])
+    assert default["real"] == pytest.approx(res["distance_real_m"])  # the default's row is the un-tuned run
