@@ -9,10 +9,10 @@ import pytest
 
 from agents.controllers import make_controller, rollout
 from agents.gap_policy import (
-    EffectBrakingEnv,
     UnknownPolicyError,
     closed_loop_log,
     effects_from_report,
+    make_env,
     policy_gap,
     resolve_policy,
     stopping_distances,
@@ -28,24 +28,27 @@ LAG = [make_effect("brake_lag", tau=0.04)]
 
 @pytest.mark.parametrize("name", ["rule-abs", "oracle-slip"])
 def test_nominal_closed_loop_is_braking_env(name):
-    """No effect, no free roll: the same trajectory as Braking-v0 for the same seed (same noise stream)."""
+    """No effect, no free roll: the closed loop is Braking-v0 itself, the same stop for the same seed."""
     pol = resolve_policy(name)
     env = BrakingEnv(road="wet", observation=pol.config_kwargs["observation"])
     ref = rollout(env, make_controller(name, env), seed=4).info["stopping_distance"]
     got = stopping_distances(pol, "wet", (), [4], free_roll=0.0)[0].distance
-    assert got == pytest.approx(ref, rel=1e-4)
+    assert got == ref
 
 
-def test_observation_layout_and_scaling():
-    env = EffectBrakingEnv("dry", LAG, free_roll=0.0)
+def test_closed_loop_env_is_braking_v0_with_effects():
+    """The gap tool's simulators are Braking-v0 with effects: the observation layout and the lagged torque."""
+    env = make_env(resolve_policy("rule-abs"), "dry", LAG)
+    assert isinstance(env.unwrapped, BrakingEnv)
     obs, _ = env.reset(seed=0)
     assert obs.shape == env.observation_space.shape and obs.dtype == np.float32
     assert obs[0] * 100.0 == pytest.approx(20.0 / 0.345, abs=3.0)  # measured wheel speed, free rolling
-    obs, *_ = env.step(np.array([0.0]))  # action 0 = half of t_max
+    obs, *_ = env.step(np.array([0.0], dtype=np.float32))  # action 0 = half of t_max
     assert obs[2] == pytest.approx(0.5)
-    assert env.sim.applied[0] < 0.5 * env.config.t_max  # the lag: the applied torque trails the command
+    applied = env.unwrapped.sim.plant.sims[0].applied[0]
+    assert 0.0 < applied < 0.5 * env.unwrapped.config.t_max  # the lag: the applied torque trails the command
     with pytest.raises(ValueError, match="finite"):
-        env.step(np.array([np.nan]))
+        env.step(np.array([np.nan], dtype=np.float32))
 
 
 def test_brake_lag_gap_and_true_effect_reproduces_real():
@@ -85,8 +88,9 @@ def test_report_mode_and_json_keys(tmp_path, capsys):
     assert rc == 0
     res = json.loads(out.read_text())
     for key in ("policy", "road", "effects", "verdict", "distance_nominal_m", "distance_real_m",
-                "distance_augmented_m", "prediction_error_before", "prediction_error_after"):
+                "distance_augmented_m", "prediction_error_before", "prediction_error_after", "ratio"):
         assert key in res
+    assert res["ratio"]["real"] == pytest.approx(res["distance_real_m"] / res["limit_distance_m"])
     assert res["verdict"] == "brake_lag" and res["effects"] == [{"effect": "brake_lag", "params": {"tau": 0.04}}]
     assert abs(res["prediction_error_after"]) < abs(res["prediction_error_before"])
     assert "augmented" in capsys.readouterr().out
@@ -123,3 +127,16 @@ def test_full_flow_diagnoses_the_closed_loop_log():
     assert res["verdict"] == "brake_lag"
     assert res["augmented_effects"][0]["params"]["tau"] == pytest.approx(0.04, rel=0.15)
     assert abs(res["prediction_error_after"]) < abs(res["prediction_error_before"])
+
+
+def test_retune_picks_in_the_corrected_sim_and_measures_on_the_real_side():
+    """The retune choice is the corrected simulator's best value, and the real-side gain is measured, not assumed."""
+    res = policy_gap("rule-abs", "dry", LAG, report={"verdict": "brake_lag", "params": {"tau": 0.04}}, seeds=1,
+                     retune=True)
+    rt = res["retune"]
+    best = min(rt["grid"], key=lambda r: r["augmented"])
+    assert rt["best_augmented"] == best["value"]
+    assert rt["real_best_augmented_m"] == best["real"]
+    assert rt["real_gain_m"] == pytest.approx(res["distance_real_m"] - best["real"])
+    default = next(r for r in rt["grid"] if r["value"] == rt["default"])
+    assert default["real"] == pytest.approx(res["distance_real_m"])  # the default's row is the un-tuned run

@@ -47,7 +47,7 @@ def run(args: argparse.Namespace) -> int:
     import time
 
     from agents.gap_policy import UnknownPolicyError, format_table, policy_gap
-    from fricenv.commands.gap_simulate import parse_effects
+    from fricenv.envs.effect_spec import parse_effect_args
     from fricenv.plants.tire import UnknownRoadError, get_road
     from fricenv.utils import write_json
 
@@ -56,7 +56,7 @@ def run(args: argparse.Namespace) -> int:
         return 2
 
     try:
-        effects = parse_effects(args.effect, args.param)
+        effects = parse_effect_args(args.effect, args.param)
         get_road(args.road)
     except (ValueError, UnknownRoadError) as exc:
         return fail(str(exc))

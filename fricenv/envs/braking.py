@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from typing import Any, ClassVar
 
 import gymnasium as gym
@@ -11,6 +12,8 @@ import numpy as np
 from gymnasium import spaces
 
 from fricenv.envs import braking_core as core
+from fricenv.envs.effect_plant import effect_plant_or_none
+from fricenv.envs.rendering import EpisodeHistory
 from fricenv.plants import quarter_car as qc
 from fricenv.plants.tire import MagicFormula
 
@@ -102,17 +105,22 @@ class BrakingEnv(gym.Env):
     ## Info
 
     Every step: ``v`` [m/s], ``slip``, ``mu``, ``distance`` [m], ``road``, ``torque`` [N m], ``locked``, ``time``
-    [s]. At episode end also ``stopping_distance`` [m] (NaN if truncated), ``limit_distance`` [m] (the physical
-    limit ``(v0^2 - v_stop^2) / (2 g mu_max)``, piecewise over a friction change), ``ratio`` (stopping / limit),
-    ``lock_seen``, ``stopped``, ``v0``.
+    [s]. At episode end also ``stopping_distance`` [m], ``limit_distance`` [m] (the physical limit
+    ``(v0^2 - v_stop^2) / (2 g mu_max)``, piecewise over a friction change), ``ratio`` (stopping / limit),
+    ``lock_seen``, ``stopped``, ``v0``. A truncated episode (no stop) has ``stopping_distance`` and ``ratio``
+    None: its final info holds no NaN, so two identical envs compare equal (Gymnasium's ``data_equivalence``).
 
     ## Arguments
 
     ``gymnasium.make("fricenv/Braking-v0", road="dry", v0=20.0, change_distance=None, action_mode="torque",
     observation="default", render_mode=None, t_max=2500.0, torque_rate_max=25000.0, v_stop=2.0, time_limit=60.0,
     physics_dt=0.002, lock_penalty=0.01, decel_noise_std=1.0, ax_noise_std=0.1, omega_noise_var=0.2,
-    params=PAPER_PARAMS)``. Unknown arguments raise ``TypeError``; unknown values raise ``ValueError`` listing
-    the valid ones. ``reset(options=...)`` accepts ``road``, ``v0`` and ``change_distance``.
+    params=PAPER_PARAMS, effects=None, effects_randomization=None)``. Unknown arguments raise ``TypeError``;
+    unknown values raise ``ValueError`` listing the valid ones. ``reset(options=...)`` accepts ``road``, ``v0`` and
+    ``change_distance``. Every id is registered with ``max_episode_steps = time_limit / dt`` (6000): ``gym.make``
+    adds a ``TimeLimit`` at the same step the env truncates itself, and wrappers that read the spec
+    (``TimeAwareObservation``, sb3-contrib's ``TimeFeatureWrapper``) see the true episode length; with a
+    ``time_limit`` above 60 s pass ``max_episode_steps`` too.
 
     ## Vectorized
 
@@ -120,8 +128,21 @@ class BrakingEnv(gym.Env):
     default for this id) builds :class:`fricenv.envs.braking_vector.BrakingVectorEnv`: all ``N`` cars step in one
     batched numpy call, with next-step autoreset (or ``autoreset_mode="SameStep"``/``"Disabled"``), per-env seeds
     (``seed + i``) and per-env roads (``road=[...]``), and the same trajectories as ``N`` single envs. For SB3,
-    :class:`fricenv.envs.sb3_vec.BrakingSB3VecEnv` is a ``VecEnv`` over it. Wrappers need
-    ``vectorization_mode="sync"``.
+    :class:`fricenv.envs.sb3_vec.BrakingSB3VecEnv` is a ``VecEnv`` over it. Keywords the native vector env does
+    not take (``estimator`` other than ``"none"``, ``render_mode``) make ``make_vec`` fall back to Gymnasium's
+    ``SyncVectorEnv`` over single envs, with a warning. Wrappers need ``vectorization_mode="sync"``.
+
+    ## The corrected simulator: effects
+
+    ``effects`` steps the quarter car with unmodelled effects (DESIGN.md effect names): a list of
+    ``{"effect": "brake_lag", "params": {"tau": 0.04}}`` entries, or the path of a ``gap diagnose`` report.json (its
+    ``effects`` list if present, else its ``verdict`` and ``params``; ``none``/``unexplained`` give no effects).
+    ``effects_randomization={"brake_lag": {"tau": (0.02, 0.08)}, ...}`` draws parameters per episode from
+    ``self.np_random`` (after the scenario's draws) for robust training; a parameter without a range keeps its value
+    from ``effects``. ``effects=[]`` (the default None too) is exactly the plain env. Unknown effect or parameter
+    names raise :class:`fricenv.envs.effect_spec.EffectSpecError` (a ``ValueError``) naming them. The plant is then
+    :class:`fricenv.envs.effect_plant.EffectPlant` (slower: numpy per substep). ``mu_change``'s ``t_change`` counts
+    from the episode start; ``radius_error`` moves free rolling, slip and the lock test to ``r_eff``.
 
     ## Version History
 
@@ -148,6 +169,8 @@ class BrakingEnv(gym.Env):
         ax_noise_std: float = core.AX_NOISE_STD,
         omega_noise_var: float = core.OMEGA_NOISE_VAR,
         params: qc.QuarterCarParams = qc.PAPER_PARAMS,
+        effects: Any = None,
+        effects_randomization: Mapping[str, Any] | None = None,
     ):
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"unknown render_mode {render_mode!r}; valid: "
@@ -158,8 +181,9 @@ class BrakingEnv(gym.Env):
             time_limit=time_limit, omega_noise_var=omega_noise_var, decel_noise_std=decel_noise_std,
             ax_noise_std=ax_noise_std, lock_penalty=lock_penalty, action_mode=action_mode,
             observation=observation, params=params)
+        plant = effect_plant_or_none(1, self.config, effects, effects_randomization)
         self.sim = core.BrakingSim(1, self.config, road=road, v0=v0, change_distance=change_distance,
-                                   scalar=True)
+                                   scalar=plant is None, plant=plant)
         self.dt = self.config.dt
         self.observation_fields = self.sim.layout
         self.observation_names = tuple(f.name for f in self.observation_fields)
@@ -169,8 +193,7 @@ class BrakingEnv(gym.Env):
             high=np.array([f.high for f in self.observation_fields], dtype=np.float32),
             dtype=np.float32,
         )
-        self._history: dict[str, list[float]] | None = None
-        self._renderer = None
+        self._history: EpisodeHistory | None = None
         self._v_render_max = float(np.max(v0))
 
     # ------------------------------------------------------------------ Gymnasium API
@@ -181,8 +204,10 @@ class BrakingEnv(gym.Env):
                              f"got {type(options).__name__}")
         obs = self.sim.reset_cars([0], [self.np_random], options)
         if self.render_mode is not None:
-            self._history = {k: [] for k in ("t", "v", "wheel", "slip", "torque")}
-            self._record()
+            if self._history is None:
+                self._history = EpisodeHistory(self.config.t_max, self._v_render_max)
+            self._history.reset()
+            self._history.record(self.sim)
         return obs[0].copy(), self.sim.car_info(0)
 
     def step(self, action):
@@ -198,7 +223,7 @@ class BrakingEnv(gym.Env):
         obs, reward, terminated, truncated = self.sim.step(a)
         term, trunc = terminated.item(0), truncated.item(0)
         if self.render_mode is not None:
-            self._record()
+            self._history.record(self.sim)
         return obs[0].copy(), reward.item(0), term, trunc, self.sim.car_info(0, final=term or trunc)
 
     def render(self):
@@ -207,16 +232,11 @@ class BrakingEnv(gym.Env):
             return None
         if self._history is None:
             raise gym.error.ResetNeeded("call reset() before render()")
-        if self._renderer is None:
-            from fricenv.envs.rendering import BrakingRenderer
-
-            self._renderer = BrakingRenderer(self.config.t_max, self._v_render_max)
-        h = self._history
-        return self._renderer.render(h["t"], h["v"], h["wheel"], h["slip"], h["torque"],
-                                     title=f"road: {self.sim.names[0]}")
+        return self._history.frame()
 
     def close(self):
-        self._renderer = None
+        if self._history is not None:
+            self._history.close()
 
     # ------------------------------------------------------------------ helpers
     def decode_observation(self, obs) -> dict[str, float]:
@@ -230,16 +250,3 @@ class BrakingEnv(gym.Env):
         if sc is None:
             return None
         return sc.road_b if self.sim.switched[0] else sc.road_a
-
-    def _record(self):
-        s, h = self.sim, self._history
-        h["t"].append(float(s.t[0] * self.dt))
-        h["v"].append(float(s.v[0]))
-        h["wheel"].append(float(s.omega[0] * self.config.params.r))
-        h["slip"].append(float(s.slip[0]))
-        h["torque"].append(float(s.torque[0]))
-
-    def __getstate__(self):
-        state = self.__dict__.copy()
-        state["_renderer"] = None  # a matplotlib figure does not need to travel
-        return state

@@ -30,7 +30,9 @@ mode                       behaviour
 Info (Gymnasium's dict of arrays, each key ``k`` with a boolean mask ``_k``): every step and reset carries, for
 all sub-envs, ``v``, ``slip``, ``mu``, ``distance``, ``road`` (object array of names), ``torque``, ``locked``,
 ``time``; when a sub-env's episode ends it also carries ``stopping_distance``, ``limit_distance``, ``ratio``,
-``lock_seen``, ``stopped`` and ``v0`` (masked to the sub-envs that ended), the keys of the single env's info.
+``lock_seen``, ``stopped`` and ``v0`` (masked to the sub-envs that ended), the keys of the single env's info;
+``stopping_distance`` and ``ratio`` are masked to the sub-envs that stopped (a truncated one has them left out,
+where a single env has None: no NaN in any info).
 
 Per-env roads: ``road`` may be one road spec for all sub-envs or a sequence of ``num_envs`` specs (names or
 :class:`~fricenv.plants.tire.MagicFormula`); ``reset(options={"road": [...]})`` does the same for one reset.
@@ -49,6 +51,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from fricenv.envs import braking_core as core
+from fricenv.envs.effect_plant import effect_plant_or_none
 from fricenv.plants.tire import MagicFormula
 
 __all__ = ["CONFIG_KWARGS", "FINAL_INFO_KEYS", "STEP_INFO_KEYS", "BrakingVectorEnv"]
@@ -57,6 +60,7 @@ __all__ = ["CONFIG_KWARGS", "FINAL_INFO_KEYS", "STEP_INFO_KEYS", "BrakingVectorE
 CONFIG_KWARGS = tuple(f.name for f in dataclasses.fields(core.BrakingConfig) if f.name != "dt")
 STEP_INFO_KEYS = ("v", "slip", "mu", "distance", "road", "torque", "locked", "time")
 FINAL_INFO_KEYS = ("stopping_distance", "limit_distance", "ratio", "lock_seen", "stopped", "v0")
+STOP_KEYS = ("stopping_distance", "ratio")  # present (mask True) only for sub-envs that stopped
 RESET_MASK_KEY = "reset_mask"
 
 
@@ -74,9 +78,11 @@ class BrakingVectorEnv(VectorEnv):
     :param change_distance: friction-change distance [m] or range, for all sub-envs.
     :param autoreset_mode: an :class:`gymnasium.vector.AutoresetMode` or its value (``"NextStep"``,
         ``"SameStep"``, ``"Disabled"``).
-    :param max_episode_steps: optional truncation in control steps (overrides ``time_limit``); passed by
-        ``make_vec`` when the registration has one.
+    :param max_episode_steps: optional truncation in control steps (the shorter of it and ``time_limit`` holds, as
+        for a single env in ``gym.make``'s ``TimeLimit``); passed by ``make_vec`` from the registration.
     :param render_mode: only None (the vector env does not render; use single envs for videos).
+    :param effects: effects of every sub-env's plant (see ``BrakingEnv``; None or [] is the plain env).
+    :param effects_randomization: per-episode effect parameter ranges, drawn from each sub-env's generator.
     :param config_kwargs: ``BrakingConfig`` fields, the same keyword arguments as ``BrakingEnv``
         (``action_mode``, ``observation``, ``t_max``, ``physics_dt``, ...).
     """
@@ -87,14 +93,15 @@ class BrakingVectorEnv(VectorEnv):
                  v0: float | tuple[float, float] = core.V0_DEFAULT,
                  change_distance: float | tuple[float, float] | None = None,
                  autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
-                 max_episode_steps: int | None = None, render_mode: str | None = None, **config_kwargs):
+                 max_episode_steps: int | None = None, render_mode: str | None = None, effects: Any = None,
+                 effects_randomization: dict[str, Any] | None = None, **config_kwargs):
         if not isinstance(num_envs, (int, np.integer)) or isinstance(num_envs, bool) or num_envs < 1:
             raise ValueError(f"num_envs must be an int >= 1, got {num_envs!r}")
         unknown = sorted(set(config_kwargs) - set(CONFIG_KWARGS))
         if unknown:
             raise TypeError(f"unknown argument(s) {unknown} for BrakingVectorEnv; valid: "
                             f"num_envs, road, v0, change_distance, autoreset_mode, max_episode_steps, "
-                            f"render_mode, {', '.join(CONFIG_KWARGS)}")
+                            f"render_mode, effects, effects_randomization, {', '.join(CONFIG_KWARGS)}")
         if render_mode is not None:
             raise ValueError(f"BrakingVectorEnv does not render (render_mode must be None, got {render_mode!r}); "
                              f"use single envs with render_mode='rgb_array'")
@@ -106,13 +113,16 @@ class BrakingVectorEnv(VectorEnv):
         if max_episode_steps is not None:
             if not isinstance(max_episode_steps, (int, np.integer)) or max_episode_steps < 1:
                 raise ValueError(f"max_episode_steps must be an int >= 1 or None, got {max_episode_steps!r}")
-            config_kwargs["time_limit"] = int(max_episode_steps) * core.CONTROL_DT
+            # The registration's limit (6000 steps = the default 60 s) never lengthens a shorter time_limit.
+            limit = int(max_episode_steps) * core.CONTROL_DT
+            config_kwargs["time_limit"] = min(config_kwargs.get("time_limit", limit), limit)
         self.num_envs = n = int(num_envs)
         self.config = core.BrakingConfig(**config_kwargs)
         self._env_roads = self._per_env_roads(road, "road")
         first_road = self._env_roads[0] if self._env_roads is not None else road
+        plant = effect_plant_or_none(n, self.config, effects, effects_randomization)
         self.sim = core.BrakingSim(n, self.config, road=first_road, v0=v0, change_distance=change_distance,
-                                   scalar=n == 1)  # one car: the Python-float path
+                                   scalar=n == 1 and plant is None, plant=plant)  # one car: the Python-float path
         if self._env_roads is not None:  # validate every per-env road now, not at the first reset
             for spec in self._env_roads:
                 core.resolve_scenario(spec, v0, change_distance, self.config.v_stop, np.random.default_rng(0))
@@ -174,11 +184,16 @@ class BrakingVectorEnv(VectorEnv):
             infos["_" + key] = mask
         return infos
 
-    def _final_values(self) -> tuple[np.ndarray, ...]:
-        """Episode figures of every car (meaningful where the episode ended), in FINAL_INFO_KEYS order."""
+    def _add_final_info(self, infos: dict[str, Any], done: np.ndarray) -> None:
+        """Episode figures of the cars that ended (``done``), FINAL_INFO_KEYS with their masks. ``stopping_distance``
+        and ``ratio`` are masked to the cars that stopped: a truncated car has them left out (value 0, mask False)
+        instead of NaN, as a single env's final info has them None."""
         s = self.sim
-        return (s.stop_distance.copy(), s.limit.copy(), s.stop_distance / s.limit, s.lock_seen.copy(),
-                s.stopped.copy(), s.v0.copy())
+        stopped = done & s.stopped
+        values = (np.where(stopped, s.stop_distance, 0.0), s.limit.copy(), np.where(stopped, s.ratio, 0.0),
+                  s.lock_seen.copy(), s.stopped.copy(), s.v0.copy())
+        for key, value in zip(FINAL_INFO_KEYS, values):
+            infos[key], infos["_" + key] = value, (stopped if key in STOP_KEYS else done).copy()
 
     # ------------------------------------------------------------------ Gymnasium API
     def reset(self, *, seed: int | Sequence[int | None] | None = None, options: dict[str, Any] | None = None):
@@ -255,8 +270,7 @@ class BrakingVectorEnv(VectorEnv):
             for i in idx:
                 final_obs[i] = obs[i].copy()
             final_info = self._infos(done)
-            for key, value in zip(FINAL_INFO_KEYS, self._final_values()):
-                final_info[key], final_info["_" + key] = value, done.copy()
+            self._add_final_info(final_info, done)
             final = (final_obs, final_info)
             self._reset_cars(idx)
         elif pending is not None and pending.size:
@@ -267,8 +281,7 @@ class BrakingVectorEnv(VectorEnv):
             done[pending] = False
         infos = self._infos()
         if mode is not AutoresetMode.SAME_STEP and done.any():
-            for key, value in zip(FINAL_INFO_KEYS, self._final_values()):
-                infos[key], infos["_" + key] = value, done.copy()
+            self._add_final_info(infos, done)
         if final is not None:
             infos["final_obs"], infos["_final_obs"] = final[0], done.copy()
             infos["final_info"], infos["_final_info"] = final[1], done.copy()

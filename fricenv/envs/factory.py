@@ -26,6 +26,7 @@ from fricenv.envs.estimator_observation import (
 __all__ = [
     "PAYLOAD_ESTIMATOR_NAMES",
     "make_braking",
+    "make_braking_vector",
     "make_payload",
 ]
 
@@ -44,6 +45,36 @@ def make_braking(estimator: str = "none", **env_kwargs) -> gym.Env:
 
 
 make_braking.metadata = BrakingEnv.metadata  # lets gymnasium.make validate render_mode
+
+
+def make_braking_vector(num_envs: int = 1, estimator: str = "none", render_mode: str | None = None,
+                        max_episode_steps: int | None = None, **env_kwargs):
+    """Vector entry point of every ``Braking`` id: the native
+    :class:`~fricenv.envs.braking_vector.BrakingVectorEnv`, or, for the keywords it does not take (an
+    ``estimator`` other than ``none``, a ``render_mode``), Gymnasium's ``SyncVectorEnv`` over
+    :func:`make_braking` envs (each in a ``TimeLimit`` of ``max_episode_steps``), with a warning.
+
+    :param num_envs: number of sub-envs.
+    :param estimator: as :func:`make_braking`.
+    :param render_mode: None (native) or ``rgb_array`` (sync fallback; ``render()`` gives each sub-env's frame).
+    :param max_episode_steps: truncation in control steps (``make_vec`` passes the registration's).
+    :param env_kwargs: the single env's keyword arguments.
+    """
+    from fricenv.envs.braking_vector import BrakingVectorEnv
+
+    check_estimator_name(estimator, ESTIMATOR_NAMES)
+    if estimator == "none" and render_mode is None:
+        return BrakingVectorEnv(num_envs, max_episode_steps=max_episode_steps, **env_kwargs)
+    if "autoreset_mode" in env_kwargs:
+        raise TypeError("autoreset_mode is not available with the sync fallback (estimator or render_mode given)")
+    gym.logger.warn(f"fricenv/Braking vector env: estimator={estimator!r}, render_mode={render_mode!r} are not "
+                    f"supported by the native vector env; using gymnasium.vector.SyncVectorEnv over single envs")
+
+    def one() -> gym.Env:
+        env = make_braking(estimator, render_mode=render_mode, **env_kwargs)
+        return gym.wrappers.TimeLimit(env, max_episode_steps) if max_episode_steps is not None else env
+
+    return gym.vector.SyncVectorEnv([one for _ in range(num_envs)])
 
 
 def make_payload(estimator: str | bool = "none", **env_kwargs) -> gym.Env:

@@ -1,16 +1,17 @@
 """Headless matplotlib (Agg) renderer of a braking episode: speed, slip and brake torque so far.
 
-Imported lazily by :class:`fricenv.envs.braking.BrakingEnv` only when ``render_mode="rgb_array"``, so that the env
-itself never imports matplotlib.
+:class:`EpisodeHistory` records one car of a :class:`~fricenv.envs.braking_sim.BrakingSim` per step and draws it;
+matplotlib is imported only at the first frame, so an env that never renders never imports it. Used by
+:class:`fricenv.envs.braking.BrakingEnv` and :class:`fricenv.envs.sb3_vec.BrakingSB3VecEnv` (its first sub-env).
 """
 
 from __future__ import annotations
 
-import numpy as np
-from matplotlib.backends.backend_agg import FigureCanvasAgg
-from matplotlib.figure import Figure
+from typing import Any
 
-__all__ = ["BrakingRenderer"]
+import numpy as np
+
+__all__ = ["BrakingRenderer", "EpisodeHistory"]
 
 FIG_SIZE = (6.4, 4.8)  # [inch]
 DPI = 80  # 512 x 384 pixels
@@ -24,6 +25,9 @@ class BrakingRenderer:
     """
 
     def __init__(self, t_max: float, v_max: float):
+        from matplotlib.backends.backend_agg import FigureCanvasAgg
+        from matplotlib.figure import Figure
+
         self.fig = Figure(figsize=FIG_SIZE, dpi=DPI)
         self.canvas = FigureCanvasAgg(self.fig)
         ax_v, ax_s, ax_t = self.fig.subplots(3, 1, sharex=True)
@@ -62,3 +66,46 @@ class BrakingRenderer:
         self.title.set_text(title)
         self.canvas.draw()
         return np.asarray(self.canvas.buffer_rgba())[..., :3].copy()
+
+
+class EpisodeHistory:
+    """The rendered quantities of one car of a sim over its episode so far, and its frames.
+
+    :param t_max: brake torque at full command [N m].
+    :param v_max: upper speed of the speed panel [m/s].
+    """
+
+    KEYS = ("t", "v", "wheel", "slip", "torque")
+
+    def __init__(self, t_max: float, v_max: float):
+        self.t_max, self.v_max = float(t_max), float(v_max)
+        self.rows: dict[str, list[float]] = {k: [] for k in self.KEYS}
+        self._renderer: BrakingRenderer | None = None
+        self.title = ""
+
+    def reset(self) -> None:
+        self.rows = {k: [] for k in self.KEYS}
+
+    def record(self, sim: Any, i: int = 0) -> None:
+        """Append car ``i``'s state now (time, speed, wheel speed omega r, slip, torque)."""
+        values = (float(sim.t[i] * sim.config.dt), float(sim.v[i]), float(sim.omega[i] * sim.config.params.r),
+                  float(sim.slip[i]), float(sim.torque[i]))
+        for key, value in zip(self.KEYS, values):
+            self.rows[key].append(value)
+        self.title = f"road: {sim.names[i]}"
+
+    def frame(self) -> np.ndarray:
+        """The (H, W, 3) uint8 frame of the episode so far."""
+        if self._renderer is None:
+            self._renderer = BrakingRenderer(self.t_max, self.v_max)
+        h = self.rows
+        return self._renderer.render(h["t"], h["v"], h["wheel"], h["slip"], h["torque"], title=self.title)
+
+    def close(self) -> None:
+        """Drop the figure (a new one is made at the next frame)."""
+        self._renderer = None
+
+    def __getstate__(self) -> dict[str, Any]:
+        state = self.__dict__.copy()
+        state["_renderer"] = None  # a matplotlib figure does not need to travel
+        return state

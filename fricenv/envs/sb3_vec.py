@@ -12,18 +12,26 @@ Infos are kept cheap: by default a sub-env's info dict is empty except at episod
 env's final info (``stopping_distance``, ``limit_distance``, ``ratio``, ``lock_seen``, ``v``, ``road``, ...);
 ``full_info=True`` fills every step's dicts with the truth keys. Episode returns for SB3's logger come from
 ``VecMonitor``: :func:`make_sb3_vec_env` wraps it.
+
+Like SB3's own vec envs it has a ``spec`` (``fricenv/Braking-v0``'s registration with the given keyword
+arguments) and, with ``render_mode="rgb_array"``, ``render()`` draws its first sub-env's episode (the single env's
+frame), so SB3's ``VecVideoRecorder`` can record it.
 """
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 from typing import Any
 
+import gymnasium as gym
 import numpy as np
 from gymnasium.vector import AutoresetMode
 from stable_baselines3.common.vec_env import VecEnv, VecMonitor
 
+from fricenv.envs.braking import RENDER_FPS
 from fricenv.envs.braking_vector import FINAL_INFO_KEYS, STEP_INFO_KEYS, BrakingVectorEnv
+from fricenv.envs.rendering import EpisodeHistory
 
 __all__ = ["BrakingSB3VecEnv", "make_sb3_vec_env"]
 
@@ -39,11 +47,14 @@ class BrakingSB3VecEnv(VecEnv):
     :param num_envs: number of sub-envs (ignored when ``venv`` is given).
     :param venv: an existing :class:`BrakingVectorEnv` in ``SAME_STEP`` autoreset mode (else one is built).
     :param full_info: fill every step's info dicts with the truth keys (costs a dict per sub-env per step).
+    :param render_mode: None or ``"rgb_array"`` (``render()`` draws the first sub-env).
     :param env_kwargs: keyword arguments of :class:`BrakingVectorEnv` (``road``, ``v0``, ``observation``, ...).
     """
 
     def __init__(self, num_envs: int = 1, *, venv: BrakingVectorEnv | None = None, full_info: bool = False,
-                 **env_kwargs):
+                 render_mode: str | None = None, **env_kwargs):
+        if render_mode not in (None, "rgb_array"):
+            raise ValueError(f"unknown render_mode {render_mode!r}; valid: rgb_array or None")
         if venv is None:
             if "autoreset_mode" in env_kwargs:
                 raise TypeError("autoreset_mode is fixed to SAME_STEP by the SB3 adapter (SB3's convention)")
@@ -59,6 +70,12 @@ class BrakingSB3VecEnv(VecEnv):
         self.full_info = bool(full_info)
         self._actions: np.ndarray | None = None
         super().__init__(venv.num_envs, venv.single_observation_space, venv.single_action_space)
+        self.render_mode = render_mode
+        self.metadata = {"render_modes": ["rgb_array"], "render_fps": RENDER_FPS}
+        spec = gym.spec("fricenv/Braking-v0")
+        self.spec = dataclasses.replace(spec, kwargs={**spec.kwargs, **env_kwargs})
+        v_max = float(np.max(env_kwargs.get("v0", venv.sim.defaults["v0"])))
+        self._history = EpisodeHistory(venv.config.t_max, v_max) if render_mode else None
 
     # ------------------------------------------------------------------ VecEnv API
     def reset(self):
@@ -68,6 +85,9 @@ class BrakingSB3VecEnv(VecEnv):
         obs, _ = self.venv.reset(seed=seeds, options=options)
         self._reset_seeds()
         self._reset_options()
+        if self._history is not None:
+            self._history.reset()
+            self._history.record(self.venv.sim, 0)
         return obs
 
     def _merged_options(self) -> dict[str, Any] | None:
@@ -97,6 +117,10 @@ class BrakingSB3VecEnv(VecEnv):
         obs, rewards, terminated, truncated, infos = self.venv.step(self._actions)
         self._actions = None
         dones = terminated | truncated
+        if self._history is not None:  # the first sub-env's episode (restarted by its autoreset)
+            if dones[0]:
+                self._history.reset()
+            self._history.record(self.venv.sim, 0)
         n = self.num_envs
         if self.full_info:
             cols = [infos[k] for k in STEP_INFO_KEYS]
@@ -107,7 +131,7 @@ class BrakingSB3VecEnv(VecEnv):
             final_obs, final_info = infos["final_obs"], infos["final_info"]
             keys = STEP_INFO_KEYS + FINAL_INFO_KEYS
             for i in np.flatnonzero(dones):
-                d = {k: _item(final_info[k][i]) for k in keys}
+                d = {k: _item(final_info[k][i]) if final_info["_" + k][i] else None for k in keys}
                 d["terminal_observation"] = final_obs[i]
                 d["TimeLimit.truncated"] = bool(truncated[i] and not terminated[i])
                 out[i] = d
@@ -137,7 +161,16 @@ class BrakingSB3VecEnv(VecEnv):
         return [False for _ in self._indices(indices)]
 
     def get_images(self) -> Sequence[np.ndarray | None]:
-        return [None for _ in range(self.num_envs)]
+        """The first sub-env's frame (None for the others: they share one simulator and are not drawn)."""
+        first = self._history.frame() if self._history is not None else None
+        return [first] + [None] * (self.num_envs - 1)
+
+    def render(self, mode: str | None = None) -> np.ndarray | None:
+        """The first sub-env's frame (``render_mode="rgb_array"``), as SB3's ``VecVideoRecorder`` records it."""
+        if (mode or self.render_mode) != "rgb_array" or self._history is None:
+            gym.logger.warn("BrakingSB3VecEnv renders only with render_mode='rgb_array'")
+            return None
+        return self._history.frame()
 
 
 def make_sb3_vec_env(num_envs: int, *, monitor: bool = True, seed: int | None = None,

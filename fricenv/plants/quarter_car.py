@@ -37,6 +37,7 @@ from fricenv.plants.tire import (
 
 __all__ = [
     "PAPER_PARAMS",
+    "ROS2_GAMMA",
     "QuarterCarParams",
     "braking_invariant_broken",
     "derivatives",
@@ -51,7 +52,8 @@ __all__ = [
 ]
 
 # ROS2 constant: gamma = 1 + 1/sqrt(2) makes the method L-stable and of order 2.
-_ROS2_GAMMA = 1.0 + 1.0 / np.sqrt(2.0)
+ROS2_GAMMA = 1.0 + 1.0 / np.sqrt(2.0)
+_ROS2_GAMMA = ROS2_GAMMA  # old private name
 REFINE_PARTS = 8  # a substep that breaks the braking invariant is redone in this many parts ...
 REFINE_MIN_STEP = 5e-4  # ... recursively, while the step is longer than this [s] (one level from 2 ms: deeper
 # levels cost up to 512 steps per substep in stiff fits and changed no tested result)
@@ -179,7 +181,7 @@ def step(v, omega, Tb, road, dt: float, p: QuarterCarParams = PAPER_PARAMS, subs
         raise ValueError(f"substeps must be >= 1, got {substeps}")
     road = np.asarray(road, dtype=float)
     h = dt / substeps
-    hg = h * _ROS2_GAMMA
+    hg = h * ROS2_GAMMA
     v = np.asarray(v, dtype=float)
     omega = np.asarray(omega, dtype=float)
     for _ in range(substeps):

@@ -1,0 +1,126 @@
+"""The quarter car with unmodelled effects as a :class:`~fricenv.plants.braking_plant.BrakingPlant`: the corrected
+simulator under the braking episode (``gymnasium.make("fricenv/Braking-v0", effects=...)``).
+
+Each car is one :class:`fricenv.effects.quarter_car.EffectSimulator` (its public API: ``ModelBatch.from_effects``,
+``reset``, ``step``, ``tire_force``, ``accel``) run with a sample time of one physics substep and one substep per
+sample, so the episode sees every substep (the stop and a friction change are located inside it, as on the nominal
+plant). The actuator effects are exact over a zero-order-held substep (the lag's exact solution, the delay's exact
+average), so this equals the effect simulator's own 10 ms samples of 5 substeps. A car's simulator is rebuilt at
+each of its episodes, with the episode's effects (fixed, or drawn from the car's generator by an
+:class:`~fricenv.envs.effect_spec.EffectRandomization`).
+
+Conventions: time 0 of ``mu_change``'s ``t_change`` is the episode start; the plant's ``r_eff`` (``radius_error``)
+sets free rolling at reset, the slip and the lock test, while the ECU's wheel deceleration keeps the nominal radius.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from fricenv.effects.quarter_car import EffectSimulator, ModelBatch
+from fricenv.envs.effect_spec import EffectRandomization, parse_randomization, resolve_effects
+from fricenv.plants import quarter_car as qc
+from fricenv.plants.tire import DRY, longitudinal_slip
+
+__all__ = ["EffectPlant", "effect_plant_or_none"]
+
+
+class EffectPlant:
+    """``n`` quarter cars with effects (see the module docstring); members of
+    :class:`~fricenv.plants.braking_plant.BrakingPlant` on arrays of shape (n,).
+
+    :param n: number of cars.
+    :param h: physics substep [s].
+    :param p: nominal quarter-car parameters.
+    :param effects: effect specs of every car (:func:`fricenv.effects.quarter_car.make_effect`).
+    :param randomization: per-episode draws (replace ``effects`` when given; built with the fixed ones).
+    :param max_substeps: substeps of the longest episode (the command history's length).
+    """
+
+    def __init__(self, n: int, h: float, p: qc.QuarterCarParams = qc.PAPER_PARAMS, effects: Sequence = (),
+                 randomization: EffectRandomization | None = None, max_substeps: int = 30000):
+        self.n, self.h, self.p = int(n), float(h), p
+        self.fixed, self.randomization = tuple(effects), randomization
+        self.effects: list[tuple] = [self.fixed] * self.n  # the effects of each car's current episode
+        self.sims: list[EffectSimulator | None] = [None] * self.n
+        self._samples = int(max_substeps) + 2
+        self.road = np.tile(DRY.as_array(), (self.n, 1))
+        self.r_eff = np.full(self.n, p.r)
+        self.v, self.omega, self.Tb = np.zeros(self.n), np.zeros(self.n), np.zeros(self.n)
+
+    def new_episode(self, i: int, rng: np.random.Generator) -> None:
+        """Car ``i``'s effects for its next episode (drawn from ``rng`` if randomised) and a fresh simulator."""
+        effects = self.randomization.draw(rng) if self.randomization is not None else self.fixed
+        batch = ModelBatch.from_effects(self.road[i], effects, self.p)
+        self.effects[i] = effects
+        self.sims[i] = EffectSimulator(batch, self.h, self._samples, self.p, 1, t0=0.0)
+        self.r_eff[i] = float(batch.r_eff[0])
+
+    def _sim(self, i: int) -> EffectSimulator:
+        sim = self.sims[i]
+        if sim is None:
+            raise RuntimeError("EffectPlant: reset the car (new_episode) before stepping it")
+        return sim
+
+    def reset(self, idx, v, omega) -> None:
+        """Set the speeds of cars ``idx`` (lag state 0, transient slip at the slip of the state)."""
+        idx = np.atleast_1d(np.arange(self.n)[idx])
+        v, omega = np.broadcast_to(v, idx.shape), np.broadcast_to(omega, idx.shape)
+        for k, i in enumerate(idx):
+            self._sim(i).reset(np.array([v[k]]), np.array([omega[k]]))
+        self.v, self.omega = self.v.copy(), self.omega.copy()
+        self.v[idx], self.omega[idx] = v, omega
+
+    def set_road(self, idx, road) -> None:
+        """Road rows (B, C, E, theta) of cars ``idx`` (a friction change at a distance switches it)."""
+        self.road[idx] = road
+        for i in np.atleast_1d(np.arange(self.n)[idx]):
+            if self.sims[i] is not None:
+                self.sims[i].batch.road[0] = self.road[i]
+
+    def set_torque(self, Tb) -> None:
+        """Commanded brake torques [N m]; the effects act on them (lag, delay, gain)."""
+        self.Tb = np.array(np.broadcast_to(np.asarray(Tb, dtype=float), (self.n,)))
+
+    def substep(self) -> tuple[np.ndarray, np.ndarray]:
+        """One substep of every car; new state arrays."""
+        v, w = np.empty(self.n), np.empty(self.n)
+        for i in range(self.n):
+            vi, wi = self._sim(i).step(self.Tb[i:i + 1])
+            v[i], w[i] = vi[0], wi[0]
+        self.v, self.omega = v, w
+        return v, w
+
+    def slip(self) -> np.ndarray:
+        return longitudinal_slip(self.v, self.omega, self.r_eff)
+
+    def tire_force(self) -> np.ndarray:
+        """F_x [N] of every car (through the transient slip with ``relaxation_length``, the changed theta...)."""
+        return np.array([self._sim(i).tire_force()[0] for i in range(self.n)])
+
+    def friction(self, slip: np.ndarray | None = None) -> np.ndarray:
+        """F_x / F_z (``slip`` is not needed: with ``relaxation_length`` the force follows the transient slip)."""
+        return self.tire_force() / self.p.Fz
+
+    def accel(self) -> np.ndarray:
+        return np.array([self._sim(i).accel()[0] for i in range(self.n)])
+
+
+def effect_plant_or_none(n: int, config, effects=None, effects_randomization=None) -> EffectPlant | None:
+    """The plant for a braking env's ``effects``/``effects_randomization`` arguments: None (the nominal plant,
+    exactly the plain env) when both give no effect, else an :class:`EffectPlant`.
+
+    :param n: number of cars.
+    :param config: the env's :class:`~fricenv.envs.braking_core.BrakingConfig`.
+    :param effects: see :func:`fricenv.envs.effect_spec.resolve_effects`.
+    :param effects_randomization: see :func:`fricenv.envs.effect_spec.parse_randomization`.
+    :raises fricenv.envs.effect_spec.EffectSpecError: unknown or malformed effects.
+    """
+    fixed = resolve_effects(effects)
+    randomization = parse_randomization(effects_randomization, fixed)
+    if not fixed and randomization is None:
+        return None
+    return EffectPlant(n, config.dt / config.substeps, config.params, fixed, randomization,
+                       config.max_steps * config.substeps)
