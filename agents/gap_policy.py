@@ -33,19 +33,16 @@ of the free roll (the env's episode start), and the stopping distance is counted
 
 from __future__ import annotations
 
-import json
 import math
 import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, fields
-from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
 
 from agents.controllers import (
-    CONTROLLERS,
     ControlSpec,
     FullBraking,
     OracleSlipController,
@@ -55,6 +52,7 @@ from agents.controllers import (
     SlipController,
     slip_reference,
 )
+from agents.policy_spec import PolicySpecError, parse_policy_spec
 from fricenv.effects.quarter_car import DEFAULT_SUBSTEPS, EFFECTS, effect_params, make_effect
 from fricenv.envs import braking_core as core
 from fricenv.envs.effect_spec import describe_effects, effects_from_report
@@ -80,7 +78,6 @@ DEFAULT_SEEDS = 10  # noise seeds averaged over: rule-abs under an actuator effe
 V0 = core.V0_DEFAULT  # initial speed [m/s], the ABS figure's 20 m/s
 LOG_MAX_TIME = 8.0  # longest closed-loop log handed to the diagnosis [s] (snow from 20 m/s takes ~7 s)
 LOG_STREAM = 0x6C6F67  # seed-sequence key of the log-only noise (v, a_x columns, free-roll wheel speed)
-PIPELINE_PREFIX = "pipeline:"
 # Retune grids: controller -> (parameter, values). rule-abs: the excess wheel deceleration that starts a dump from
 # hold [m/s^2] (under a brake lag it decides how deep the wheel goes past the peak); slip-pi: the slip reference as
 # a multiple of the road's peak slip [-].
@@ -90,8 +87,7 @@ RETUNE: dict[str, tuple[str, tuple[float, ...]]] = {
 }
 
 
-class UnknownPolicyError(ValueError):
-    """A policy spec that is neither a controller, an estimator pipeline nor a training run directory."""
+UnknownPolicyError = PolicySpecError  # the one policy-spec error (kept under its old name)
 
 
 # --------------------------------------------------------------------------------------------- policies
@@ -143,41 +139,22 @@ class GapPolicy:
         return FullBraking(spec)
 
 
-def _valid_forms() -> str:
-    return (f"valid: {', '.join(CONTROLLERS)}, {PIPELINE_PREFIX}<estimator>, or a training run directory "
-            f"(with train.json)")
-
-
 def resolve_policy(spec: str) -> GapPolicy:
-    """A policy from its spec: a controller name, ``pipeline:<estimator>`` or a saved SB3 run directory.
+    """A policy from its spec (:func:`agents.policy_spec.parse_policy_spec`: a controller name,
+    ``pipeline:<estimator>`` or a saved SB3 run directory).
 
-    :raises UnknownPolicyError: anything else (lists the valid controllers and forms).
+    :raises UnknownPolicyError: anything else (lists the valid forms).
     """
-    if spec in CONTROLLERS:
-        observation = "oracle" if spec in ("slip-pi", "oracle-slip") else "default"
-        return GapPolicy(spec, "controller", spec, config_kwargs={"observation": observation})
-    if spec.startswith(PIPELINE_PREFIX):
-        from fricenv.envs.estimator_observation import ESTIMATOR_NAMES
-
-        est = spec[len(PIPELINE_PREFIX):]
-        valid = [n for n in ESTIMATOR_NAMES if n != "none"]
-        if est not in valid:
-            raise UnknownPolicyError(f"unknown pipeline estimator {est!r}; valid: {', '.join(valid)}")
-        return GapPolicy(f"est+slip-pi[{est}]", "pipeline", spec, estimator=est)
-    path = Path(spec)
-    if (path / "train.json").is_file():
-        meta = json.loads((path / "train.json").read_text())
-        if meta.get("env", "braking") != "braking":
-            raise UnknownPolicyError(f"{spec} is a {meta.get('env')} policy; gap policy takes braking policies")
+    parsed = parse_policy_spec(spec)
+    if parsed.kind == "trained":
         from agents.training import load_policy
 
-        trained = load_policy(path)
         names = {f.name for f in fields(core.BrakingConfig)}
-        kwargs = {k: v for k, v in (meta.get("env_kwargs") or {}).items() if k in names}
-        policy = GapPolicy(f"{meta.get('algo', 'ppo')}[{meta.get('estimator', 'none')}]", "trained", spec,
-                           estimator=meta.get("estimator", "none"), config_kwargs=kwargs, _trained=trained)
-        return policy
-    raise UnknownPolicyError(f"unknown policy {spec!r}; {_valid_forms()}")
+        kwargs = {k: v for k, v in parsed.env_kwargs.items() if k in names}
+        return GapPolicy(parsed.label, "trained", parsed.source, estimator=parsed.estimator, config_kwargs=kwargs,
+                         _trained=load_policy(parsed.source))
+    config = {"observation": parsed.observation} if parsed.kind == "controller" else {}
+    return GapPolicy(parsed.label, parsed.kind, parsed.source, estimator=parsed.estimator, config_kwargs=config)
 
 
 def make_env(policy: GapPolicy, road: str | MagicFormula, effects: Sequence = (), v0: float = V0,
