@@ -94,13 +94,15 @@ import casadi as ca
 import numpy as np
 
 from estimators.base import Estimate, Estimator, EstimatorConfigError, Health, check_dt
-from estimators.ekf import DEFAULT_EKF_TUNING, SLIP_PRIOR, V_PRIOR, ekf_predict, ekf_update
+from estimators.ekf import (DEFAULT_EKF_TUNING, SLIP_PRIOR, V_PRIOR, ekf_predict, ekf_update, innovation_covariance,
+                            reinit_from_wheel_speed)
+from estimators.outliers import DEFAULT_GATE, GateParams, Verdict, gate, nis
 from estimators.quarter_car_model import PARAM_NAMES, AugmentedModel
+from fricenv.plants.sui_johansen import OMEGA_NOISE_STD  # [rad/s], Section IV
 
 __all__ = ["DEFAULT_ARRIVAL", "PAPER_TUNING", "STATE_SCALES", "RegularizedMHE"]
 
 HORIZON = 10  # N, Section IV
-OMEGA_NOISE_STD = float(np.sqrt(0.2))  # [rad/s], Section IV
 # Paper tuning, Section IV.A (theta only) and IV.B (theta, B, C, E).
 PAPER_TUNING = {
     "theta-only": {"alpha": 0.01, "beta": 1.0, "delta": 0.1},
@@ -157,6 +159,9 @@ class RegularizedMHE(Estimator):
         distance from the alongside EKF's x(t|t) (in its covariance), the EKF's estimate is returned instead (info
         ``gated``); None disables the gate (beyond the paper, module docstring).
     :param model: a prebuilt :class:`AugmentedModel`.
+    :param outlier_gate: the innovation gate on the alongside EKF's prediction (:mod:`estimators.outliers`): a
+        rejected wheel speed stays in the window with zero weight (``Health.OUTLIER``), the ``max_rejections +
+        1``-th in a row restarts the EKF and the window from it (``Health.REINITIALISED``); None trusts every sample.
     """
 
     measurement_columns = ("omega",)
@@ -168,7 +173,7 @@ class RegularizedMHE(Estimator):
                  weighting: str = "scaled", arrival: str | None = None, state_scales: dict | None = None,
                  noise_std: float = OMEGA_NOISE_STD, max_iter: int | None = None,
                  model_error: tuple[float, float] | str | None = "auto", gate: float | None = GATE_CHI2,
-                 model: AugmentedModel | None = None):
+                 model: AugmentedModel | None = None, outlier_gate: GateParams | None = DEFAULT_GATE):
         dt = check_dt(dt)
         if weighting not in WEIGHTINGS:
             raise EstimatorConfigError(f"weighting must be one of {WEIGHTINGS}, got {weighting!r}")
@@ -222,6 +227,9 @@ class RegularizedMHE(Estimator):
         if gate is not None and not (np.isfinite(gate) and gate > 0):
             raise EstimatorConfigError(f"gate must be a positive squared distance or None, got {gate!r}")
         self.gate = None if gate is None else float(gate)
+        if outlier_gate is not None and not isinstance(outlier_gate, GateParams):
+            raise EstimatorConfigError(f"outlier_gate must be a GateParams or None, got {outlier_gate!r}")
+        self.outlier_gate = outlier_gate
         scales = {**STATE_SCALES[group], **(state_scales or {})}
         names = self.model.names
         self.D = np.array([scales[n] for n in names]) if weighting == "scaled" else np.ones(len(names))
@@ -303,6 +311,8 @@ class RegularizedMHE(Estimator):
         self._w_prev: np.ndarray | None = None
         self._ekf_x, self._ekf_P = self.x_prior0.copy(), self._P0.copy()
         self._arr_hist: deque = deque(maxlen=self.N + 1)
+        self._used: list[bool] = []  # per window sample: False if the gate rejected it
+        self._rejected = 0  # consecutive rejections (estimators.outliers)
         return self._estimate(self.x_prior0, Health.OK)
 
     def _estimate(self, x: np.ndarray, health: Health, info: dict | None = None) -> Estimate:
@@ -313,13 +323,40 @@ class RegularizedMHE(Estimator):
         if sample is None:
             return self._estimate(self._last, Health.INVALID_INPUT, {"reason": "NaN or wrong shape; sample skipped"})
         y, uu = sample
+        verdict = self._take(y, float(uu[0]))
+        est = self._window_estimate(float(uu[0]))
+        if verdict == Verdict.ACCEPT:
+            return est
+        health = Health.OUTLIER if verdict == Verdict.REJECT else Health.REINITIALISED
+        return Estimate(est.values, health, {**est.info, "window_health": est.health})
+
+    def _take(self, y: np.ndarray, u: float) -> Verdict:
+        """Gate the sample on the alongside EKF's innovation, update that EKF and the window buffers."""
+        verdict = Verdict.ACCEPT
+        hx, H = np.array([self.model.h(self._ekf_x)]), self.model.h_jacobian(self._ekf_x)
+        if self.outlier_gate is not None:
+            S = innovation_covariance(self._ekf_P, H, self._R)[1]
+            verdict, self._rejected = gate(nis(y - hx, S), self._rejected, self.outlier_gate)
+        if verdict == Verdict.REINIT:  # restart the alongside EKF from the sample and the window after it
+            self._ekf_x, self._ekf_P = reinit_from_wheel_speed(self.model, self._ekf_x, self._ekf_P, self._P0,
+                                                               float(y[0]))
+            hx, H = np.array([self.model.h(self._ekf_x)]), self.model.h_jacobian(self._ekf_x)
+            self._y, self._u, self._used = [], [], []
+            self._arr_hist.clear()
+            self.x_prior0, self._X_prev = self._ekf_x.copy(), None
         self._y.append(float(y[0]))
-        self._u.append(float(uu[0]))
+        self._u.append(u)
+        self._used.append(verdict != Verdict.REJECT)  # a rejected sample stays in the window with no weight
+        self._arr_hist.append((self._ekf_x, self._ekf_P))  # prior of x(t) given y(..t-1)
+        if verdict == Verdict.REJECT:
+            self._ekf_post = (self._ekf_x, self._ekf_P)
+        else:
+            self._ekf_post = ekf_update(self._ekf_x, self._ekf_P, y, hx, H, self._R)[:2]
+        return verdict
+
+    def _window_estimate(self, u: float) -> Estimate:
+        """Warm-up, window solve (eq. (12)), fallback and the EKF-consistency gate, then the EKF's time update."""
         N = self.N
-        if self.arrival == "ekf":
-            self._arr_hist.append((self._ekf_x, self._ekf_P))  # prior of x(t) given y(..t-1)
-            self._ekf_post = ekf_update(self._ekf_x, self._ekf_P, y, np.array([self.model.h(self._ekf_x)]),
-                                        self.model.h_jacobian(self._ekf_x), self._R)[:2]
         if len(self._y) < N + 1:  # warming up: propagate the prior, eq. (11), or the alongside EKF's estimate
             if self.arrival == "ekf":
                 x = np.clip(self._ekf_post[0], self.lower, self.upper)
@@ -328,18 +365,18 @@ class RegularizedMHE(Estimator):
                 for k in range(len(self._y) - 1):
                     x = self.model.f(x, self._u[k])
             self._last = x
-            self._ekf_predict(float(uu[0]))
+            self._ekf_predict(u)
             return self._estimate(x, Health.NOT_EXCITED, {"warming_up": True})
         if len(self._y) > N + 1:
             # the window slides: the new a priori start is the previous x(t-N-1|t-1) pushed one sample, eq. (11)
-            self._y.pop(0), self._u.pop(0)
+            self._y.pop(0), self._u.pop(0), self._used.pop(0)
             self.x_prior0 = np.clip(self._f_est0, self.lower, self.upper)
         if self.arrival == "ekf":
             self.x_prior0, self._P = self._arr_hist[0]
         Y = np.asarray(self._y)
         U = np.asarray(self._u[:N])
         try:
-            sol, health, info = self._solve(self.x_prior0, Y, U)
+            sol, health, info = self._solve(self.x_prior0, Y, U, np.asarray(self._used))
         except Exception as exc:  # noqa: BLE001 - a failed solve must never raise inside a loop
             sol, health, info = None, Health.SOLVER_FAILED, {"reason": f"{type(exc).__name__}: {exc}"}
         if sol is None:
@@ -354,12 +391,12 @@ class RegularizedMHE(Estimator):
                 usable = False
             if not usable:  # even the prior is unusable: hold the last estimate, restart from the prior start
                 self._x_est0, self._f_est0 = self.x_prior0, self.x_prior0
-                self._ekf_predict(float(uu[0]))
+                self._ekf_predict(u)
                 return self._estimate(self._last, Health.SOLVER_FAILED, info)
             self._x_est0, self._f_est0 = self.x_prior0, f0
             self._X_prev = None
             self._last = Xb[:, -1]
-            self._ekf_predict(float(uu[0]))
+            self._ekf_predict(u)
             return self._estimate(self._last, Health.SOLVER_FAILED, info)
         self._x_est0 = sol["z"][:self.model.nx]
         self._X_prev, self._w_prev = sol["X"], sol["z"][self.model.nx:]
@@ -375,13 +412,11 @@ class RegularizedMHE(Estimator):
                 self._last = np.clip(x_ekf, self.lower, self.upper)
                 self._X_prev = None
                 info["gated"] = True
-        self._ekf_predict(float(uu[0]))
+        self._ekf_predict(u)
         return self._estimate(self._last, health, info)
 
     def _ekf_predict(self, u: float) -> None:
-        """Arrival cost (arrival="ekf"): the alongside EKF's time update from x(t|t) to the prior of x(t+1)."""
-        if self.arrival != "ekf":
-            return
+        """The alongside EKF's time update from x(t|t) to the prior of x(t+1) (arrival cost and outlier gate)."""
         x_post, P_post = self._ekf_post
         x_post = np.clip(x_post, self.lower, self.upper)
         xn, F = self.model.f_and_jacobian(x_post, u)
@@ -391,6 +426,15 @@ class RegularizedMHE(Estimator):
             self._ekf_x, self._ekf_P = self._ekf_x, self._P0.copy()
 
     # ------------------------------------------------------------------ weights and solver
+    def _masked_weights(self, Phi: np.ndarray, used: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
+        """:meth:`_weights` over the samples the gate kept, with zero weight on the others."""
+        if used.all():
+            return self._weights(Phi)
+        W_used, s, rank = self._weights(Phi[used])
+        W = np.zeros((len(used), len(used)))
+        W[np.ix_(np.arange(W_used.shape[0]) if self.weighting == "literal" else used, used)] = W_used
+        return W, s, rank
+
     def _weights(self, Phi: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
         """W_t of eq. (16) (literal) or its scaled reading; returns (W (N+1 x N+1), singular values, rank kept)."""
         N1, nx = Phi.shape
@@ -399,7 +443,7 @@ class RegularizedMHE(Estimator):
             keep = (s >= self.delta) & (s > SV_FLOOR * max(s[0], 1e-300))
             s_inv = np.where(keep, 1.0 / np.where(keep, s, 1.0), 0.0)
             W = (Vt.T * s_inv) @ Uu.T / self.alpha  # eq. (16), nx x (N+1)
-            Wfull = np.zeros((N1, N1))
+            Wfull = np.zeros((max(N1, nx), N1))  # (more rows than samples only when the gate removed some)
             Wfull[:nx] = W
             return Wfull, s, int(keep.sum())
         if self.arrival == "ekf":
@@ -439,8 +483,10 @@ class RegularizedMHE(Estimator):
             J.append(Jw)
         return np.concatenate(r), np.vstack(J)
 
-    def _solve(self, xb0: np.ndarray, Y: np.ndarray, U: np.ndarray):
-        """Projected Levenberg-Marquardt on (12a) from the a priori start; returns (solution or None, health, info)."""
+    def _solve(self, xb0: np.ndarray, Y: np.ndarray, U: np.ndarray, used: np.ndarray):
+        """Projected Levenberg-Marquardt on (12a) from the a priori start; returns (solution or None, health, info).
+
+        ``used`` marks the window samples the outlier gate kept; the others get no weight."""
         z = self._z(xb0)
         # eq. (11), row i = xbar(t-N+i); with the EKF arrival cost only xbar(t-N) enters
         Xbar = np.asarray(self._fun_prior(xb0, U)).T if self.arrival == "paper" else np.tile(xb0, (self.N + 1, 1))
@@ -450,7 +496,7 @@ class RegularizedMHE(Estimator):
 
         ev = self._evaluate(z, Xbar, Y, U)
         nx = self.model.nx
-        W, s, rank = self._weights(ev["PhiZ"][:, :nx])  # Phi_hat at the a priori state, eq. (14)
+        W, s, rank = self._masked_weights(ev["PhiZ"][:, :nx], used)  # Phi_hat at the a priori state, eq. (14)
         Wa, Wp = self._prior_weights()
         r, J = self._residual(ev, W, Wa, Wp)
         cost = float(r @ r)
@@ -489,5 +535,5 @@ class RegularizedMHE(Estimator):
                 break
         if not (np.all(np.isfinite(z)) and np.all(np.isfinite(ev["X"]))):
             return None, Health.SOLVER_FAILED, {"reason": "non-finite solution"}
-        health = Health.OK if rank == len(s) else Health.NOT_EXCITED
+        health = Health.OK if rank == nx else Health.NOT_EXCITED
         return ev, health, {"singular_values": s, "rank": rank, "cost": cost, "evaluations": n_eval}
