@@ -118,15 +118,15 @@ V_PRIOR = 19.0  # a priori initial speed [m/s], Section IV
 SLIP_PRIOR = 0.0  # a priori initial slip [-]
 
 
-SLIP_REINIT_MAX = 0.9  # a re-initialisation keeps the slip estimate below this, so v = omega r / (1 - slip) is finite
-
-
 def reinit_from_wheel_speed(model: AugmentedModel, x: np.ndarray, P: np.ndarray, P0: np.ndarray,
                             omega: float) -> tuple[np.ndarray, np.ndarray]:
     """Re-initialise the measured states from one wheel speed (the gate's re-initialisation, estimators.outliers).
 
-    The speed is set so that eq. (7) holds exactly at the current slip, ``v = omega r / (1 - slip)``; the (v, slip)
-    covariance goes back to its initial block of ``P0`` and their correlations with the parameters are dropped.
+    One wheel speed cannot separate v from the slip (eq. (7)), and the filter's own slip is not to be trusted
+    after a run of rejections (a filter that followed a dropout to zero has its slip near 1, which would make
+    ``omega r / (1 - slip)`` ten times too fast): the slip goes back to its a priori value ``SLIP_PRIOR`` and v to
+    the value that makes eq. (7) hold, ``v = omega r / (1 - SLIP_PRIOR)``; the (v, slip) covariance goes back to
+    its initial block of ``P0`` and their correlations with the parameters are dropped.
 
     :param model: the augmented model (for r).
     :param x: current state, (n,).
@@ -136,9 +136,8 @@ def reinit_from_wheel_speed(model: AugmentedModel, x: np.ndarray, P: np.ndarray,
     :return: (x, P) re-initialised.
     """
     x = x.copy()
-    slip = min(max(float(x[1]), 0.0), SLIP_REINIT_MAX)
-    x[0] = max(float(omega) * model.p.r / (1.0 - slip), 0.0)
-    x[1] = slip
+    x[0] = max(float(omega) * model.p.r / (1.0 - SLIP_PRIOR), 0.0)
+    x[1] = SLIP_PRIOR
     P = P.copy()
     P[:2, :] = 0.0
     P[:, :2] = 0.0

@@ -167,8 +167,9 @@ class WheelSpeedGate:
     Per wheel, state (omega, b) with b = F R_w / I_w the tire's torque over the inertia, a random walk, and the
     wheel equation ``omega(k+1) = omega(k) + dt (T(k) / I_w - b(k))`` (the force EKF's eq. (7) row, with the known
     torque), measured with noise ``omega_std``. A wheel speed whose NIS fails the gate is replaced by the
-    prediction (the filters run on it as if it had not come); the ``max_rejections + 1``-th in a row restarts that
-    wheel's filter from the measurement.
+    prediction (the filters run on it as if it had not come) and the covariance is held at its last one-step value
+    (the random walk of b would open the gate to a dropout within 7 samples); the ``max_rejections + 1``-th in a row
+    restarts that wheel's filter from the measurement.
 
     :param n: number of wheels.
     :param I_w: wheel inertia [kg m^2].
@@ -216,8 +217,8 @@ class WheelSpeedGate:
             e = float(omega[i]) - x[0]
             S = P[0, 0] + self.R
             verdict, self.rejected[i] = gate(nis(e, S), self.rejected[i], self.params)
-            if verdict == Verdict.REJECT:
-                self.x[i], self.P[i] = x, P
+            if verdict == Verdict.REJECT:  # the covariance is held: a bad run must not widen the gate to itself
+                self.x[i] = x
                 used[i] = x[0]
             elif verdict == Verdict.REINIT:
                 self._start(i, float(omega[i]))
