@@ -18,12 +18,12 @@ from collections.abc import Callable
 import numpy as np
 
 from estimators.base import Estimate, Estimator, EstimatorConfigError, Health, check_dt
-from estimators.outliers import DEFAULT_GATE, GateParams, Verdict, gate, nis
+from estimators.outliers import DEFAULT_GATE, GateParams, Verdict, check_gate, gate, nis
 from estimators.quarter_car_model import PARAM_NAMES, AugmentedModel
 from fricenv.plants.sui_johansen import OMEGA_NOISE_VAR
 
 __all__ = ["DEFAULT_EKF_TUNING", "ExtendedKalmanFilter", "ParameterInformation", "QuarterCarEKF", "ekf_predict",
-           "ekf_update", "innovation_covariance", "reinit_from_wheel_speed"]
+           "ekf_update", "gate_wheel_speed", "innovation_covariance", "reinit_from_wheel_speed"]
 
 
 def _sym(P: np.ndarray) -> np.ndarray:
@@ -145,6 +145,22 @@ def reinit_from_wheel_speed(model: AugmentedModel, x: np.ndarray, P: np.ndarray,
     return x, P
 
 
+def gate_wheel_speed(model: AugmentedModel, x: np.ndarray, P: np.ndarray, P0: np.ndarray, R: np.ndarray,
+                     y: np.ndarray, rejected: int, params: GateParams | None):
+    """The quarter-car filters' gate (:mod:`estimators.outliers`) on wheel speed ``y`` against the prior (x, P).
+
+    :return: (verdict, consecutive rejections after it, x, P), x and P re-initialised from y on ``REINIT``
+        (:func:`reinit_from_wheel_speed`); ``ACCEPT`` when ``params`` is None.
+    """
+    if params is None:
+        return Verdict.ACCEPT, 0, x, P
+    S = innovation_covariance(P, model.h_jacobian(x), R)[1]
+    verdict, rejected = gate(nis(y - model.h(x), S), rejected, params)
+    if verdict == Verdict.REINIT:
+        x, P = reinit_from_wheel_speed(model, x, P, P0, float(y[0]))
+    return verdict, rejected, x, P
+
+
 class ParameterInformation:
     """The MHE's excitation rule for a recursive filter: is every estimated parameter direction informed?
 
@@ -232,8 +248,6 @@ class QuarterCarEKF(Estimator):
             bad = [k for k in (given or {}) if k not in ("v", "slip") + PARAM_NAMES]
             if bad:
                 raise EstimatorConfigError(f"{label} keys {bad} unknown; valid: v, slip, {', '.join(PARAM_NAMES)}")
-        if outlier_gate is not None and not isinstance(outlier_gate, GateParams):
-            raise EstimatorConfigError(f"outlier_gate must be a GateParams or None, got {outlier_gate!r}")
         p0 = {**DEFAULT_EKF_TUNING["P0_std"], **(P0_std or {})}
         q = {**DEFAULT_EKF_TUNING["Q_std"], **(Q_std or {})}
         names = self.model.names
@@ -245,7 +259,7 @@ class QuarterCarEKF(Estimator):
             np.array([[float(R)]]),
         )
         self.lower, self.upper = self.model.lower(), self.model.upper()
-        self.outlier_gate = outlier_gate
+        self.outlier_gate = check_gate(outlier_gate)
         group = "theta-only" if len(self.model.estimated) <= 1 else "all"
         self.information = ParameterInformation(slice(2, self.model.nx), HORIZON, PAPER_TUNING[group]["delta"])
         self.reset()
@@ -261,23 +275,13 @@ class QuarterCarEKF(Estimator):
     def _estimate(self, x: np.ndarray, health: Health, info: dict | None = None) -> Estimate:
         return Estimate(self.model.values(x), health, info or {})
 
-    def _gate(self, y: np.ndarray) -> Verdict:
-        """The gate's verdict on wheel speed y (re-initialises x, P on REINIT); ACCEPT when gating is off."""
-        if self.outlier_gate is None:
-            return Verdict.ACCEPT
-        yp, H = self.filter.h_and_jacobian(self.x)
-        _, S = innovation_covariance(self.P, np.atleast_2d(H), self.filter.R)
-        verdict, self._rejected = gate(nis(y - yp, S), self._rejected, self.outlier_gate)
-        if verdict == Verdict.REINIT:
-            self.x, self.P = reinit_from_wheel_speed(self.model, self.x, self.P, self.P0, float(y[0]))
-        return verdict
-
     def update(self, measurement, u) -> Estimate:
         sample = self._validated_sample(measurement, u)
         if sample is None:
             return self._estimate(self.x, Health.INVALID_INPUT, {"reason": "NaN or wrong shape; sample skipped"})
         y, uu = sample
-        verdict = self._gate(y)
+        verdict, self._rejected, self.x, self.P = gate_wheel_speed(self.model, self.x, self.P, self.P0, self.filter.R,
+                                                                   y, self._rejected, self.outlier_gate)
         if verdict == Verdict.REJECT:
             x_post, P_post, innov = self.x, self.P, None
         else:

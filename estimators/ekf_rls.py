@@ -58,7 +58,7 @@ import numpy as np
 
 from estimators.base import Estimate, Estimator, EstimatorConfigError, Health, check_dt
 from estimators.ekf import ekf_predict, ekf_update
-from estimators.outliers import DEFAULT_GATE, GateParams, Verdict, gate, nis
+from estimators.outliers import DEFAULT_GATE, GateParams, Verdict, check_gate, gate, nis
 from fricenv.plants.quarter_car import PAPER_PARAMS, QuarterCarParams
 from fricenv.plants.sui_johansen import OMEGA_NOISE_STD
 from fricenv.plants.tire import DRY, MagicFormula, magic_formula
@@ -152,8 +152,7 @@ class EkfRlsConfig:
             raise EstimatorConfigError(f"forgetting must be in [0.9, 1] (paper: (0.9, 1)), got {self.forgetting}")
         if len(self.Fz) < 1 or not all(np.isfinite(f) and f > 0 for f in self.Fz):
             raise EstimatorConfigError(f"Fz must be one positive load per wheel, got {self.Fz!r}")
-        if self.outlier_gate is not None and not isinstance(self.outlier_gate, GateParams):
-            raise EstimatorConfigError(f"outlier_gate must be a GateParams or None, got {self.outlier_gate!r}")
+        check_gate(self.outlier_gate)
 
     @property
     def m_eff(self) -> float:

@@ -49,7 +49,7 @@ import math
 import numpy as np
 
 from estimators.base import Estimate, Estimator, EstimatorConfigError, Health, check_dt
-from estimators.outliers import FMS_GATE, GateParams, block_health, wrench_gate
+from estimators.outliers import FMS_GATE, GateParams, block_health, check_gate, wrench_gate
 from fricenv.plants.payload import PAPER_NOISE, PAPER_PARAMS, PayloadParams
 
 __all__ = ["FmsObserver", "READINGS", "PAPER_K1", "PAPER_K2", "PAPER_DELTA"]
@@ -111,9 +111,8 @@ class FmsObserver(Estimator):
         self.K2 = K2
         self.reading = reading
         self.max_cond = float(max_cond)
-        if outlier_gate is not None and not isinstance(outlier_gate, GateParams):
-            raise EstimatorConfigError(f"outlier_gate must be a GateParams or None, got {outlier_gate!r}")
-        self._wrench_gate = None if outlier_gate is None else wrench_gate(self.dt, wrench_std, outlier_gate)
+        self._wrench_gate = None if check_gate(outlier_gate) is None else wrench_gate(self.dt, wrench_std,
+                                                                                       outlier_gate)
         self._rng = as_generator(seed)
         self.reset()
 

@@ -46,7 +46,7 @@ import numpy as np
 from scipy import signal
 
 from estimators.base import Estimate, Estimator, EstimatorConfigError, Health, check_dt
-from estimators.outliers import FMS_GATE, GateParams, block_health, wrench_gate
+from estimators.outliers import FMS_GATE, GateParams, block_health, check_gate, wrench_gate
 from fricenv.plants.payload import PAPER_NOISE, PAPER_PARAMS, PayloadParams
 
 __all__ = ["FmsRLS", "WRENCH_HOLDS"]
@@ -156,9 +156,7 @@ class FmsRLS(Estimator):
         self._zi_unit = signal.sosfilt_zi(self._sos)
         self._block_maps: dict[int, tuple] = {}
         self._settle = int(np.ceil(SETTLE_CYCLES / (self.cutoff_hz * self.dt)))
-        if outlier_gate is not None and not isinstance(outlier_gate, GateParams):
-            raise EstimatorConfigError(f"outlier_gate must be a GateParams or None, got {outlier_gate!r}")
-        self._wrench_gate = None if outlier_gate is None else wrench_gate(self.dt, ws, outlier_gate)
+        self._wrench_gate = None if check_gate(outlier_gate) is None else wrench_gate(self.dt, ws, outlier_gate)
         self.reset()
 
     # ------------------------------------------------------------------ state

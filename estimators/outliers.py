@@ -31,7 +31,7 @@ from scipy.stats import chi2
 
 from estimators.base import EstimatorConfigError
 
-__all__ = ["DEFAULT_GATE", "FMS_GATE", "GateParams", "SignalGate", "StudyRow", "Verdict", "block_health", "gate", "nis",
+__all__ = ["DEFAULT_GATE", "FMS_GATE", "GateParams", "SignalGate", "StudyRow", "Verdict", "block_health", "check_gate", "gate", "nis",
            "spike_indices", "study", "wrench_gate"]
 
 P_FALSE = 1e-5  # default per-sample false-rejection probability of a consistent filter [-]
@@ -64,12 +64,19 @@ class GateParams:
             raise EstimatorConfigError(f"gate max_rejections must be an integer >= 0, got {self.max_rejections!r}")
         object.__setattr__(self, "bound", float(chi2.isf(self.p_false, int(self.dof))))
 
-    def with_dof(self, dof: int) -> "GateParams":
+    def with_dof(self, dof: int) -> GateParams:
         """The same gate for an innovation of another dimension."""
         return GateParams(self.p_false, dof, self.max_rejections)
 
 
 DEFAULT_GATE = GateParams()
+
+
+def check_gate(value) -> GateParams | None:
+    """An estimator's ``outlier_gate`` option: a :class:`GateParams` or None (off); anything else is refused."""
+    if value is not None and not isinstance(value, GateParams):
+        raise EstimatorConfigError(f"outlier_gate must be a GateParams (estimators.outliers) or None, got {value!r}")
+    return value
 
 
 class Verdict(enum.IntEnum):
@@ -373,8 +380,9 @@ def study(estimator: str, seeds, factors=SPIKE_FACTORS, gated: bool = True) -> l
 
 def format_table(rows: list[StudyRow]) -> str:
     """The study as a text table."""
-    lines = [f"{'estimator':<9} {'spike':>6} {'runs':>5} {'rms clean':>10} {'rms spiked':>11} {'worst ratio':>12} "
-             f"{'hit rate':>9} {'false rate':>11} {'target':>7}"]
+    header = (f"{'estimator':<9} {'spike':>6} {'runs':>5} {'rms clean':>10} {'rms spiked':>11} {'worst ratio':>12} "
+              f"{'hit rate':>9} {'false rate':>11} {'target':>7}")
+    lines = [header]
     for r in rows:
         lines.append(f"{r.estimator:<9} {r.factor:>6g} {r.runs:>5d} {r.rms_clean:>10.4f} {r.rms_spiked:>11.4f} "
                      f"{r.ratio:>12.3f} {r.hit_rate:>9.3f} {r.false_rate:>11.5f} "

@@ -13,8 +13,16 @@ from estimators.base import EstimatorConfigError, Health, run
 from estimators.ekf import QuarterCarEKF
 from estimators.ekf_rls import QuarterCarEkfRls
 from estimators.mhe import RegularizedMHE
-from estimators.outliers import (DEFAULT_GATE, STUDY_ESTIMATORS, GateParams, Verdict, gate, nis, spike_indices,
-                                 study)
+from estimators.outliers import (
+    DEFAULT_GATE,
+    STUDY_ESTIMATORS,
+    GateParams,
+    Verdict,
+    gate,
+    nis,
+    spike_indices,
+    study,
+)
 from estimators.scenarios import ekf_rls_scenario, mhe_case
 from fricenv.plants.sui_johansen import OMEGA_NOISE_VAR
 
