@@ -184,24 +184,28 @@ class ParameterInformation:
 
     def reset(self) -> None:
         self._gains: list[np.ndarray] = []
+        self._total = 0.0  # sum of self._gains
 
     def add(self, P_prior: np.ndarray, P_post: np.ndarray | None) -> None:
         """Record one sample's update (``P_post`` None: the sample gave no update)."""
         i = self.index
         if P_post is None:
-            gain = np.zeros_like(P_prior[i, i])
+            gain = 0.0 * P_prior[i, i]
+        elif P_prior[i, i].shape == (1, 1):  # theta alone: no inverse needed
+            gain = 1.0 / P_post[i, i] - 1.0 / P_prior[i, i]
         else:
             gain = np.linalg.inv(P_post[i, i]) - np.linalg.inv(P_prior[i, i])
         self._gains.append(gain)
+        self._total = self._total + gain
         if len(self._gains) > self.horizon + 1:
-            self._gains.pop(0)
+            self._total = self._total - self._gains.pop(0)
 
     def excited(self, P: np.ndarray) -> bool:
         """True when the recorded window informs every parameter direction by at least delta^2 times ``P``'s."""
         block = P[self.index, self.index]
         if block.size == 0:
             return True
-        G = np.sum(self._gains, axis=0) if self._gains else np.zeros_like(block)
+        G = self._total + 0.0 * block
         if block.shape == (1, 1):
             return bool(G[0, 0] * block[0, 0] >= self.delta2)
         L = np.linalg.cholesky(_sym(block))
