@@ -109,9 +109,8 @@ class RegularizedMHE(Estimator):
     """The regularized MHE of Sui & Johansen on the augmented quarter-car model.
 
     ``update(omega, T_b)`` takes the wheel speed at time t and the torque held from t to t+1, and returns x(t|t).
-    Until N + 1 samples have arrived, the a priori trajectory is returned (with ``arrival="ekf"``: the alongside
-    EKF's estimate; ``Health.NOT_EXCITED``, info ``warming_up``). Values: ``v``, ``slip``, the four curve parameters (estimated or fixed) and
-    ``mu``, the friction in use, mu(slip) on the estimated curve.
+    Until N + 1 samples have arrived it returns the a priori trajectory (``arrival="ekf"``: the alongside EKF's
+    estimate; ``Health.NOT_EXCITED``, info ``warming_up``). Values: ``v``, ``slip``, theta, B, C, E and ``mu``.
 
     :param estimated: parameters augmented to the state (subset of theta, B, C, E).
     :param dt: sample time [s].
@@ -333,8 +332,7 @@ class RegularizedMHE(Estimator):
                     x = self.model.f(x, self._u[k])
             self._last = x
             return self._estimate(x, Health.NOT_EXCITED, {"warming_up": True})
-        if len(self._y) > N + 1:
-            # the window slides: the new a priori start is the previous x(t-N-1|t-1) pushed one sample, eq. (11)
+        if len(self._y) > N + 1:  # the window slides: the a priori start is x(t-N-1|t-1) pushed on, eq. (11)
             self._y.pop(0), self._u.pop(0), self._used.pop(0)
             self.x_prior0 = np.clip(self._f_est0, self.lower, self.upper)
         if self.arrival == "ekf":
