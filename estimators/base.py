@@ -2,7 +2,9 @@
 
 An estimator is fed one sample at a time with ``update(measurement, u)`` and answers an :class:`Estimate`: named
 values plus a health flag. It never raises inside a loop for a bad sample or a failed solve; it falls back (keeps
-its prior, holds the last value) and says so in the flag. Configuration errors (bad ``dt``, wrong shapes at
+its prior, holds the last value) and says so in the flag. Every estimator gates its measurements
+(:mod:`estimators.outliers`): a sample that fails the innovation test is skipped (``OUTLIER``), and after too many
+in a row the estimator restarts from the measurement (``REINITIALISED``). Configuration errors (bad ``dt``, wrong shapes at
 construction, unknown options) do raise, at construction, with a clear message.
 
 :func:`run` drives any estimator over a whole log, given as arrays or as a log file / :class:`QuarterCarLog`.
@@ -31,6 +33,8 @@ class Health(enum.IntEnum):
     NOT_EXCITED = 1  # data not informative: parameters held near their prior
     SOLVER_FAILED = 2  # the numerical solve failed; the estimate is the fallback (prior / last value)
     INVALID_INPUT = 3  # NaN, wrong shape or otherwise unusable sample: the sample was skipped
+    OUTLIER = 4  # the sample failed the innovation gate (estimators.outliers): the update skipped it
+    REINITIALISED = 5  # too many outliers in a row: the measured states restarted from this sample
 
 
 @dataclass(frozen=True)

@@ -18,9 +18,12 @@ from collections.abc import Callable
 import numpy as np
 
 from estimators.base import Estimate, Estimator, EstimatorConfigError, Health, check_dt
+from estimators.outliers import DEFAULT_GATE, GateParams, Verdict, check_gate, gate, nis
 from estimators.quarter_car_model import PARAM_NAMES, AugmentedModel
+from fricenv.plants.sui_johansen import OMEGA_NOISE_VAR
 
-__all__ = ["DEFAULT_EKF_TUNING", "ExtendedKalmanFilter", "QuarterCarEKF", "ekf_predict", "ekf_update"]
+__all__ = ["DEFAULT_EKF_TUNING", "ExtendedKalmanFilter", "ParameterInformation", "QuarterCarEKF", "ekf_predict",
+           "ekf_update", "gate_wheel_speed", "innovation_covariance", "reinit_from_wheel_speed"]
 
 
 def _sym(P: np.ndarray) -> np.ndarray:
@@ -39,6 +42,17 @@ def ekf_predict(x_next: np.ndarray, F: np.ndarray, P: np.ndarray, Q: np.ndarray)
     return x_next, _sym(F @ P @ F.T + Q)
 
 
+def innovation_covariance(P: np.ndarray, H: np.ndarray, R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(P H^T, S = H P H^T + R)``: the cross covariance and the innovation covariance of a measurement update.
+
+    :param P: prior covariance, (n, n).
+    :param H: Jacobian d h / d x, (m, n).
+    :param R: measurement noise covariance, (m, m).
+    """
+    PHt = P @ H.T
+    return PHt, _sym(H @ PHt + R)
+
+
 def ekf_update(x: np.ndarray, P: np.ndarray, y: np.ndarray, y_pred: np.ndarray, H: np.ndarray,
                R: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Measurement update with Joseph's covariance form.
@@ -52,8 +66,7 @@ def ekf_update(x: np.ndarray, P: np.ndarray, y: np.ndarray, y_pred: np.ndarray, 
     :return: (posterior mean, posterior covariance, innovation).
     """
     innov = np.atleast_1d(y - y_pred)
-    PHt = P @ H.T
-    S = _sym(H @ PHt + R)
+    PHt, S = innovation_covariance(P, H, R)
     if S.shape == (1, 1):  # scalar measurement: the solve is a division
         K = PHt / S[0, 0]
     else:
@@ -99,10 +112,104 @@ DEFAULT_EKF_TUNING = {
     "P0_std": {"v": 1.0, "slip": 0.05, "theta": 0.4, "B": 3.0, "C": 0.5, "E": 3.0},
     # process noise per 10 ms sample: model error on v and slip, random walk on the parameters
     "Q_std": {"v": 0.01, "slip": 0.01, "theta": 0.002, "B": 0.02, "C": 0.005, "E": 0.02},
-    "R": 0.2,  # wheel-speed noise variance [(rad/s)^2], Section IV
+    "R": OMEGA_NOISE_VAR,  # wheel-speed noise variance [(rad/s)^2], Section IV
 }
 V_PRIOR = 19.0  # a priori initial speed [m/s], Section IV
 SLIP_PRIOR = 0.0  # a priori initial slip [-]
+
+
+def reinit_from_wheel_speed(model: AugmentedModel, x: np.ndarray, P: np.ndarray, P0: np.ndarray,
+                            omega: float) -> tuple[np.ndarray, np.ndarray]:
+    """Re-initialise the measured states from one wheel speed (the gate's re-initialisation, estimators.outliers).
+
+    One wheel speed cannot separate v from the slip (eq. (7)), and the filter's own slip is not to be trusted
+    after a run of rejections (a filter that followed a dropout to zero has its slip near 1, which would make
+    ``omega r / (1 - slip)`` ten times too fast): the slip goes back to its a priori value ``SLIP_PRIOR`` and v to
+    the value that makes eq. (7) hold, ``v = omega r / (1 - SLIP_PRIOR)``; the (v, slip) covariance goes back to
+    its initial block of ``P0`` and their correlations with the parameters are dropped.
+
+    :param model: the augmented model (for r).
+    :param x: current state, (n,).
+    :param P: current covariance, (n, n).
+    :param P0: initial covariance, (n, n).
+    :param omega: the measured wheel speed [rad/s].
+    :return: (x, P) re-initialised.
+    """
+    x = x.copy()
+    x[0] = max(float(omega) * model.p.r / (1.0 - SLIP_PRIOR), 0.0)
+    x[1] = SLIP_PRIOR
+    P = P.copy()
+    P[:2, :] = 0.0
+    P[:, :2] = 0.0
+    P[:2, :2] = P0[:2, :2]
+    return x, P
+
+
+def gate_wheel_speed(model: AugmentedModel, x: np.ndarray, P: np.ndarray, P0: np.ndarray, R: np.ndarray,
+                     y: np.ndarray, rejected: int, params: GateParams | None):
+    """The quarter-car filters' gate (:mod:`estimators.outliers`) on wheel speed ``y`` against the prior (x, P).
+
+    :return: (verdict, consecutive rejections after it, x, P), x and P re-initialised from y on ``REINIT``
+        (:func:`reinit_from_wheel_speed`); ``ACCEPT`` when ``params`` is None.
+    """
+    if params is None:
+        return Verdict.ACCEPT, 0, x, P
+    S = innovation_covariance(P, model.h_jacobian(x), R)[1]
+    verdict, rejected = gate(nis(y - model.h(x), S), rejected, params)
+    if verdict == Verdict.REINIT:
+        x, P = reinit_from_wheel_speed(model, x, P, P0, float(y[0]))
+    return verdict, rejected, x, P
+
+
+class ParameterInformation:
+    """The MHE's excitation rule for a recursive filter: is every estimated parameter direction informed?
+
+    The MHE (estimators.mhe) calls its window excited when every singular value s_i of the window's sensitivity,
+    in units of the prior, reaches delta, i.e. the window's information along every state direction is at least
+    delta^2 times the prior's. The same test on a filter: over the last ``horizon + 1`` measurement updates, add up
+    the information each update gave the parameter block (``inv(P_post) - inv(P_prior)`` of the marginal
+    parameter covariances) and compare it, whitened by the current parameter covariance, with delta^2. Free
+    rolling gives no information on the friction curve (mu(0) = 0 whatever theta), so it is NOT_EXCITED.
+
+    :param index: indices of the parameters in the state.
+    :param horizon: N, the MHE's window length minus one.
+    :param delta: the MHE's SVD threshold for this parameter group.
+    """
+
+    def __init__(self, index: slice, horizon: int, delta: float):
+        self.index = index
+        self.horizon = int(horizon)
+        self.delta2 = float(delta) ** 2
+        self.reset()
+
+    def reset(self) -> None:
+        self._gains: list[np.ndarray] = []
+        self._total = 0.0  # sum of self._gains
+
+    def add(self, P_prior: np.ndarray, P_post: np.ndarray | None) -> None:
+        """Record one sample's update (``P_post`` None: the sample gave no update)."""
+        i = self.index
+        if P_post is None:
+            gain = 0.0 * P_prior[i, i]
+        elif P_prior[i, i].shape == (1, 1):  # theta alone: no inverse needed
+            gain = 1.0 / P_post[i, i] - 1.0 / P_prior[i, i]
+        else:
+            gain = np.linalg.inv(P_post[i, i]) - np.linalg.inv(P_prior[i, i])
+        self._gains.append(gain)
+        self._total = self._total + gain
+        if len(self._gains) > self.horizon + 1:
+            self._total = self._total - self._gains.pop(0)
+
+    def excited(self, P: np.ndarray) -> bool:
+        """True when the recorded window informs every parameter direction by at least delta^2 times ``P``'s."""
+        block = P[self.index, self.index]
+        if block.size == 0:
+            return True
+        G = self._total + 0.0 * block
+        if block.shape == (1, 1):
+            return bool(G[0, 0] * block[0, 0] >= self.delta2)
+        L = np.linalg.cholesky(_sym(block))
+        return bool(np.linalg.eigvalsh(_sym(L.T @ G @ L))[0] >= self.delta2)
 
 
 class QuarterCarEKF(Estimator):
@@ -112,12 +219,19 @@ class QuarterCarEKF(Estimator):
     k+1 with the torque held over the sample. Values: ``v``, ``slip``, the four curve parameters (estimated or fixed) and
     ``mu``, the friction in use, mu(slip) on the estimated curve.
 
+    Every wheel speed is gated (:mod:`estimators.outliers`): a sample whose NIS exceeds the chi-square bound is
+    skipped (``Health.OUTLIER``, the state is only predicted); after ``outlier_gate.max_rejections`` in a row the
+    next failing one re-initialises v from it (:func:`reinit_from_wheel_speed`, ``Health.REINITIALISED``). The
+    health is ``NOT_EXCITED`` when the last N + 1 updates did not inform every estimated parameter by the MHE's
+    rule (:class:`ParameterInformation`), e.g. free rolling.
+
     :param estimated: parameters augmented to the state (subset of theta, B, C, E).
     :param dt: sample time [s].
     :param P0_std: initial standard deviations per state name (overrides defaults).
     :param Q_std: process noise standard deviations per sample, per state name (overrides defaults).
     :param R: measurement noise variance [(rad/s)^2].
     :param model: a prebuilt :class:`AugmentedModel` (else one is built from ``estimated`` and ``dt``).
+    :param outlier_gate: the innovation gate, or None to trust every sample (the paper's EKF).
     """
 
     measurement_columns = ("omega",)
@@ -126,7 +240,9 @@ class QuarterCarEKF(Estimator):
 
     def __init__(self, estimated: tuple[str, ...] = ("theta",), dt: float = 0.01, P0_std: dict | None = None,
                  Q_std: dict | None = None, R: float = DEFAULT_EKF_TUNING["R"],
-                 model: AugmentedModel | None = None):
+                 model: AugmentedModel | None = None, outlier_gate: GateParams | None = DEFAULT_GATE):
+        from estimators.mhe import HORIZON, PAPER_TUNING
+
         dt = check_dt(dt)
         try:
             self.model = model or AugmentedModel(estimated=tuple(estimated), dt=dt)
@@ -147,12 +263,17 @@ class QuarterCarEKF(Estimator):
             np.array([[float(R)]]),
         )
         self.lower, self.upper = self.model.lower(), self.model.upper()
+        self.outlier_gate = check_gate(outlier_gate)
+        group = "theta-only" if len(self.model.estimated) <= 1 else "all"
+        self.information = ParameterInformation(slice(2, self.model.nx), HORIZON, PAPER_TUNING[group]["delta"])
         self.reset()
 
     def reset(self, v: float = V_PRIOR, slip: float = SLIP_PRIOR, params: dict | None = None) -> Estimate:
         """Start from the a priori state (Section IV) with covariance P0."""
         self.x = self.model.nominal_state(v, slip, params)
         self.P = self.P0.copy()
+        self._rejected = 0
+        self.information.reset()
         return self._estimate(self.x, Health.OK)
 
     def _estimate(self, x: np.ndarray, health: Health, info: dict | None = None) -> Estimate:
@@ -163,15 +284,26 @@ class QuarterCarEKF(Estimator):
         if sample is None:
             return self._estimate(self.x, Health.INVALID_INPUT, {"reason": "NaN or wrong shape; sample skipped"})
         y, uu = sample
-        x_post, P_post, innov = self.filter.update(self.x, self.P, y)
-        x_post = np.clip(x_post, self.lower, self.upper)
+        verdict, self._rejected, self.x, self.P = gate_wheel_speed(self.model, self.x, self.P, self.P0, self.filter.R,
+                                                                   y, self._rejected, self.outlier_gate)
+        if verdict == Verdict.REJECT:
+            x_post, P_post, innov = self.x, self.P, None
+        else:
+            x_post, P_post, innov = self.filter.update(self.x, self.P, y)
+            x_post = np.clip(x_post, self.lower, self.upper)
         x_next, P_next = self.filter.predict(x_post, P_post, float(uu[0]))
         if not (np.all(np.isfinite(x_next)) and np.all(np.isfinite(P_next))):
             # keep the last good state; restart the covariance
             self.P = self.P0.copy()
             return self._estimate(self.x, Health.SOLVER_FAILED, {"reason": "non-finite EKF step"})
+        self.information.add(self.P, None if innov is None else P_post)
+        if verdict == Verdict.ACCEPT:
+            health = Health.OK if self.information.excited(P_post) else Health.NOT_EXCITED
+        else:
+            health = Health.OUTLIER if verdict == Verdict.REJECT else Health.REINITIALISED
         self.x, self.P = np.clip(x_next, self.lower, self.upper), P_next
-        return self._estimate(x_post, Health.OK, {"innovation": float(innov[0])})
+        info = {"rejected_in_row": self._rejected} if innov is None else {"innovation": float(innov[0])}
+        return self._estimate(x_post, health, info)
 
     @property
     def covariance(self) -> np.ndarray:

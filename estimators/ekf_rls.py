@@ -58,7 +58,9 @@ import numpy as np
 
 from estimators.base import Estimate, Estimator, EstimatorConfigError, Health, check_dt
 from estimators.ekf import ekf_predict, ekf_update
+from estimators.outliers import DEFAULT_GATE, GateParams, Verdict, check_gate, gate, nis
 from fricenv.plants.quarter_car import PAPER_PARAMS, QuarterCarParams
+from fricenv.plants.sui_johansen import OMEGA_NOISE_STD
 from fricenv.plants.tire import DRY, MagicFormula, magic_formula
 
 __all__ = [
@@ -85,6 +87,7 @@ KS0 = 10.0  # initial slip slope [1/unit slip]
 Q_STD = {"a_x": 0.5, "a_w": 50.0, "F": 300.0}  # EKF process noise per sample [m/s^2, rad/s^2, N]
 AX_STD_MIN = 0.01  # floor of the a_x noise standard deviation in the EKF [m/s^2]
 SLIP_SMALL = 1e-4  # below this slip the family maps use their linear limit [-]
+WHEEL_B_STD = 100.0  # random walk of the tire torque over inertia in the wheel-speed gate, per sample [rad/s^2]
 
 
 class LinearMap:
@@ -133,9 +136,11 @@ class EkfRlsConfig:
     deadband: float = 0.0  # dead zone on the a_x correction [m/s^2]; 0: the paper's loop
     forgetting: float = FORGETTING  # RLS forgetting factor [-]
     ax_std: float = AX_STD_MIN  # a_x noise standard deviation assumed by the EKF [m/s^2]
+    omega_std: float = OMEGA_NOISE_STD  # wheel-speed noise standard deviation assumed by the gate [rad/s]
+    outlier_gate: GateParams | None = DEFAULT_GATE  # the wheel-speed gate (WheelSpeedGate); None: off
 
     def __post_init__(self):
-        for name in ("m", "I_w", "R_w", "C_s", "d", "ax_std"):
+        for name in ("m", "I_w", "R_w", "C_s", "d", "ax_std", "omega_std"):
             value = getattr(self, name)
             if not (np.isfinite(value) and value > 0):
                 raise EstimatorConfigError(f"EkfRlsConfig.{name} must be finite and > 0, got {value!r}")
@@ -147,11 +152,81 @@ class EkfRlsConfig:
             raise EstimatorConfigError(f"forgetting must be in [0.9, 1] (paper: (0.9, 1)), got {self.forgetting}")
         if len(self.Fz) < 1 or not all(np.isfinite(f) and f > 0 for f in self.Fz):
             raise EstimatorConfigError(f"Fz must be one positive load per wheel, got {self.Fz!r}")
+        check_gate(self.outlier_gate)
 
     @property
     def m_eff(self) -> float:
         """Mass of eq. (5)'s 466.5 = m_eff R_w: the car plus the wheels' rotary inertia [kg]."""
         return self.m + len(self.Fz) * self.I_w / self.R_w**2
+
+
+class WheelSpeedGate:
+    """The outlier gate on the wheel speeds (:mod:`estimators.outliers`): one small Kalman filter per wheel.
+
+    Per wheel, state (omega, b) with b = F R_w / I_w the tire's torque over the inertia, a random walk, and the
+    wheel equation ``omega(k+1) = omega(k) + dt (T(k) / I_w - b(k))`` (the force EKF's eq. (7) row, with the known
+    torque), measured with noise ``omega_std``. A wheel speed whose NIS fails the gate is replaced by the
+    prediction (the filters run on it as if it had not come) and the covariance is held at its last one-step value
+    (the random walk of b would open the gate to a dropout within 7 samples); the ``max_rejections + 1``-th in a row
+    restarts that wheel's filter from the measurement.
+
+    :param n: number of wheels.
+    :param I_w: wheel inertia [kg m^2].
+    :param R_w: wheel radius [m].
+    :param Fz: load per wheel [N] (scale of b's initial spread: the tire torque at mu = 1).
+    :param dt: sample time [s].
+    :param omega_std: wheel-speed noise standard deviation assumed [rad/s].
+    :param params: the gate.
+    """
+
+    def __init__(self, n: int, I_w: float, R_w: float, Fz: np.ndarray, dt: float, omega_std: float,
+                 params: GateParams):
+        self.n, self.I_w, self.dt = n, float(I_w), float(dt)
+        self.params = params
+        self.R = float(omega_std) ** 2
+        self.b_std0 = np.asarray(Fz, dtype=float) * R_w / I_w  # [rad/s^2]
+        self.Q = np.diag([0.0, WHEEL_B_STD**2])
+        self.F = np.array([[1.0, -self.dt], [0.0, 1.0]])
+        self.reset()
+
+    def reset(self) -> None:
+        self.x: list[np.ndarray] | None = None  # per wheel (omega, b)
+        self.P: list[np.ndarray] = []
+        self.rejected = [0] * self.n
+
+    def _start(self, i: int, omega: float) -> None:
+        self.x[i] = np.array([omega, 0.0])
+        self.P[i] = np.diag([self.R, self.b_std0[i] ** 2])
+
+    def __call__(self, omega: np.ndarray, torque_prev: np.ndarray) -> tuple[np.ndarray, list[Verdict]]:
+        """Gate this sample's wheel speeds, given the torques held since the last one.
+
+        :return: the wheel speeds to use (predictions in place of rejected ones) and one verdict per wheel.
+        """
+        if self.x is None:
+            self.x, self.P = [None] * self.n, [None] * self.n
+            for i in range(self.n):
+                self._start(i, float(omega[i]))
+            return omega, [Verdict.ACCEPT] * self.n
+        used = omega.astype(float).copy()
+        verdicts = []
+        for i in range(self.n):
+            x = self.F @ self.x[i] + np.array([self.dt * torque_prev[i] / self.I_w, 0.0])
+            P = self.F @ self.P[i] @ self.F.T + self.Q
+            e = float(omega[i]) - x[0]
+            S = P[0, 0] + self.R
+            verdict, self.rejected[i] = gate(nis(e, S), self.rejected[i], self.params)
+            if verdict == Verdict.REJECT:  # the covariance is held: a bad run must not widen the gate to itself
+                self.x[i] = x
+                used[i] = x[0]
+            elif verdict == Verdict.REINIT:
+                self._start(i, float(omega[i]))
+            else:
+                K = P[:, 0] / S
+                self.x[i] = x + K * e
+                self.P[i] = P - np.outer(K, P[0])
+            verdicts.append(verdict)
+        return used, verdicts
 
 
 class EkfRlsCore:
@@ -175,6 +250,8 @@ class EkfRlsCore:
         self.A[0, 1 + n:] = 1.0 / cfg.m
         for i in range(n):
             self.A[1 + i, 1 + n + i] = -cfg.R_w / cfg.I_w
+        self.wheel_gate = None if cfg.outlier_gate is None else WheelSpeedGate(
+            n, cfg.I_w, cfg.R_w, self.Fz, self.dt, cfg.omega_std, cfg.outlier_gate)
         self.reset()
 
     def reset(self, v0: float | None = None) -> None:
@@ -189,6 +266,9 @@ class EkfRlsCore:
         self.s_num = 0.0
         self.s_den = 0.0
         self.mu_peak = 0.0
+        self.torque_prev = np.zeros(self.n)  # torque held since the last sample (for the wheel-speed gate)
+        if self.wheel_gate is not None:
+            self.wheel_gate.reset()
 
     def _dead(self, c: float) -> float:
         """The correction applied to the rate: c outside the dead zone (+-deadband), shrunk towards 0."""
@@ -202,6 +282,10 @@ class EkfRlsCore:
 
     def step(self, omega: np.ndarray, a_x: float, torque: np.ndarray) -> dict:
         cfg, n = self.cfg, self.n
+        verdicts = [Verdict.ACCEPT] * n
+        if self.wheel_gate is not None:  # outliers: the gate's prediction replaces a rejected wheel speed
+            omega, verdicts = self.wheel_gate(omega, self.torque_prev)
+        self.torque_prev = np.array(torque, dtype=float)
         wr = omega * cfg.R_w
         T_total = float(torque.sum())
         x_ref = float(wr.min() if T_total > 0 else wr.max()) if n > 1 else float(wr[0])
@@ -249,7 +333,16 @@ class EkfRlsCore:
         mu_util = abs(F_total) / self.Fz_total
         self.mu_peak = max(self.mu_peak, mu_util)
         return {"v": y, "S": S, "F": F, "k_s": self.k_s, "mu": mu, "mu_peak": self.mu_peak,
-                "mu_utilized": mu_util, "s_bar": s_bar, "excited": excited}
+                "mu_utilized": mu_util, "s_bar": s_bar, "excited": excited, "verdict": max(verdicts)}
+
+
+def _health(out: dict) -> Health:
+    """Health of one EKF/RLS step: the gate's verdict first, then the RLS excitation."""
+    if out["verdict"] == Verdict.REJECT:
+        return Health.OUTLIER
+    if out["verdict"] == Verdict.REINIT:
+        return Health.REINITIALISED
+    return Health.OK if out["excited"] else Health.NOT_EXCITED
 
 
 class QuarterCarEkfRls(Estimator):
@@ -267,6 +360,9 @@ class QuarterCarEkfRls(Estimator):
     :param correction_gain: K of the a_x loop (Fig. 2) [1/s]; default 0, the torque feedforward of eq. (5) alone
         (module docstring); ``PAPER_CORRECTION_GAIN`` (100) is the paper-literal loop.
     :param correction_deadband: dead zone on the a_x correction [m/s^2] (0: none).
+    :param omega_std: wheel-speed noise standard deviation assumed by the outlier gate [rad/s].
+    :param outlier_gate: the wheel-speed gate (:class:`WheelSpeedGate`; ``Health.OUTLIER`` for a rejected sample,
+        ``REINITIALISED`` when a wheel's gate restarts from it), or None to trust every sample.
     """
 
     measurement_columns = ("omega", "a_x")
@@ -275,9 +371,11 @@ class QuarterCarEkfRls(Estimator):
 
     def __init__(self, dt: float = 0.01, p: QuarterCarParams = PAPER_PARAMS, shape: MagicFormula = DRY,
                  mu_map=None, ax_std: float = AX_STD_MIN, forgetting: float = FORGETTING,
-                 correction_gain: float = DEFAULT_CORRECTION_GAIN, correction_deadband: float = 0.0):
+                 correction_gain: float = DEFAULT_CORRECTION_GAIN, correction_deadband: float = 0.0,
+                 omega_std: float = OMEGA_NOISE_STD, outlier_gate: GateParams | None = DEFAULT_GATE):
         cfg = EkfRlsConfig(m=p.m, I_w=p.J, R_w=p.r, Fz=(p.Fz,), ax_std=ax_std, forgetting=forgetting,
-                           K=correction_gain, deadband=correction_deadband)
+                           K=correction_gain, deadband=correction_deadband, omega_std=omega_std,
+                           outlier_gate=outlier_gate)
         self.core = EkfRlsCore(cfg, dt, mu_map or MagicFormulaFamilyMap(shape))
         self._last = None
         self.reset()
@@ -296,8 +394,7 @@ class QuarterCarEkfRls(Estimator):
         out = self.core.step(np.array([y[0]]), float(y[1]), np.array([-uu[0]]))
         self._last = {"v": out["v"], "slip": float(-out["S"][0]), "F_x": float(-out["F"][0]), "k_s": out["k_s"],
                       "mu": out["mu"], "mu_peak": out["mu_peak"], "mu_utilized": out["mu_utilized"]}
-        return Estimate(dict(self._last), Health.OK if out["excited"] else Health.NOT_EXCITED,
-                        {"s_bar": out["s_bar"]})
+        return Estimate(dict(self._last), _health(out), {"s_bar": out["s_bar"]})
 
 
 class TwoAxleEkfRls(Estimator):
@@ -311,6 +408,9 @@ class TwoAxleEkfRls(Estimator):
     :param correction_gain: K of the a_x loop (Fig. 2) [1/s]; default 0 as for the quarter car;
         ``PAPER_CORRECTION_GAIN`` (100) is the paper-literal loop.
     :param correction_deadband: dead zone on the a_x correction [m/s^2] (0: none).
+    :param omega_std: wheel-speed noise standard deviation assumed by the outlier gate [rad/s].
+    :param outlier_gate: the wheel-speed gate (:class:`WheelSpeedGate`; ``Health.OUTLIER`` for a rejected sample,
+        ``REINITIALISED`` when a wheel's gate restarts from it), or None to trust every sample.
     """
 
     measurement_columns = ("omega_f", "omega_r", "a_x")
@@ -319,13 +419,15 @@ class TwoAxleEkfRls(Estimator):
 
     def __init__(self, dt: float = 0.01, params=None, mu_map=None, ax_std: float = AX_STD_MIN,
                  forgetting: float = FORGETTING, correction_gain: float = DEFAULT_CORRECTION_GAIN,
-                 correction_deadband: float = 0.0):
+                 correction_deadband: float = 0.0, omega_std: float = OMEGA_NOISE_STD,
+                 outlier_gate: GateParams | None = DEFAULT_GATE):
         from fricenv.plants.two_axle import TABLE_I, axle_loads
 
         p = params or TABLE_I
         Fzf, Fzr = axle_loads(p)
         cfg = EkfRlsConfig(m=p.m, I_w=p.I_w, R_w=p.R_w, Fz=(Fzf, Fzr), C_s=p.C_s, ax_std=ax_std,
-                           forgetting=forgetting, K=correction_gain, deadband=correction_deadband)
+                           forgetting=forgetting, K=correction_gain, deadband=correction_deadband,
+                           omega_std=omega_std, outlier_gate=outlier_gate)
         self.core = EkfRlsCore(cfg, dt, mu_map or PAPER_MAP)
         self.reset()
 
@@ -344,5 +446,4 @@ class TwoAxleEkfRls(Estimator):
         self._last = {"v": out["v"], "slip_f": float(out["S"][0]), "slip_r": float(out["S"][1]),
                       "F_xf": float(out["F"][0]), "F_xr": float(out["F"][1]), "k_s": out["k_s"],
                       "mu": out["mu"], "mu_peak": out["mu_peak"], "mu_utilized": out["mu_utilized"]}
-        return Estimate(dict(self._last), Health.OK if out["excited"] else Health.NOT_EXCITED,
-                        {"s_bar": out["s_bar"]})
+        return Estimate(dict(self._last), _health(out), {"s_bar": out["s_bar"]})

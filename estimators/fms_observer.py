@@ -49,7 +49,8 @@ import math
 import numpy as np
 
 from estimators.base import Estimate, Estimator, EstimatorConfigError, Health, check_dt
-from fricenv.plants.payload import PAPER_PARAMS, PayloadParams
+from estimators.outliers import FMS_GATE, GateParams, block_health, check_gate, wrench_gate
+from fricenv.plants.payload import PAPER_NOISE, PAPER_PARAMS, PayloadParams
 
 __all__ = ["FmsObserver", "READINGS", "PAPER_K1", "PAPER_K2", "PAPER_DELTA"]
 
@@ -73,6 +74,10 @@ class FmsObserver(Estimator):
     :param reading: ``"paper"`` (eq. (8) as printed) or ``"corrected"`` (translational update times 1/m).
     :param seed: seed (or Generator) of the initial S_hat drawn in [0, 3] when ``reset`` is not given one.
     :param max_cond: condition number above which S_hat is flagged near singular.
+    :param wrench_std: reading noise std (M, f_x, f_y) assumed by the outlier gate.
+    :param outlier_gate: the gate on the readings (:func:`estimators.outliers.wrench_gate`): a rejected reading
+        is replaced by the gate's prediction (``Health.OUTLIER`` for the block), the ``max_rejections + 1``-th in a
+        row restarts the gate's predictor at it (``Health.REINITIALISED``); None trusts every reading.
     """
 
     measurement_columns = ("theta", "X", "Y")
@@ -81,7 +86,8 @@ class FmsObserver(Estimator):
 
     def __init__(self, dt: float = 1e-3, params: PayloadParams = PAPER_PARAMS, *, delta: float = PAPER_DELTA,
                  K1=PAPER_K1, K2=PAPER_K2, reading: str = "paper", seed=None,
-                 max_cond: float = DEFAULT_MAX_COND):
+                 max_cond: float = DEFAULT_MAX_COND, wrench_std=tuple(PAPER_NOISE.wrench_std),
+                 outlier_gate: GateParams | None = FMS_GATE):
         self.dt = check_dt(dt)
         if not isinstance(params, PayloadParams):
             raise EstimatorConfigError(f"params must be a PayloadParams, got {type(params).__name__}")
@@ -105,6 +111,8 @@ class FmsObserver(Estimator):
         self.K2 = K2
         self.reading = reading
         self.max_cond = float(max_cond)
+        self._wrench_gate = None if check_gate(outlier_gate) is None else wrench_gate(self.dt, wrench_std,
+                                                                                       outlier_gate)
         self._rng = as_generator(seed)
         self.reset()
 
@@ -120,6 +128,8 @@ class FmsObserver(Estimator):
         self._x = None  # observer state (theta, omega, X, VX, Y, VY), set from the first pose
         self._e_prev = (0.0, 0.0, 0.0)
         self._n = 0
+        if self._wrench_gate is not None:
+            self._wrench_gate.reset()
         return self._estimate(Health.NOT_EXCITED, "no data yet")
 
     @property
@@ -144,12 +154,18 @@ class FmsObserver(Estimator):
         valid = np.all(np.isfinite(Y), axis=1) & np.all(np.isfinite(U), axis=1)
         if not valid.all():
             Y, U = Y[valid], U[valid]
+        flagged = verdicts = None
         if len(Y):
+            if self._wrench_gate is not None:
+                U, verdicts = self._wrench_gate(U)
+                flagged = block_health(verdicts)
             diverged = self._run(Y.tolist(), U.tolist())
             if diverged:
                 return self._estimate(Health.SOLVER_FAILED, "observer diverged; restarted from its initial S")
         if not valid.all():
             return self._estimate(Health.INVALID_INPUT, f"{int((~valid).sum())} sample(s) with NaN skipped")
+        if flagged is not None:
+            return self._estimate(flagged, f"{int(np.count_nonzero(verdicts))} force reading(s) failed the gate")
         cond = float(np.linalg.cond(self.S))
         if not np.isfinite(cond) or cond > self.max_cond:
             return self._estimate(Health.NOT_EXCITED, f"S_hat near singular (cond {cond:.3g} > {self.max_cond:g})")

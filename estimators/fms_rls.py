@@ -46,6 +46,7 @@ import numpy as np
 from scipy import signal
 
 from estimators.base import Estimate, Estimator, EstimatorConfigError, Health, check_dt
+from estimators.outliers import FMS_GATE, GateParams, block_health, check_gate, wrench_gate
 from fricenv.plants.payload import PAPER_NOISE, PAPER_PARAMS, PayloadParams
 
 __all__ = ["FmsRLS", "WRENCH_HOLDS"]
@@ -89,6 +90,9 @@ class FmsRLS(Estimator):
     :param prior_weight: weight of the prior S0.
     :param min_excitation: excitation below which the estimate is flagged ``NOT_EXCITED``.
     :param max_cond: condition number above which S_hat is flagged near singular.
+    :param outlier_gate: the gate on the readings (:func:`estimators.outliers.wrench_gate`, with ``wrench_std``):
+        a rejected reading is replaced by the gate's prediction (``Health.OUTLIER`` for the block), the
+        ``max_rejections + 1``-th in a row restarts the predictor at it (``Health.REINITIALISED``); None: off.
     """
 
     measurement_columns = ("theta", "X", "Y")
@@ -102,7 +106,7 @@ class FmsRLS(Estimator):
                  wrench_std=tuple(PAPER_NOISE.wrench_std), wrench_hold: str = "point",
                  change_detection: bool = False, change_threshold: float = DEFAULT_CHANGE_THRESHOLD,
                  prior_weight: float = DEFAULT_PRIOR_WEIGHT, min_excitation: float = DEFAULT_MIN_EXCITATION,
-                 max_cond: float = DEFAULT_MAX_COND):
+                 max_cond: float = DEFAULT_MAX_COND, outlier_gate: GateParams | None = FMS_GATE):
         self.dt = check_dt(dt)
         if not isinstance(params, PayloadParams):
             raise EstimatorConfigError(f"params must be a PayloadParams, got {type(params).__name__}")
@@ -152,6 +156,7 @@ class FmsRLS(Estimator):
         self._zi_unit = signal.sosfilt_zi(self._sos)
         self._block_maps: dict[int, tuple] = {}
         self._settle = int(np.ceil(SETTLE_CYCLES / (self.cutoff_hz * self.dt)))
+        self._wrench_gate = None if check_gate(outlier_gate) is None else wrench_gate(self.dt, ws, outlier_gate)
         self.reset()
 
     # ------------------------------------------------------------------ state
@@ -174,6 +179,8 @@ class FmsRLS(Estimator):
         self._res_slow = 0.0
         self._armed_after = CHANGE_WARMUP_TIME / self.dt
         self.changes: list[int] = []  # sample counts at which a jump of S was detected
+        if self._wrench_gate is not None:
+            self._wrench_gate.reset()
         return self._estimate(Health.NOT_EXCITED, reason="no data yet")
 
     @property
@@ -208,6 +215,11 @@ class FmsRLS(Estimator):
             return self._estimate(Health.INVALID_INPUT,
                                   reason=f"block shapes {Y.shape} and {U.shape}; expected (n, 3) and (n, 3)")
         valid = np.all(np.isfinite(Y), axis=1) & np.all(np.isfinite(U), axis=1)
+        flagged = verdicts = None
+        if self._wrench_gate is not None and valid.any():
+            U = U.copy()
+            U[valid], verdicts = self._wrench_gate(U[valid])
+            flagged = block_health(verdicts)
         if valid.all():
             self._absorb(Y, U)
         else:
@@ -215,6 +227,8 @@ class FmsRLS(Estimator):
         health, reason = self._solve()
         if not valid.all():
             return self._estimate(Health.INVALID_INPUT, reason=f"{int((~valid).sum())} sample(s) with NaN skipped")
+        if flagged is not None and health != Health.SOLVER_FAILED:
+            return self._estimate(flagged, reason=f"{int(np.count_nonzero(verdicts))} force reading(s) failed the gate")
         return self._estimate(health, reason=reason)
 
     def _absorb_with_gaps(self, Y: np.ndarray, U: np.ndarray, valid: np.ndarray) -> None:

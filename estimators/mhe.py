@@ -15,75 +15,50 @@ no weight from the data and are held by the prior: that is how B, C, E stay put 
 Two readings of (16) are offered (``weighting=``):
 
 ``"literal"``
-    Raw SI units, ``W_t = (1/alpha) V S_delta^+ U^T``, ``beta_i = beta``. Then ``W_t Phi_t = (1/alpha) V_l V_l^T``:
-    each excited direction of the state is pulled to the window's own least-squares fit with weight 1/alpha^2 =
-    1e4 against a prior weight beta = 1. With alpha = 0.01 the estimator is, in effect, a sliding-window
-    least-squares inversion: no averaging across windows, so the noise of 11 samples (0.45 rad/s) goes straight
-    into theta (about +-0.1), and with the thresholds in raw units the split of what is "excited" depends on the
-    units of v [m/s] against theta [-] and B [-]. No choice of units changes the 1e4 : 1 balance, since W_t Phi_t
-    is unit-free; the literal reading cannot filter.
+    Raw SI units, ``W_t = (1/alpha) V S_delta^+ U^T``, ``beta_i = beta``: ``W_t Phi_t = (1/alpha) V_l V_l^T``
+    pulls each excited direction to the window's own fit with weight 1e4 against the prior's 1, whatever the units
+    -- a sliding-window inversion that cannot filter (the noise of 11 samples goes into theta, about +-0.1).
 
 ``"scaled"`` (default)
-    The paper notes that its scalar tuning "depends on appropriate scaling of the data, states and model
-    equations". The reading under which the method behaves as described scales the data by the measurement noise
-    (``sigma_y = sqrt(0.2)`` rad/s) and the states by ``D`` = :data:`STATE_SCALES` (the spread of the prior per
-    window state; theta alone: v 0.3 m/s, slip 0.01, theta 0.04; theta, B, C, E: v 0.3, slip 0.03, theta 0.03,
-    B 1, C 0.2, E 1), and does the SVD (14) and the thresholding in those units: ``Phi_s = Phi D / sigma_y =
-    U S V^T``. Then ``s_i^2`` is the window's information along ``v_i`` relative to one prior term, and delta
-    (0.1 for theta alone, 0.8 for four parameters, as in the paper) is a threshold on that ratio. The weight keeps
-    the data in the excited directions at their statistical weight and removes the output directions of the
-    thresholded ones, ``W_t = (I - U_d U_d^T) / sigma_y`` (U_d: left singular vectors with s_i < delta). It has the
-    same range and null space as the paper's ``(1/alpha) V S_delta^+ U^T`` (so ``W_t Phi_t`` annihilates exactly
-    the thresholded state directions, which are then held by the prior), but it weighs each excited direction by
-    its information s_i^2 instead of by 1/alpha^2, so that the prior beta_i ||(x - xbar)/D||^2 averages theta over
-    successive windows instead of being overruled 1e4 : 1. alpha is not used by this reading; (17) holds with
-    ``||(W_t Phi_s)^+|| = 1/s_l <= 1/delta``.
-
-    Measured (``fricenv paper mhe``): theta converges in cases 1 and 2 and estimating B, C, E improves v and slip on
-    dry (case 3 against case 1); the literal reading is kept for comparison.
+    The paper notes that its tuning "depends on appropriate scaling of the data, states and model equations". We
+    scale the data by the noise (``sigma_y = sqrt(0.2)`` rad/s) and the states by ``D`` = :data:`STATE_SCALES`
+    (the prior's spread per window state) and do the SVD (14) and the thresholding in those units: ``Phi_s = Phi
+    D / sigma_y = U S V^T``, so ``s_i^2`` is the window's information along ``v_i`` relative to one prior term and
+    delta (0.1 for theta alone, 0.8 for four parameters, as in the paper) a threshold on it. ``W_t = (I - U_d
+    U_d^T) / sigma_y`` (U_d: left singular vectors with s_i < delta) has the range and null space of the paper's
+    ``(1/alpha) V S_delta^+ U^T`` (the thresholded directions are held by the prior) but weighs each excited
+    direction by its information s_i^2 instead of 1/alpha^2, so that the prior averages theta over successive
+    windows. alpha is not used; (17) holds with ``||(W_t Phi_s)^+|| = 1/s_l <= 1/delta``.
 
 Beyond the paper, and the default (``arrival="ekf"``, ``model_error="auto"``, ``gate=GATE_CHI2``). With B, C, E
-fixed at the wrong nominal values (cases 1-2) the nominal curve peaks at 0.89 theta, theta sits at its bound 1,
-and the paper's MHE, whose window follows the model exactly (12b) and whose prior terms pin every window state to
-the a priori trajectory, cannot absorb the model error the way the EKF's process noise does: case 1 rms_v 0.121
-against the EKF's 0.070 (``fricenv paper mhe --seeds 5``, row mhe-paper). The default therefore solves the usual
-MHE with process noise:
+fixed at wrong values (cases 1-2) the paper's MHE (exact model (12b), prior terms pinning every window state)
+cannot absorb the model error as the EKF's process noise does (case 1 rms_v 0.121 against the EKF's 0.070,
+``fricenv paper mhe --seeds 5``). The default solves the usual MHE with process noise:
 
     J = ||W_t (Y - H)||^2 + ||x(t-N) - xbar(t-N)||^2_{P^-1} + sum_i ||w_i||^2_{Q_vs^-1},
     x(i+1) = f(x(i), u(i)) + (w_i, 0),
 
-with w_i per-sample model errors on (v, slip) penalized by the EKF's model-error covariance Q_vs (the same
-``DEFAULT_EKF_TUNING["Q_std"]``, 0.01 m/s and 0.01 per sample), and the arrival cost of an EKF run alongside on
-every sample: xbar(t-N), P are that EKF's prior mean and covariance of x(t-N) given y(..t-N-1) (the "filtering
-update" of Rao, Rawlings & Lee; with N = 0 the estimator is exactly that EKF). The SVD thresholding of the data
-is kept, done in the arrival covariance's units (``Phi_s = Phi L / sigma_y``, P = L L^T), so that directions the
-window does not inform beyond delta^2 times the prior are held by the prior. The paper's later prior terms
-beta_i (i >= 1) are dropped: they would count the prior N + 1 times and pin the trajectory (with process noise and
-the paper's prior terms the estimate diverges in case 1, so that combination is refused). A solution further than
-``gate`` (squared Mahalanobis distance in the EKF's posterior covariance) from the alongside EKF's x(t|t) is
-replaced by the EKF's (info ``gated``): on dry with four parameters an occasional window fits the slip on the
-wrong side of the peak (case 3, seed 1: a single-sample v error of 3.6 m/s); the gate removes these outliers.
+with w_i per-sample model errors on (v, slip) penalized by the EKF's ``DEFAULT_EKF_TUNING["Q_std"]``, and the
+arrival cost of an EKF run alongside: xbar(t-N), P are that EKF's prior of x(t-N) given y(..t-N-1) (the
+"filtering update" of Rao, Rawlings & Lee; with N = 0 the estimator is that EKF). The SVD thresholding is done in
+the arrival covariance's units (``Phi_s = Phi L / sigma_y``, P = L L^T). The paper's later prior terms beta_i
+(i >= 1) are dropped: they would count the prior N + 1 times (with process noise they make case 1 diverge, so
+that combination is refused). A solution further than ``gate`` (squared Mahalanobis distance in the EKF's
+posterior covariance) from the alongside EKF's x(t|t) is replaced by the EKF's (info ``gated``): on dry with four
+parameters an occasional window fits the slip on the wrong side of the peak (case 3, seed 1: 3.6 m/s once).
+Measured (``fricenv paper mhe --seeds 5``; seeds 3-7 to check): v within 0.6 % of the EKF's, slip 1-10 % better
+in every case; arrival means from the MHE's own estimates were worse (they count the window's data twice). The
+paper's MHE is ``arrival="paper", model_error=None``; ``model_error=(std_v, std_slip)`` sets the process noise.
 
-An earlier "ekf" arrival took the mean from the MHE's own smoothed x(t-N|t-1) with the EKF covariance: that counts
-the data y(t-N..t-1) twice (once in the mean, once in the window), and the error grew with N (case 2 rms_v 0.073 at
-N = 1 to 0.14 at N = 10, against the EKF's 0.052); using the MHE's own filtered estimates as the arrival mean was
-also worse (case 1 0.070 against 0.064; these two on seeds 0-2). Measured with the current form (``fricenv paper
-mhe --seeds 5``, and seeds 3-7 for checking): with the same model, Q and R a consistent MHE's filtered estimate
-cannot be much better than the EKF's in v (it is within 0.6 % of it, above it in cases 1-3, below in case 4), and
-it is more accurate in slip in every case (1-10 %; the window relinearizes the slip dynamics). The four-parameter
-paper MHE is better than both on seeds 0-4 in cases 3-4 but worse on seeds 3-7 (case 3 rms_v 0.061 against the
-EKF's 0.037), so it is not the default.
-The paper's MHE is ``arrival="paper", model_error=None``; ``arrival="ekf", model_error=None`` gives the EKF arrival
-cost with the paper's hard dynamics.
+Outliers (:mod:`estimators.outliers`): every wheel speed is gated on the alongside EKF's innovation (that EKF
+runs for every arrival option). A rejected sample stays in the window with zero weight (its row removed before the
+SVD) and the EKF skips it (``Health.OUTLIER``); the ``max_rejections + 1``-th in a row restarts the EKF from it
+(:func:`estimators.ekf.gate_wheel_speed`) and the window after it (``Health.REINITIALISED``).
 
-Solver: a few projected Levenberg-Marquardt (damped Gauss-Newton) iterations on a compiled CasADi SX function
-returning the window outputs, states and their Jacobians (weights applied in numpy), warm-started from the a priori
-(shifted) solution; the bounds are handled by an active set plus projection; at most ``MAX_EVALS`` model
-evaluations per update bound the worst-case time. A solve that raises or gives a non-finite result falls back to
-the a priori trajectory and reports ``Health.SOLVER_FAILED``.
-
-Option ``model_error=(std_v, std_slip)`` sets the process-noise standard deviations explicitly (``"auto"``: the
-EKF's; None: hard dynamics, the paper's).
+Solver: a few projected Levenberg-Marquardt iterations on a compiled CasADi SX function (window outputs, states,
+Jacobians; weights applied in numpy), warm-started from the a priori solution, bounds by an active set plus
+projection, at most ``MAX_EVALS`` model evaluations per update. A solve that raises or gives a non-finite result
+falls back to the a priori trajectory (``Health.SOLVER_FAILED``).
 """
 
 from __future__ import annotations
@@ -94,13 +69,14 @@ import casadi as ca
 import numpy as np
 
 from estimators.base import Estimate, Estimator, EstimatorConfigError, Health, check_dt
-from estimators.ekf import DEFAULT_EKF_TUNING, SLIP_PRIOR, V_PRIOR, ekf_predict, ekf_update
+from estimators.ekf import DEFAULT_EKF_TUNING, SLIP_PRIOR, V_PRIOR, ekf_predict, ekf_update, gate_wheel_speed
+from estimators.outliers import DEFAULT_GATE, GateParams, Verdict, check_gate
 from estimators.quarter_car_model import PARAM_NAMES, AugmentedModel
+from fricenv.plants.sui_johansen import OMEGA_NOISE_STD  # [rad/s], Section IV
 
 __all__ = ["DEFAULT_ARRIVAL", "PAPER_TUNING", "STATE_SCALES", "RegularizedMHE"]
 
 HORIZON = 10  # N, Section IV
-OMEGA_NOISE_STD = float(np.sqrt(0.2))  # [rad/s], Section IV
 # Paper tuning, Section IV.A (theta only) and IV.B (theta, B, C, E).
 PAPER_TUNING = {
     "theta-only": {"alpha": 0.01, "beta": 1.0, "delta": 0.1},
@@ -133,9 +109,8 @@ class RegularizedMHE(Estimator):
     """The regularized MHE of Sui & Johansen on the augmented quarter-car model.
 
     ``update(omega, T_b)`` takes the wheel speed at time t and the torque held from t to t+1, and returns x(t|t).
-    Until N + 1 samples have arrived, the a priori trajectory is returned (with ``arrival="ekf"``: the alongside
-    EKF's estimate; ``Health.NOT_EXCITED``, info ``warming_up``). Values: ``v``, ``slip``, the four curve parameters (estimated or fixed) and
-    ``mu``, the friction in use, mu(slip) on the estimated curve.
+    Until N + 1 samples have arrived it returns the a priori trajectory (``arrival="ekf"``: the alongside EKF's
+    estimate; ``Health.NOT_EXCITED``, info ``warming_up``). Values: ``v``, ``slip``, theta, B, C, E and ``mu``.
 
     :param estimated: parameters augmented to the state (subset of theta, B, C, E).
     :param dt: sample time [s].
@@ -157,6 +132,8 @@ class RegularizedMHE(Estimator):
         distance from the alongside EKF's x(t|t) (in its covariance), the EKF's estimate is returned instead (info
         ``gated``); None disables the gate (beyond the paper, module docstring).
     :param model: a prebuilt :class:`AugmentedModel`.
+    :param outlier_gate: the wheel-speed gate on the alongside EKF's innovation (module docstring, "Outliers");
+        None trusts every sample.
     """
 
     measurement_columns = ("omega",)
@@ -168,7 +145,7 @@ class RegularizedMHE(Estimator):
                  weighting: str = "scaled", arrival: str | None = None, state_scales: dict | None = None,
                  noise_std: float = OMEGA_NOISE_STD, max_iter: int | None = None,
                  model_error: tuple[float, float] | str | None = "auto", gate: float | None = GATE_CHI2,
-                 model: AugmentedModel | None = None):
+                 model: AugmentedModel | None = None, outlier_gate: GateParams | None = DEFAULT_GATE):
         dt = check_dt(dt)
         if weighting not in WEIGHTINGS:
             raise EstimatorConfigError(f"weighting must be one of {WEIGHTINGS}, got {weighting!r}")
@@ -222,6 +199,7 @@ class RegularizedMHE(Estimator):
         if gate is not None and not (np.isfinite(gate) and gate > 0):
             raise EstimatorConfigError(f"gate must be a positive squared distance or None, got {gate!r}")
         self.gate = None if gate is None else float(gate)
+        self.outlier_gate = check_gate(outlier_gate)
         scales = {**STATE_SCALES[group], **(state_scales or {})}
         names = self.model.names
         self.D = np.array([scales[n] for n in names]) if weighting == "scaled" else np.ones(len(names))
@@ -303,6 +281,8 @@ class RegularizedMHE(Estimator):
         self._w_prev: np.ndarray | None = None
         self._ekf_x, self._ekf_P = self.x_prior0.copy(), self._P0.copy()
         self._arr_hist: deque = deque(maxlen=self.N + 1)
+        self._used: list[bool] = []  # per window sample: False if the gate rejected it
+        self._rejected = 0  # consecutive rejections (estimators.outliers)
         return self._estimate(self.x_prior0, Health.OK)
 
     def _estimate(self, x: np.ndarray, health: Health, info: dict | None = None) -> Estimate:
@@ -313,13 +293,36 @@ class RegularizedMHE(Estimator):
         if sample is None:
             return self._estimate(self._last, Health.INVALID_INPUT, {"reason": "NaN or wrong shape; sample skipped"})
         y, uu = sample
+        verdict = self._take(y, float(uu[0]))
+        est = self._window_estimate(float(uu[0]))
+        self._ekf_predict(float(uu[0]))
+        if verdict == Verdict.ACCEPT:
+            return est
+        health = Health.OUTLIER if verdict == Verdict.REJECT else Health.REINITIALISED
+        return Estimate(est.values, health, {**est.info, "window_health": est.health})
+
+    def _take(self, y: np.ndarray, u: float) -> Verdict:
+        """Gate the sample on the alongside EKF's innovation, update that EKF and the window buffers."""
+        verdict, self._rejected, self._ekf_x, self._ekf_P = gate_wheel_speed(
+            self.model, self._ekf_x, self._ekf_P, self._P0, self._R, y, self._rejected, self.outlier_gate)
+        if verdict == Verdict.REINIT:  # the alongside EKF restarted from the sample: so does the window
+            self._y, self._u, self._used = [], [], []
+            self._arr_hist.clear()
+            self.x_prior0, self._X_prev = self._ekf_x.copy(), None
         self._y.append(float(y[0]))
-        self._u.append(float(uu[0]))
+        self._u.append(u)
+        self._used.append(verdict != Verdict.REJECT)  # a rejected sample stays in the window with no weight
+        self._arr_hist.append((self._ekf_x, self._ekf_P))  # prior of x(t) given y(..t-1)
+        if verdict == Verdict.REJECT:
+            self._ekf_post = (self._ekf_x, self._ekf_P)
+        else:
+            hx, H = np.array([self.model.h(self._ekf_x)]), self.model.h_jacobian(self._ekf_x)
+            self._ekf_post = ekf_update(self._ekf_x, self._ekf_P, y, hx, H, self._R)[:2]
+        return verdict
+
+    def _window_estimate(self, u: float) -> Estimate:
+        """Warm-up, window solve (eq. (12)), fallback and the EKF-consistency gate."""
         N = self.N
-        if self.arrival == "ekf":
-            self._arr_hist.append((self._ekf_x, self._ekf_P))  # prior of x(t) given y(..t-1)
-            self._ekf_post = ekf_update(self._ekf_x, self._ekf_P, y, np.array([self.model.h(self._ekf_x)]),
-                                        self.model.h_jacobian(self._ekf_x), self._R)[:2]
         if len(self._y) < N + 1:  # warming up: propagate the prior, eq. (11), or the alongside EKF's estimate
             if self.arrival == "ekf":
                 x = np.clip(self._ekf_post[0], self.lower, self.upper)
@@ -328,18 +331,16 @@ class RegularizedMHE(Estimator):
                 for k in range(len(self._y) - 1):
                     x = self.model.f(x, self._u[k])
             self._last = x
-            self._ekf_predict(float(uu[0]))
             return self._estimate(x, Health.NOT_EXCITED, {"warming_up": True})
-        if len(self._y) > N + 1:
-            # the window slides: the new a priori start is the previous x(t-N-1|t-1) pushed one sample, eq. (11)
-            self._y.pop(0), self._u.pop(0)
+        if len(self._y) > N + 1:  # the window slides: the a priori start is x(t-N-1|t-1) pushed on, eq. (11)
+            self._y.pop(0), self._u.pop(0), self._used.pop(0)
             self.x_prior0 = np.clip(self._f_est0, self.lower, self.upper)
         if self.arrival == "ekf":
             self.x_prior0, self._P = self._arr_hist[0]
         Y = np.asarray(self._y)
         U = np.asarray(self._u[:N])
         try:
-            sol, health, info = self._solve(self.x_prior0, Y, U)
+            sol, health, info = self._solve(self.x_prior0, Y, U, np.asarray(self._used))
         except Exception as exc:  # noqa: BLE001 - a failed solve must never raise inside a loop
             sol, health, info = None, Health.SOLVER_FAILED, {"reason": f"{type(exc).__name__}: {exc}"}
         if sol is None:
@@ -354,12 +355,10 @@ class RegularizedMHE(Estimator):
                 usable = False
             if not usable:  # even the prior is unusable: hold the last estimate, restart from the prior start
                 self._x_est0, self._f_est0 = self.x_prior0, self.x_prior0
-                self._ekf_predict(float(uu[0]))
                 return self._estimate(self._last, Health.SOLVER_FAILED, info)
             self._x_est0, self._f_est0 = self.x_prior0, f0
             self._X_prev = None
             self._last = Xb[:, -1]
-            self._ekf_predict(float(uu[0]))
             return self._estimate(self._last, Health.SOLVER_FAILED, info)
         self._x_est0 = sol["z"][:self.model.nx]
         self._X_prev, self._w_prev = sol["X"], sol["z"][self.model.nx:]
@@ -375,13 +374,10 @@ class RegularizedMHE(Estimator):
                 self._last = np.clip(x_ekf, self.lower, self.upper)
                 self._X_prev = None
                 info["gated"] = True
-        self._ekf_predict(float(uu[0]))
         return self._estimate(self._last, health, info)
 
     def _ekf_predict(self, u: float) -> None:
-        """Arrival cost (arrival="ekf"): the alongside EKF's time update from x(t|t) to the prior of x(t+1)."""
-        if self.arrival != "ekf":
-            return
+        """The alongside EKF's time update from x(t|t) to the prior of x(t+1) (arrival cost and outlier gate)."""
         x_post, P_post = self._ekf_post
         x_post = np.clip(x_post, self.lower, self.upper)
         xn, F = self.model.f_and_jacobian(x_post, u)
@@ -391,6 +387,15 @@ class RegularizedMHE(Estimator):
             self._ekf_x, self._ekf_P = self._ekf_x, self._P0.copy()
 
     # ------------------------------------------------------------------ weights and solver
+    def _masked_weights(self, Phi: np.ndarray, used: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
+        """:meth:`_weights` over the samples the gate kept, with zero weight on the others."""
+        if used.all():
+            return self._weights(Phi)
+        W_used, s, rank = self._weights(Phi[used])
+        W = np.zeros((len(used), len(used)))
+        W[np.ix_(np.arange(W_used.shape[0]) if self.weighting == "literal" else used, used)] = W_used
+        return W, s, rank
+
     def _weights(self, Phi: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
         """W_t of eq. (16) (literal) or its scaled reading; returns (W (N+1 x N+1), singular values, rank kept)."""
         N1, nx = Phi.shape
@@ -399,7 +404,7 @@ class RegularizedMHE(Estimator):
             keep = (s >= self.delta) & (s > SV_FLOOR * max(s[0], 1e-300))
             s_inv = np.where(keep, 1.0 / np.where(keep, s, 1.0), 0.0)
             W = (Vt.T * s_inv) @ Uu.T / self.alpha  # eq. (16), nx x (N+1)
-            Wfull = np.zeros((N1, N1))
+            Wfull = np.zeros((max(N1, nx), N1))  # (more rows than samples only when the gate removed some)
             Wfull[:nx] = W
             return Wfull, s, int(keep.sum())
         if self.arrival == "ekf":
@@ -439,8 +444,10 @@ class RegularizedMHE(Estimator):
             J.append(Jw)
         return np.concatenate(r), np.vstack(J)
 
-    def _solve(self, xb0: np.ndarray, Y: np.ndarray, U: np.ndarray):
-        """Projected Levenberg-Marquardt on (12a) from the a priori start; returns (solution or None, health, info)."""
+    def _solve(self, xb0: np.ndarray, Y: np.ndarray, U: np.ndarray, used: np.ndarray):
+        """Projected Levenberg-Marquardt on (12a) from the a priori start; returns (solution or None, health, info).
+
+        ``used`` marks the window samples the outlier gate kept; the others get no weight."""
         z = self._z(xb0)
         # eq. (11), row i = xbar(t-N+i); with the EKF arrival cost only xbar(t-N) enters
         Xbar = np.asarray(self._fun_prior(xb0, U)).T if self.arrival == "paper" else np.tile(xb0, (self.N + 1, 1))
@@ -450,7 +457,7 @@ class RegularizedMHE(Estimator):
 
         ev = self._evaluate(z, Xbar, Y, U)
         nx = self.model.nx
-        W, s, rank = self._weights(ev["PhiZ"][:, :nx])  # Phi_hat at the a priori state, eq. (14)
+        W, s, rank = self._masked_weights(ev["PhiZ"][:, :nx], used)  # Phi_hat at the a priori state, eq. (14)
         Wa, Wp = self._prior_weights()
         r, J = self._residual(ev, W, Wa, Wp)
         cost = float(r @ r)
@@ -489,5 +496,5 @@ class RegularizedMHE(Estimator):
                 break
         if not (np.all(np.isfinite(z)) and np.all(np.isfinite(ev["X"]))):
             return None, Health.SOLVER_FAILED, {"reason": "non-finite solution"}
-        health = Health.OK if rank == len(s) else Health.NOT_EXCITED
+        health = Health.OK if rank == nx else Health.NOT_EXCITED
         return ev, health, {"singular_values": s, "rank": rank, "cost": cost, "evaluations": n_eval}
