@@ -150,6 +150,7 @@ def test_report_json_has_exactly_the_schema_keys(diagnosed, tmp_path):
     assert rep == on_disk
     for name in ("report.md", "residual_time.png", "residual_regimes.png"):
         assert (tmp_path / "out" / name).stat().st_size > 0
+        assert f"({name})" in (tmp_path / "out" / "report.md").read_text() or name == "report.md"
     assert not [p for p in (tmp_path / "out").iterdir() if p.name.startswith(".")]  # no temporary left
 
 
@@ -158,6 +159,7 @@ def test_report_is_never_half_written(diagnosed, tmp_path, monkeypatch):
     out = tmp_path / "out"
     write_report(dg, out, plots=False)
     before = (out / "report.json").read_text()
+    assert "![" not in (out / "report.md").read_text()  # no link to a plot that was not written
 
     def boom(*args, **kwargs):
         raise RuntimeError("disk full while plotting")

@@ -34,12 +34,14 @@ def _worker(job):
 
 
 def _terminate(pool: ProcessPoolExecutor) -> None:
-    """Cancel what has not started and end the worker processes now."""
-    pool.shutdown(wait=False, cancel_futures=True)
-    for proc in list((getattr(pool, "_processes", None) or {}).values()):
+    """End the worker processes now and cancel what has not started (the executor forgets its processes on
+    shutdown, so they are taken first)."""
+    procs = list((getattr(pool, "_processes", None) or {}).values())
+    for proc in procs:
         if proc.is_alive():
             proc.terminate()
-    for proc in list((getattr(pool, "_processes", None) or {}).values()):
+    pool.shutdown(wait=False, cancel_futures=True)
+    for proc in procs:
         proc.join(timeout=5)
 
 
