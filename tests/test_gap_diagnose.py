@@ -476,7 +476,7 @@ def test_a_range_edge_in_one_fold_is_enough():
 def test_mu_change_starts_come_from_distinct_road_shapes_and_find_the_change(diagnosed):
     from fricenv.gap.diagnose import change_point_starts, fold_data, param_names
 
-    log, dg = diagnosed("mu_change")
+    _, dg = diagnosed("mu_change")
     fold = fold_data(dg.data, 0)
     starts = change_point_starts("mu_change", dg.nominal.road_x(), fold, 2)
     at = {n: i for i, n in enumerate(param_names(["mu_change"]))}
