@@ -150,6 +150,7 @@ def test_report_json_has_exactly_the_schema_keys(diagnosed, tmp_path):
     assert rep == on_disk
     for name in ("report.md", "residual_time.png", "residual_regimes.png"):
         assert (tmp_path / "out" / name).stat().st_size > 0
+        assert f"({name})" in (tmp_path / "out" / "report.md").read_text() or name == "report.md"
     assert not [p for p in (tmp_path / "out").iterdir() if p.name.startswith(".")]  # no temporary left
 
 
@@ -158,6 +159,7 @@ def test_report_is_never_half_written(diagnosed, tmp_path, monkeypatch):
     out = tmp_path / "out"
     write_report(dg, out, plots=False)
     before = (out / "report.json").read_text()
+    assert "![" not in (out / "report.md").read_text()  # no link to a plot that was not written
 
     def boom(*args, **kwargs):
         raise RuntimeError("disk full while plotting")
@@ -422,15 +424,15 @@ def test_a_gap_only_in_the_lock_up_windows_is_not_real():
 def test_least_squares_starts_come_from_distinct_roads():
     """The second run starts from the best start of another road shape, not from the same road with another
     effect value (that run would stay in the first one's basin); failed starts (non-finite loss) are never used."""
-    from fricenv.gap.diagnose import _distinct_starts
+    from fricenv.gap.diagnose import distinct_starts
 
     nominal, dry = [19.2, 2.25, 0.99, 0.95], [10.38, 1.65, 0.657, 1.0]
     starts = np.array([nominal + [0.045], nominal + [0.025], dry + [0.045], dry + [0.025], [4.0, 2.0, 1.0, 0.1, 0.01]])
     cost = np.array([4499.0, 6682.0, 5694.0, 8484.0, np.inf])
-    chosen = _distinct_starts(starts, cost, 2)
+    chosen = distinct_starts(starts, cost, 2)
     assert [list(c) for c in chosen] == [nominal + [0.045], dry + [0.045]]
-    assert len(_distinct_starts(starts, cost, 5)) == 2  # only two finite road shapes
-    assert [list(c) for c in _distinct_starts(starts, cost, 1)] == [nominal + [0.045]]
+    assert len(distinct_starts(starts, cost, 5)) == 2  # only two finite road shapes
+    assert [list(c) for c in distinct_starts(starts, cost, 1)] == [nominal + [0.045]]
 
 
 def _fit_with(effect, values, folds=None):
@@ -472,13 +474,15 @@ def test_a_range_edge_in_one_fold_is_enough():
 
 
 def test_mu_change_starts_come_from_distinct_road_shapes_and_find_the_change(diagnosed):
-    from fricenv.gap.diagnose import _fold_data, _mu_change_starts
+    from fricenv.gap.diagnose import change_point_starts, fold_data, param_names
 
-    log, dg = diagnosed("mu_change")
-    fold = _fold_data(dg.data, 0)
-    starts = _mu_change_starts(dg.nominal.x[:4], fold, 2)
+    _, dg = diagnosed("mu_change")
+    fold = fold_data(dg.data, 0)
+    starts = change_point_starts("mu_change", dg.nominal.road_x(), fold, 2)
+    at = {n: i for i, n in enumerate(param_names(["mu_change"]))}
     assert len(starts) == 2
-    assert not np.allclose(starts[0][:3], starts[1][:3])  # two road shapes, not one shape twice
+    shape = [at["B"], at["C"], at["E"]]
+    assert not np.allclose(starts[0][shape], starts[1][shape])  # two road shapes, not one shape twice
     t_true = CASES["mu_change"][0]["t_change"]
-    assert abs(starts[0][4] - t_true) < 0.1  # the best split brackets the change (10 ms samples, 0.1 s windows)
-    assert starts[0][5] < starts[0][3]  # the friction drops
+    assert abs(starts[0][at["t_change"]] - t_true) < 0.1  # the best split brackets the change (10 ms samples)
+    assert starts[0][at["theta_after"]] < starts[0][at["theta"]]  # the friction drops

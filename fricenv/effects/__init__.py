@@ -1,7 +1,10 @@
 """Unmodelled effects (DESIGN.md effect tables) as switchable, parameterised extensions of the plants.
 
 The same code builds the "real" stand-in of the gap tool and the augmented simulators its diagnosis fits.
-Quarter car: :mod:`fricenv.effects.quarter_car`; planar payload: :mod:`fricenv.effects.payload`.
+Quarter car: :mod:`fricenv.effects.quarter_car` (simulator), :mod:`fricenv.effects.registry` (one entry per effect:
+parameters, bounds, fit recipe, validation draw, plug-in hooks), :mod:`fricenv.effects.library` (the built-in effects'
+specs and entries), :mod:`fricenv.effects.batch` (per-element parameters), :mod:`fricenv.effects.relaxation` (the
+relaxation plant); planar payload: :mod:`fricenv.effects.payload`.
 """
 
 from fricenv.effects.quarter_car import (
@@ -19,6 +22,7 @@ from fricenv.effects.quarter_car import (
     make_effect,
     simulate_with_effects,
 )
+from fricenv.effects.registry import Param, QuarterCarEffect, register, registered
 
 __all__ = [
     "EFFECTS",
@@ -30,8 +34,12 @@ __all__ = [
     "EffectSimulator",
     "ModelBatch",
     "MuChange",
+    "Param",
+    "QuarterCarEffect",
     "RadiusError",
     "RelaxationLength",
     "make_effect",
+    "register",
+    "registered",
     "simulate_with_effects",
 ]

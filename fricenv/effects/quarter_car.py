@@ -1,16 +1,8 @@
 """Unmodelled effects of the quarter-car braking plant (DESIGN.md, "Effect names (quarter car)").
 
-Each effect is a typed, frozen spec whose name and parameter names are the DESIGN.md contract:
-
-| name                | parameters                  | where it acts                                             |
-| ------------------- | --------------------------- | --------------------------------------------------------- |
-| ``brake_lag``        | ``tau`` [s]                 | applied torque: tau T_a' = T_cmd - T_a                     |
-| ``brake_delay``      | ``delay`` [s]               | applied torque: T_a(t) = T_cmd(t - delay)                  |
-| ``brake_gain``       | ``gain`` [-]                | applied torque: T_a = gain T_cmd                           |
-| ``relaxation_length``| ``sigma`` [m]               | tire force from a transient slip, (sigma/v) l_t' = l - l_t |
-| ``radius_error``     | ``r_eff`` [m]               | rolling radius of slip and torque arm                      |
-| ``mu_change``        | ``t_change`` [s], ``theta_after`` [-] | road peak factor theta switches at t_change     |
-| ``drag``             | ``c0`` [N], ``c2`` [N s^2/m^2] | extra force on the vehicle, c0 + c2 v^2                 |
+Each effect is a typed, frozen spec whose name and parameter names are the DESIGN.md contract; the specs and
+their registry entries are in :mod:`fricenv.effects.library` (the table there), the registry in
+:mod:`fricenv.effects.registry`. This module re-exports them.
 
 :class:`EffectSimulator` is the one simulator with effects, batched over a leading dimension whose elements may each
 carry their own effect parameters (a :class:`ModelBatch`). It layers the effects around the plant of
@@ -24,37 +16,47 @@ carry their own effect parameters (a :class:`ModelBatch`). It layers the effects
   ``radius_error`` (elements grouped by radius, since the plant takes one parameter set per call), and the drag force
   added by Strang splitting (it varies on the vehicle's slow time scale);
 - ``relaxation_length`` changes the tire force law (the force depends on a third state, the transient slip), which
-  cannot be expressed through ``quarter_car.step``: those elements are integrated by :func:`relaxation_step`, the
-  same L-stable ROS2 scheme on the extended 3-state right-hand side :func:`relaxation_derivatives`, with the Magic
-  Formula of :mod:`fricenv.plants.tire`. It is checked against ``scipy.integrate.solve_ivp`` (Radau) in the tests.
+  cannot be expressed through ``quarter_car.step``: those elements are integrated by
+  :func:`fricenv.effects.relaxation.relaxation_step`;
+- a plug-in effect (registered with ``builtin=False``) acts through its registry hooks on the applied torque and
+  the road's peak factor.
 
-Three physically real effects that are NOT in the library are provided for the gap tool's validation on withheld
+Three physically real effects that are NOT in the library are built in for the gap tool's validation on withheld
 effects (:data:`OUT_OF_LIBRARY`): temperature brake fade, pitch-dynamics wheel-load transfer and friction that falls
 with the sliding speed (Burckhardt's velocity factor).
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
-from dataclasses import dataclass, fields, replace
-from typing import ClassVar
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from dataclasses import fields, replace
 
 import numpy as np
 
-from fricenv.plants import quarter_car as qc
-from fricenv.plants.tire import (
-    MagicFormula,
-    longitudinal_slip,
-    magic_formula,
-    magic_formula_dslip,
-    slip_and_partials,
+from fricenv.effects import registry
+from fricenv.effects.batch import ModelBatch
+from fricenv.effects.library import (
+    BrakeDelay,
+    BrakeFade,
+    BrakeGain,
+    BrakeLag,
+    Drag,
+    LoadTransfer,
+    MuChange,
+    RadiusError,
+    RelaxationLength,
+    SlidingSpeedFriction,
 )
+from fricenv.effects.relaxation import RELAX_GAMMA, relaxation_derivatives, relaxation_step
+from fricenv.plants import quarter_car as qc
+from fricenv.plants.tire import MagicFormula, longitudinal_slip, magic_formula
 
 __all__ = [
     "DEFAULT_SUBSTEPS",
     "EFFECTS",
     "EFFECT_PARAMS",
     "OUT_OF_LIBRARY",
+    "RELAX_GAMMA",
     "BrakeDelay",
     "BrakeFade",
     "BrakeGain",
@@ -67,21 +69,15 @@ __all__ = [
     "RadiusError",
     "RelaxationLength",
     "SlidingSpeedFriction",
+    "effect_params",
     "make_effect",
     "relaxation_derivatives",
     "relaxation_step",
     "simulate_with_effects",
 ]
 
-# ROS2 constant (Verwer et al. 1999), the same L-stable choice as the plant's integrator.
-_ROS2_GAMMA = 1.0 + 1.0 / np.sqrt(2.0)
 # Physics substeps per 10 ms sample: the plant's verified setting (< 0.01 % vs Radau).
 DEFAULT_SUBSTEPS = 5
-# Rosenbrock gamma of the relaxation plant's steps: 1/2 (linearly implicit trapezoidal rule, A-stable, second
-# order) leaves the oscillatory mode of the transient slip and the wheel (about 25 Hz on dry asphalt at
-# sigma = 0.3 m) undamped, as it is; the plant's L-stable 1 + 1/sqrt(2) damps that mode numerically at 2 ms steps,
-# which a fit then reads as a relaxation length about 10 % too long.
-RELAX_GAMMA = 0.5
 # Index rounding guard when locating a delayed sample [samples].
 _INDEX_EPS = 1e-9
 # Load-transfer pitch mode: natural frequency [rad/s] and damping ratio [-] of a passenger car's pitch.
@@ -89,151 +85,36 @@ _PITCH_OMEGA = 2.0 * np.pi * 1.5
 _PITCH_ZETA = 0.4
 
 
-# --------------------------------------------------------------------------------------------- effect specs
-def _check_positive(obj, name: str, allow_zero: bool = False) -> None:
-    value = getattr(obj, name)
-    ok = np.isfinite(value) and (value >= 0 if allow_zero else value > 0)
-    if not ok:
-        bound = ">= 0" if allow_zero else "> 0"
-        raise ValueError(f"{obj.name}.{name} must be finite and {bound}, got {value!r}")
+class _RegistryView(Mapping):
+    """A live, read-only view of the registry: effect name -> ``value(entry)`` over the entries ``keep`` selects
+    (an effect registered later appears in it)."""
+
+    def __init__(self, keep: Callable, value: Callable):
+        self._keep, self._value = keep, value
+
+    def _names(self) -> list[str]:
+        return [n for n, e in registry.REGISTRY.items() if self._keep(e)]
+
+    def __getitem__(self, name: str):
+        entry = registry.REGISTRY.get(name)
+        if entry is None or not self._keep(entry):
+            raise KeyError(name)
+        return self._value(entry)
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._names())
+
+    def __len__(self) -> int:
+        return len(self._names())
+
+    def __repr__(self) -> str:
+        return repr(dict(self))
 
 
-@dataclass(frozen=True)
-class BrakeLag:
-    """Applied torque is a first-order lag of the logged torque: ``tau T_a' = T_cmd - T_a``."""
-
-    tau: float  # lag time constant [s]
-    name: ClassVar[str] = "brake_lag"
-
-    def __post_init__(self):
-        _check_positive(self, "tau")
-
-
-@dataclass(frozen=True)
-class BrakeDelay:
-    """Applied torque is the logged torque delayed: ``T_a(t) = T_cmd(t - delay)``."""
-
-    delay: float  # transport delay [s]
-    name: ClassVar[str] = "brake_delay"
-
-    def __post_init__(self):
-        _check_positive(self, "delay", allow_zero=True)
-
-
-@dataclass(frozen=True)
-class BrakeGain:
-    """Applied torque is a multiple of the logged torque: ``T_a = gain T_cmd``."""
-
-    gain: float  # torque gain [-]
-    name: ClassVar[str] = "brake_gain"
-
-    def __post_init__(self):
-        _check_positive(self, "gain")
-
-
-@dataclass(frozen=True)
-class RelaxationLength:
-    """Tire force follows a transient slip: ``(sigma / v) lambda_t' = lambda - lambda_t``, ``F_x = F_z mu(lambda_t)``."""
-
-    sigma: float  # relaxation length [m]
-    name: ClassVar[str] = "relaxation_length"
-
-    def __post_init__(self):
-        _check_positive(self, "sigma")
-
-
-@dataclass(frozen=True)
-class RadiusError:
-    """The effective rolling radius (slip and torque arm) is ``r_eff`` instead of the nominal one."""
-
-    r_eff: float  # effective rolling radius [m]
-    name: ClassVar[str] = "radius_error"
-
-    def __post_init__(self):
-        _check_positive(self, "r_eff")
-
-
-@dataclass(frozen=True)
-class MuChange:
-    """The road's peak factor theta switches to ``theta_after`` at ``t_change`` (log time)."""
-
-    t_change: float  # switching time [s]
-    theta_after: float  # road condition coefficient after the change [-]
-    name: ClassVar[str] = "mu_change"
-
-    def __post_init__(self):
-        if not np.isfinite(self.t_change):
-            raise ValueError(f"mu_change.t_change must be finite, got {self.t_change!r}")
-        _check_positive(self, "theta_after")
-
-
-@dataclass(frozen=True)
-class Drag:
-    """Extra force on the vehicle, rolling resistance plus air drag: ``F_d = c0 + c2 v^2`` (while moving)."""
-
-    c0: float  # constant resistance [N]
-    c2: float  # quadratic (air drag) coefficient [N s^2/m^2]
-    name: ClassVar[str] = "drag"
-
-    def __post_init__(self):
-        _check_positive(self, "c0", allow_zero=True)
-        _check_positive(self, "c2", allow_zero=True)
-
-
-@dataclass(frozen=True)
-class BrakeFade:
-    """NOT a library effect (validation only): brake fade with pad temperature.
-
-    The applied torque is divided by ``1 + k E_b``, with ``E_b`` the brake energy dissipated so far (a proxy of the
-    disc temperature rise).
-    """
-
-    k: float  # fade coefficient [1/J]
-    name: ClassVar[str] = "brake_fade"
-
-    def __post_init__(self):
-        _check_positive(self, "k", allow_zero=True)
-
-
-@dataclass(frozen=True)
-class LoadTransfer:
-    """NOT a library effect (validation only): wheel-load transfer through the body's pitch dynamics.
-
-    ``F_z = F_z0 (1 + k x)`` with the pitch response ``x'' = w_n^2 (d/g - x) - 2 zeta w_n x'`` to the deceleration
-    ``d``; ``k`` is the static load-transfer ratio per g (front axle).
-    """
-
-    k: float  # static load transfer per g of deceleration [-]
-    name: ClassVar[str] = "load_transfer"
-
-    def __post_init__(self):
-        if not np.isfinite(self.k):
-            raise ValueError(f"load_transfer.k must be finite, got {self.k!r}")
-
-
-@dataclass(frozen=True)
-class SlidingSpeedFriction:
-    """NOT a library effect (validation only): friction that falls with the sliding speed.
-
-    Burckhardt's tire model (Kiencke & Nielsen, Automotive Control Systems, Section 7.1) multiplies the friction
-    curve by ``exp(-c4 lambda v)``, ``lambda v = v - omega r`` being the sliding speed; ``c4`` is about 0.02-0.04 s/m
-    on asphalt. A locked wheel at 30 m/s then has about half the friction it has at walking pace.
-    """
-
-    c4: float  # friction decay per unit sliding speed [s/m]
-    name: ClassVar[str] = "sliding_speed_friction"
-
-    def __post_init__(self):
-        _check_positive(self, "c4", allow_zero=True)
-
-
-EFFECTS: dict[str, type] = {cls.name: cls for cls in (BrakeLag, BrakeDelay, BrakeGain, RelaxationLength,
-                                                       RadiusError, MuChange, Drag)}
-EFFECT_PARAMS: dict[str, tuple[str, ...]] = {
-    name: tuple(f.name for f in fields(cls)) for name, cls in EFFECTS.items()
-}
-OUT_OF_LIBRARY: dict[str, type] = {cls.name: cls for cls in (BrakeFade, LoadTransfer,
-                                                              SlidingSpeedFriction)}
+# Library effects (name -> spec class), their parameter names, and the validation-only effects: live views.
+EFFECTS: Mapping[str, type] = _RegistryView(lambda e: e.in_library, lambda e: e.spec)
+EFFECT_PARAMS: Mapping[str, tuple[str, ...]] = _RegistryView(lambda e: e.in_library, lambda e: e.param_names)
+OUT_OF_LIBRARY: Mapping[str, type] = _RegistryView(lambda e: not e.in_library, lambda e: e.spec)
 
 
 def make_effect(name: str, allow_out_of_library: bool = False, **params: float):
@@ -244,158 +125,12 @@ def make_effect(name: str, allow_out_of_library: bool = False, **params: float):
     :param params: the effect's parameters, by their DESIGN.md names.
     :raises ValueError: unknown name (lists the valid ones), unknown or missing parameter (lists the valid ones).
     """
-    table = dict(EFFECTS)
-    if allow_out_of_library:
-        table.update(OUT_OF_LIBRARY)
-    if name not in table:
-        raise ValueError(f"unknown effect {name!r}; valid effects: {', '.join(table)}")
-    cls = table[name]
-    valid = [f.name for f in fields(cls)]
-    unknown = sorted(set(params) - set(valid))
-    missing = [v for v in valid if v not in params]
-    if unknown or missing:
-        what = f"unknown parameter(s) {', '.join(unknown)}" if unknown else f"missing parameter(s) {', '.join(missing)}"
-        raise ValueError(f"effect {name!r}: {what}; its parameters are: {', '.join(valid)}")
-    return cls(**{k: float(v) for k, v in params.items()})
+    return registry.get(name, allow_out_of_library).make(**params)
 
 
 def effect_params(effect) -> dict[str, float]:
     """The parameters of an effect spec as a plain dict (DESIGN.md names, SI units)."""
     return {f.name: float(getattr(effect, f.name)) for f in fields(effect)}
-
-
-# --------------------------------------------------------------------------------------------- batched models
-@dataclass(frozen=True)
-class ModelBatch:
-    """Per-element model parameters of a batch: the road and every effect's parameters, switched off by default.
-
-    All arrays have shape ``(n,)`` except ``road`` ``(n, 4)``. "Off" values: ``tau = 0``, ``delay = 0``,
-    ``gain = 1``, ``sigma = 0``, ``r_eff = p.r``, ``t_change = inf``, ``c0 = c2 = 0``, ``fade = 0``, ``load = 0``,
-    ``slide = 0``.
-    """
-
-    road: np.ndarray  # (B, C, E, theta) per element
-    tau: np.ndarray  # brake lag [s]
-    delay: np.ndarray  # brake delay [s]
-    gain: np.ndarray  # brake gain [-]
-    sigma: np.ndarray  # relaxation length [m]
-    r_eff: np.ndarray  # rolling radius [m]
-    t_change: np.ndarray  # friction change time [s]
-    theta_after: np.ndarray  # theta after the change [-]
-    c0: np.ndarray  # drag constant [N]
-    c2: np.ndarray  # drag quadratic coefficient [N s^2/m^2]
-    fade: np.ndarray = None  # brake fade coefficient [1/J] (out of library)
-    load: np.ndarray = None  # load transfer per g [-] (out of library)
-    slide: np.ndarray = None  # friction decay per unit sliding speed [s/m] (out of library)
-
-    def __post_init__(self):
-        n = len(self.tau)
-        for f in fields(self):
-            if getattr(self, f.name) is None:
-                object.__setattr__(self, f.name, np.zeros(n))
-
-    def __len__(self) -> int:
-        return len(self.tau)
-
-    @classmethod
-    def nominal(cls, road, n: int, p: qc.QuarterCarParams = qc.PAPER_PARAMS) -> ModelBatch:
-        """``n`` elements with no effect on ``road`` ((4,), (n, 4) or a :class:`MagicFormula`)."""
-        road = np.array(qc.road_array(road, n), dtype=float)
-        return cls(road=road, tau=np.zeros(n), delay=np.zeros(n), gain=np.ones(n), sigma=np.zeros(n),
-                   r_eff=np.full(n, p.r), t_change=np.full(n, np.inf), theta_after=road[:, 3].copy(),
-                   c0=np.zeros(n), c2=np.zeros(n))
-
-    @classmethod
-    def from_effects(cls, road, effects: Sequence, p: qc.QuarterCarParams = qc.PAPER_PARAMS) -> ModelBatch:
-        """One element on ``road`` with the effect specs ``effects`` switched on (each name at most once)."""
-        batch = cls.nominal(road, 1, p)
-        names = [e.name for e in effects]
-        if len(set(names)) != len(names):
-            raise ValueError(f"each effect may appear once, got {names}")
-        updates: dict[str, np.ndarray] = {}
-        mapping = {"brake_lag": {"tau": "tau"}, "brake_delay": {"delay": "delay"}, "brake_gain": {"gain": "gain"},
-                   "relaxation_length": {"sigma": "sigma"}, "radius_error": {"r_eff": "r_eff"},
-                   "mu_change": {"t_change": "t_change", "theta_after": "theta_after"},
-                   "drag": {"c0": "c0", "c2": "c2"}, "brake_fade": {"k": "fade"}, "load_transfer": {"k": "load"},
-                   "sliding_speed_friction": {"c4": "slide"}}
-        for effect in effects:
-            if effect.name not in mapping:
-                raise ValueError(f"unknown effect {effect.name!r}; valid effects: {', '.join(mapping)}")
-            for pname, field_name in mapping[effect.name].items():
-                updates[field_name] = np.array([float(getattr(effect, pname))])
-        return replace(batch, **updates)
-
-    @classmethod
-    def stack(cls, batches: Sequence[ModelBatch]) -> ModelBatch:
-        """Concatenate batches along the leading dimension."""
-        return cls(**{f.name: np.concatenate([getattr(b, f.name) for b in batches]) for f in fields(cls)})
-
-    def repeat(self, k: int) -> ModelBatch:
-        """Each element repeated ``k`` times consecutively (element i -> rows i*k .. i*k+k-1)."""
-        return ModelBatch(**{f.name: np.repeat(getattr(self, f.name), k, axis=0) for f in fields(self)})
-
-
-# --------------------------------------------------------------------------------------------- relaxation plant
-def relaxation_derivatives(v, omega, lam_t, Tb, road, r, sigma, c0, c2, p: qc.QuarterCarParams = qc.PAPER_PARAMS):
-    """Extended quarter car with tire relaxation (eq. (1) with a transient slip): returns (v', omega', lambda_t').
-
-        m v'               = -F_z mu(lambda_t) - F_d(v)
-        J omega'           =  r F_z mu(lambda_t) - T_b
-        (sigma/v) lambda_t' = lambda(v, omega) - lambda_t
-
-    :param v: vehicle speed [m/s]; :param omega: wheel speed [rad/s]; :param lam_t: transient slip [-].
-    :param Tb: applied brake torque [N m]; :param road: (n, 4) Magic Formula parameters.
-    :param r: rolling radius [m]; :param sigma: relaxation length [m] (> 0); :param c0: drag [N];
-    :param c2: air drag coefficient [N s^2/m^2]; :param p: quarter-car parameters (m, J, F_z).
-    """
-    road = np.asarray(road, dtype=float)
-    F = p.Fz * magic_formula(lam_t, road[..., 0], road[..., 1], road[..., 2], road[..., 3])
-    drag = np.where(v > 0.0, c0 + c2 * v * v, 0.0)
-    lam = longitudinal_slip(v, omega, r)
-    return -(F + drag) / p.m, (r * F - Tb) / p.J, v * (lam - lam_t) / sigma
-
-
-def _solve_relax(m, b: np.ndarray) -> np.ndarray:
-    """Solve ``M k = b`` (b: (n, 3)) for the sparse ``M = [[m00, 0, m02], [0, 1, m12], [m20, m21, m22]]`` of
-    :func:`relaxation_step` by elimination onto the transient slip (no inverse formed; ``m00 >= 1``)."""
-    m00, m02, m12, m20, m21, m22 = m
-    b0, b1, b2 = b[:, 0], b[:, 1], b[:, 2]
-    k2 = (b2 - m20 * b0 / m00 - m21 * b1) / (m22 - m20 * m02 / m00 - m21 * m12)
-    return np.stack([(b0 - m02 * k2) / m00, b1 - m12 * k2, k2], axis=1)
-
-
-def relaxation_step(v, omega, lam_t, Tb, road, h: float, r, sigma, c0, c2,
-                    p: qc.QuarterCarParams = qc.PAPER_PARAMS, gamma: float = RELAX_GAMMA):
-    """One two-stage Rosenbrock step of :func:`relaxation_derivatives` (exact 3x3 Jacobian; the plant's ROS2
-    scheme with ``gamma``, see :data:`RELAX_GAMMA`), then ``omega >= 0``, ``v >= 0``.
-
-    :param h: step [s]; other parameters as in :func:`relaxation_derivatives` (arrays of shape (n,)).
-    :param gamma: Rosenbrock gamma (second order for any value; 1 + 1/sqrt(2) is the L-stable ROS2).
-    :return: (v, omega, lambda_t) after ``h``.
-    """
-    road = np.asarray(road, dtype=float)
-    B, C, E, th = road[..., 0], road[..., 1], road[..., 2], road[..., 3]
-    fz_dmu = p.Fz * magic_formula_dslip(lam_t, B, C, E, th)
-    lam, dlam_dv, dlam_dw = slip_and_partials(v, omega, r)
-    hg = h * gamma
-    # I - h gamma A; the Jacobian A has zeros at (0, 1), (1, 0), (1, 1), so M is sparse the same way
-    m00 = 1.0 - hg * np.where(v > 0.0, -2.0 * c2 * v / p.m, 0.0)
-    m02 = hg * fz_dmu / p.m
-    m12 = -hg * r * fz_dmu / p.J
-    m20 = -hg * ((lam - lam_t) / sigma + v / sigma * dlam_dv)
-    m21 = -hg * v / sigma * dlam_dw
-    m22 = 1.0 + hg * v / sigma
-    m = (m00, m02, m12, m20, m21, m22)
-
-    def f(x):
-        return np.stack(relaxation_derivatives(x[:, 0], np.maximum(x[:, 1], 0.0), x[:, 2], Tb, road, r, sigma,
-                                               c0, c2, p), axis=1)
-
-    x = np.stack([v, omega, lam_t], axis=1)
-    k1 = _solve_relax(m, f(x))
-    k2 = _solve_relax(m, f(x + h * k1) - 2.0 * k1)
-    x = x + h * (1.5 * k1 + 0.5 * k2)
-    return np.maximum(x[:, 0], 0.0), np.maximum(x[:, 1], 0.0), np.clip(x[:, 2], -1.0, 1.0)
 
 
 # --------------------------------------------------------------------------------------------- simulator
@@ -446,6 +181,10 @@ class EffectSimulator:
         self._any_fade = bool(np.any(batch.fade != 0.0))
         self._any_load = bool(np.any(batch.load != 0.0))
         self._any_slide = bool(np.any(batch.slide != 0.0))
+        plugins = [e for e in registry.REGISTRY.values() if not e.builtin and e.param_names[0] in batch.extra]
+        self._plugin_params = {e.name: {q: batch.extra[q] for q in e.param_names} for e in plugins}
+        self._torque_hooks = [e for e in plugins if e.torque is not None]
+        self._theta_hooks = [e for e in plugins if e.theta is not None]
         self._init_actuator()
         self.reset(np.zeros(n), np.zeros(n))
 
@@ -523,6 +262,8 @@ class EffectSimulator:
         torque = self.batch.gain * mean
         if self._any_fade:
             torque = torque / (1.0 + self.batch.fade * self.energy)
+        for e in self._torque_hooks:
+            torque = e.torque(self._plugin_params[e.name], torque)
         return torque
 
     def actuator_run(self, n_steps: int) -> np.ndarray:
@@ -561,7 +302,7 @@ class EffectSimulator:
     def _road_at(self, t_end: np.ndarray, h: float) -> np.ndarray:
         """Road of each element over the substep ending at ``t_end`` (theta blended in the switching substep)."""
         road = self.batch.road
-        if not (self._any_change or self._any_load or self._any_slide):
+        if not (self._any_change or self._any_load or self._any_slide or self._theta_hooks):
             return road
         road = road.copy()
         if self._any_change:
@@ -573,6 +314,8 @@ class EffectSimulator:
         if self._any_slide:  # at the substep's start state: the factor varies slowly next to the slip dynamics
             sliding = np.maximum(self.v - self.omega * self.batch.r_eff, 0.0)
             road[:, 3] = road[:, 3] * np.exp(-self.batch.slide * sliding)
+        for e in self._theta_hooks:
+            road[:, 3] = e.theta(self._plugin_params[e.name], road[:, 3], t_end)
         return road
 
     def tire_force(self) -> np.ndarray:

@@ -41,10 +41,18 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.optimize import minimize_scalar
-from scipy.signal import butter, sosfilt, sosfiltfilt
 
-from fricenv.effects.payload import PAYLOAD_EFFECTS
-from fricenv.gap.diagnose import decide_verdict, estimate_noise, gap_of
+from fricenv.gap.payload_data import (
+    CHANNELS,
+    DEFAULT_PAYLOAD_CONFIG,
+    PayloadData,
+    PayloadDiagnoseConfig,
+    generalised_force_map,
+    lowpass,
+    prepare_payload,
+)
+from fricenv.gap.stats import gap_of
+from fricenv.gap.verdict import decide_verdict
 from fricenv.logs import PayloadLog, read_log
 from fricenv.plants import payload as pl
 from fricenv.utils import read_json_object
@@ -52,6 +60,7 @@ from fricenv.utils import read_json_object
 __all__ = [
     "CHANNELS",
     "PayloadCandidate",
+    "PayloadData",
     "PayloadDiagnoseConfig",
     "PayloadDiagnosis",
     "diagnose_payload",
@@ -60,75 +69,11 @@ __all__ = [
     "summary_line",
 ]
 
-CHANNELS = ("theta", "X", "Y")  # residual channels: I_G theta'' [N m], m X'' [N], m Y'' [N]
-WRENCH = ("M", "f_x", "f_y")
-NOISE_DIFF_ORDER = 4  # difference order of the raw noise estimate (suppresses the smooth signal at coarse dt)
-NOISE_FLOOR = 1e-9  # smallest accepted raw noise std (SI) [-]
-NUMEROV = np.array([1.0, 10.0, 1.0]) / 12.0  # 3-tap weights matching the second difference's triangle kernel
 PENALTY_PER_PARAM = 2.0  # ranking penalty per fitted parameter, in units of 1/(effective training samples) [-]
 DELAY_GRID_STEP = 0.005  # delay grid step [s] before the bounded refinement
 SEARCH_XTOL = 1e-5  # tolerance of the bounded 1-D searches (s or 1/s)
-REL_NOISE_FLOOR = 1e-3  # smallest residual noise std as a share of the channel's RMS acceleration signal [-]
-MIN_BLOCKS = 4  # a log must have at least this many scored blocks
 PARAM_KEYS = ("m", "I_G", "rho_x", "rho_y", "S")  # valid keys of --params
 
-
-@dataclass(frozen=True)
-class PayloadDiagnoseConfig:
-    """Settings of the payload diagnosis."""
-
-    cutoff_hz: float = 4.0  # low-pass cutoff of both sides [Hz]
-    filter_order: int = 4  # Butterworth order (applied forward and backward) [-]
-    margin_s: float = 0.5  # not scored at each end of the log (filter transients, delay start-up) [s]
-    block_s: float = 0.5  # train / held-out block length [s]
-    guard_s: float = 0.05  # not scored at each block edge [s]
-    test_every: int = 2  # every test_every-th block is held out [-]
-    sig_z: float = 4.0  # held-out improvement (noise standard deviations) a candidate must exceed [-]
-    ratio_explained: float = 0.35  # a verdict leaves at most this share: gap_after <= ratio * gap_before [-]
-    gap_none: float = 1.1  # nominal gap (noise units) below which the model fits within noise [-]
-    max_delay_s: float = 0.25  # largest vision delay searched [s]
-    max_rate: float = 0.05  # largest |calibration drift rate| searched [1/s]
-    joint: bool = True  # also fit the two best significant candidates together
-    candidates: tuple[str, ...] = tuple(PAYLOAD_EFFECTS)  # effects to try
-
-    def __post_init__(self):
-        unknown = [c for c in self.candidates if c not in PAYLOAD_EFFECTS]
-        if unknown:
-            raise ValueError(f"unknown payload candidate effect(s) {', '.join(unknown)}; valid effects: "
-                             f"{', '.join(PAYLOAD_EFFECTS)}")
-        if self.max_delay_s >= self.margin_s:
-            raise ValueError(f"max_delay_s ({self.max_delay_s}) must be below margin_s ({self.margin_s})")
-
-
-@dataclass
-class PayloadData:
-    """The log prepared for fitting."""
-
-    t: np.ndarray  # (n,) time [s]
-    dt: float
-    w_hat: np.ndarray  # (n, 3) raw readings
-    theta_f: np.ndarray  # (n,) low-passed orientation [rad]
-    y: np.ndarray  # (n, 3) (I_G theta'', m X'', m Y'') from the filtered pose
-    sos: np.ndarray  # the low-pass
-    sigma: np.ndarray  # (3,) residual noise std per channel [N m, N, N]
-    raw_noise: dict  # raw noise std per log column
-    rho2: float  # sum over lags of the squared residual autocorrelation (effective-sample divisor) [-]
-    block: np.ndarray  # (n,) block index of scored samples, -1 where not scored
-    block_test: np.ndarray  # (n_blocks,) held out
-    S_known: np.ndarray
-    p: pl.PayloadParams
-
-    @property
-    def n(self) -> int:
-        return len(self.t)
-
-    @property
-    def train(self) -> np.ndarray:
-        return (self.block >= 0) & ~self.block_test[np.maximum(self.block, 0)]
-
-    @property
-    def test(self) -> np.ndarray:
-        return (self.block >= 0) & self.block_test[np.maximum(self.block, 0)]
 
 
 @dataclass
@@ -172,101 +117,6 @@ class PayloadDiagnosis:
 
 
 # --------------------------------------------------------------------------------------------- preparation
-def _impulse_norms(sos: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray, float, float]:
-    """Impulse responses of the force-side filter (low-pass + 3-tap weights) and of the pose-side filter
-    (low-pass + second difference, per dt^2 = 1), and their squared norms."""
-    imp = np.zeros(n)
-    imp[n // 2] = 1.0
-    h_lp = sosfiltfilt(sos, imp)
-    h_force = np.convolve(h_lp, NUMEROV, mode="same")
-    h_pose = np.convolve(h_lp, [1.0, -2.0, 1.0], mode="same")
-    return h_force, h_pose, float(np.sum(h_force**2)), float(np.sum(h_pose**2))
-
-
-def _acf_sq_sum(h: np.ndarray) -> float:
-    """Sum over all lags of the squared autocorrelation of white noise passed through ``h``."""
-    ac = np.correlate(h, h, mode="full")
-    ac = ac / ac[len(h) - 1]
-    return float(np.sum(ac**2))
-
-
-def _G(theta: np.ndarray, p: pl.PayloadParams) -> np.ndarray:
-    """(n, 3, 3): generalised force = G(theta) w, eq. (1) (moment arm, body force rotated into the vision frame)."""
-    c, s = np.cos(theta), np.sin(theta)
-    G = np.zeros(theta.shape + (3, 3))
-    G[..., 0, :] = p.moment_row
-    G[..., 1, 1], G[..., 1, 2] = c, -s
-    G[..., 2, 1], G[..., 2, 2] = s, c
-    return G
-
-
-def _lowpass(d_sos: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """The force-side filter along axis 0: zero-phase low-pass, then the 3-tap weights."""
-    x = np.asarray(x, dtype=float)
-    out = np.zeros_like(x)
-    out[1:-1] = NUMEROV[0] * x[:-2] + NUMEROV[1] * x[1:-1] + NUMEROV[2] * x[2:]
-    return _zero_filtfilt(d_sos, out)
-
-
-def _zero_filtfilt(sos: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """Zero-phase filtering along axis 0 of the signal extended by zeros (zero initial state, forward and
-    backward). A plain linear operator without data-dependent edge padding: two signals that agree up to noise stay
-    in agreement up to the filtered noise, right to the edges (the huge noise of a differenced pose would otherwise
-    set the edge padding)."""
-    y = sosfilt(sos, x, axis=0)
-    return sosfilt(sos, y[::-1], axis=0)[::-1]
-
-
-def _prepare(log: PayloadLog, S_known: np.ndarray, p: pl.PayloadParams, cfg: PayloadDiagnoseConfig) -> PayloadData:
-    t = np.asarray(log.t, dtype=float)
-    dt = log.dt
-    n = len(t)
-    fs = 1.0 / dt
-    if cfg.cutoff_hz >= 0.4 * fs:
-        raise ValueError(f"{log.source}: sample time {dt:g} s too coarse for the {cfg.cutoff_hz:g} Hz filter "
-                         f"(need a sample rate above {cfg.cutoff_hz / 0.4:g} Hz)")
-    sos = butter(cfg.filter_order, cfg.cutoff_hz, fs=fs, output="sos")
-    w_hat = np.column_stack([log.M, log.f_x, log.f_y]).astype(float)
-    # an orientation logged wrapped into (-pi, pi] is unwrapped (the rotation per sample is far below pi)
-    pose = np.column_stack([np.unwrap(np.asarray(log.theta, dtype=float)), log.X, log.Y]).astype(float)
-    raw = {c: max(estimate_noise(getattr(log, c), order=NOISE_DIFF_ORDER), NOISE_FLOOR) for c in CHANNELS + WRENCH}
-    pose_f = sosfiltfilt(sos, pose, axis=0)
-    # second difference first, then the filter: the filter (with its edge padding) is one linear operator applied
-    # to both sides, so its edge transients cancel instead of acting on the large drift of the pose
-    acc = np.empty_like(pose)
-    acc[1:-1] = (pose[2:] - 2.0 * pose[1:-1] + pose[:-2]) / dt**2
-    acc[0], acc[-1] = 0.0, 0.0
-    y = _zero_filtfilt(sos, acc) * np.array([p.I_G, p.m, p.m])
-    # noise propagation
-    n_imp = int(min(n, max(8 * fs / cfg.cutoff_hz, 64)))
-    h_force, h_pose, e_force, e_pose = _impulse_norms(sos, n_imp)
-    GS = _G(pose_f[:, 0], p) @ S_known
-    w_var = np.array([raw[c] ** 2 for c in WRENCH])
-    force_var = np.mean(np.einsum("nij,j->ni", GS**2, w_var), axis=0) * e_force
-    pose_var = (np.array([raw[c] for c in CHANNELS]) * np.array([p.I_G, p.m, p.m]) / dt**2) ** 2 * e_pose
-    # a floor relative to the signal: a noise-free log is judged at a relative accuracy, not at rounding level
-    sigma = np.maximum(np.sqrt(force_var + pose_var), REL_NOISE_FLOOR * np.sqrt(np.mean(y**2, axis=0)))
-    share = pose_var / (force_var + pose_var)
-    rho2 = float(np.mean(share * _acf_sq_sum(h_pose) + (1 - share) * _acf_sq_sum(h_force)))
-    # blocks
-    margin = round(cfg.margin_s / dt)
-    blen = max(round(cfg.block_s / dt), 1)
-    guard = round(cfg.guard_s / dt)
-    block = np.full(n, -1)
-    usable = np.arange(margin, n - margin)
-    nb = len(usable) // blen
-    if nb < MIN_BLOCKS:
-        raise ValueError(f"{log.source}: log too short for diagnosis: {n * dt:.3g} s; need at least "
-                         f"{2 * cfg.margin_s + MIN_BLOCKS * cfg.block_s:.3g} s ({MIN_BLOCKS} blocks of "
-                         f"{cfg.block_s:g} s plus {cfg.margin_s:g} s margins)")
-    for b in range(nb):
-        s0 = margin + b * blen
-        block[s0 + guard:s0 + blen - guard] = b
-    block_test = (np.arange(nb) % cfg.test_every) == (cfg.test_every - 1)
-    return PayloadData(t=t, dt=dt, w_hat=w_hat, theta_f=pose_f[:, 0], y=y, sos=sos, sigma=sigma, raw_noise=raw,
-                       rho2=rho2, block=block, block_test=block_test, S_known=np.asarray(S_known, dtype=float), p=p)
-
-
 # --------------------------------------------------------------------------------------------- models
 @dataclass
 class _Regressors:
@@ -285,7 +135,7 @@ def _regressors(d: PayloadData, delay: float, effects: Sequence[str]) -> _Regres
     w = d.w_hat
     if delay > 0:
         w = np.column_stack([np.interp(d.t - delay, d.t, d.w_hat[:, k]) for k in range(3)])
-    G = _G(d.theta_f, d.p)
+    G = generalised_force_map(d.theta_f, d.p)
     n = d.n
     free_S = "calibration_error" in effects
     drift = "calibration_drift" in effects
@@ -298,7 +148,7 @@ def _regressors(d: PayloadData, delay: float, effects: Sequence[str]) -> _Regres
         blocks.append(("g", G.reshape(n, 9)))
     if drift:
         blocks += [(name + "_t", x * d.t[:, None]) for name, x in blocks]
-    f = _lowpass(d.sos, np.concatenate([x for _, x in blocks], axis=1))
+    f = lowpass(d.sos, np.concatenate([x for _, x in blocks], axis=1))
     out = dict.fromkeys(("phi", "phi_t", "base", "base_t", "g", "g_t"))
     shapes = {"phi": (n, 3, 3, 3), "base": (n, 3), "g": (n, 3, 3)}
     col = 0
@@ -437,7 +287,7 @@ def improvement_z(base: PayloadCandidate, cand: PayloadCandidate, d: PayloadData
 # --------------------------------------------------------------------------------------------- localisation
 def _where(d: PayloadData, nominal: PayloadCandidate, chosen: PayloadCandidate | None) -> dict:
     scored = d.block >= 0
-    G = _G(d.theta_f, d.p)
+    G = generalised_force_map(d.theta_f, d.p)
     force = np.linalg.norm(np.einsum("nij,jk,nk->ni", G, d.S_known, d.w_hat), axis=1)
     rate = np.abs(np.gradient(d.theta_f, d.dt))
     t_mid = 0.5 * (d.t[0] + d.t[-1])
@@ -476,7 +326,7 @@ def _where(d: PayloadData, nominal: PayloadCandidate, chosen: PayloadCandidate |
 
 # --------------------------------------------------------------------------------------------- diagnosis
 def diagnose_payload(log: PayloadLog, S_known=pl.PAPER_S, p: pl.PayloadParams = pl.PAPER_PARAMS,
-                     cfg: PayloadDiagnoseConfig = PayloadDiagnoseConfig()) -> PayloadDiagnosis:
+                     cfg: PayloadDiagnoseConfig = DEFAULT_PAYLOAD_CONFIG) -> PayloadDiagnosis:
     """Diagnose the sim-to-real gap of a payload log (see the module docstring).
 
     :param log: the log (from :func:`fricenv.logs.read_log` with ``plant="payload"``).
@@ -489,7 +339,7 @@ def diagnose_payload(log: PayloadLog, S_known=pl.PAPER_S, p: pl.PayloadParams = 
     S_known = np.asarray(S_known, dtype=float)
     if S_known.shape != (3, 3) or not np.all(np.isfinite(S_known)) or np.linalg.cond(S_known) > 1e12:
         raise ValueError(f"S_known must be a finite invertible 3x3 matrix, got {S_known!r}")
-    d = _prepare(log, S_known, p, cfg)
+    d = prepare_payload(log, S_known, p, cfg)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
         nominal = fit_payload_candidate([], d, cfg)
@@ -564,7 +414,7 @@ def load_payload_params(path) -> tuple[np.ndarray, pl.PayloadParams]:
 
 
 def diagnose_payload_file(path, params_file=None,
-                          cfg: PayloadDiagnoseConfig = PayloadDiagnoseConfig()) -> PayloadDiagnosis:
+                          cfg: PayloadDiagnoseConfig = DEFAULT_PAYLOAD_CONFIG) -> PayloadDiagnosis:
     """Read a payload log with :func:`fricenv.logs.read_log` and diagnose it."""
     S, p = load_payload_params(params_file) if params_file is not None else (pl.PAPER_S, pl.PAPER_PARAMS)
     return diagnose_payload(read_log(path, "payload"), S, p, cfg)

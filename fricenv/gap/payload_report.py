@@ -3,12 +3,13 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
 
 from fricenv.gap.payload_diagnose import CHANNELS, PayloadDiagnosis, _fmt
-from fricenv.gap.report import PLOT_REGIMES, PLOT_TIME, plot_regimes, write_report
+from fricenv.gap.report import PLOT_REGIMES, PLOT_TIME, image_links, plot_regimes, write_report
 
 __all__ = ["payload_markdown", "payload_plots", "write_payload_report"]
 
@@ -16,8 +17,11 @@ PLANT = "payload"
 SMOOTH_S = 0.1  # moving RMS window of the residual-over-time plot [s]
 
 
-def payload_markdown(dg: PayloadDiagnosis, report: dict) -> str:
-    """A readable report of a payload diagnosis."""
+def payload_markdown(dg: PayloadDiagnosis, report: dict, images: Sequence[str] = (PLOT_TIME, PLOT_REGIMES)) -> str:
+    """A readable report of a payload diagnosis.
+
+    :param images: the plot files written beside it, linked at the end (empty: no image links).
+    """
     w = report["where"]
     data = w["data"]
     params = ", ".join(f"{k}={_fmt(v)}" for k, v in report["params"].items())
@@ -58,9 +62,8 @@ def payload_markdown(dg: PayloadDiagnosis, report: dict) -> str:
                    "to G(theta) S w_hat, divided by its noise level propagated from the raw noise. Score: share of the "
                    "nominal model's held-out excess squared error the candidate closes. z: held-out improvement "
                    "without its largest block, in noise standard deviations. Ranking: held-out MSE plus a penalty per "
-                   "fitted parameter."), "", f"![residual over time]({PLOT_TIME})", "",
-              f"![residual by regime]({PLOT_REGIMES})", ""]
-    return "\n".join(lines)
+                   "fitted parameter."), ""]
+    return "\n".join(lines + image_links(images))
 
 
 def _moving_rms(x: np.ndarray, n: int) -> np.ndarray:

@@ -15,16 +15,19 @@ import os
 import tempfile
 import time
 import warnings
+from contextlib import nullcontext
 from dataclasses import dataclass, fields
 
 import numpy as np
 from scipy.integrate import solve_ivp
 
+from fricenv import progress
 from fricenv.effects.payload import PAYLOAD_EFFECTS, make_payload_effect, simulate_payload_with_effects
 from fricenv.gap.payload_diagnose import PayloadDiagnoseConfig, diagnose_payload
+from fricenv.gap.pool import map_tasks
 from fricenv.logs import PayloadLog, read_log, write_log
 from fricenv.plants import payload as pl
-from fricenv.utils import as_generator, progress
+from fricenv.utils import as_generator
 
 __all__ = ["PAYLOAD_CATEGORIES", "PayloadCase", "draw_payload_case", "format_payload_summary", "run_payload_case",
            "validate_payload"]
@@ -152,8 +155,8 @@ def validate_payload(n: int, seed=None, show_progress: bool = True,
     rng.shuffle(cats)
     cases = [draw_payload_case(c, rng) for c in cats]
     t0 = time.perf_counter()
-    results = [run_payload_case(c, cfg) for c in progress(cases, total=n, desc="validate payload",
-                                                          disable=None if show_progress else True)]
+    with nullcontext() if show_progress else progress.use_sink(None):
+        results = map_tasks(run_payload_case, [(c, cfg) for c in cases], 1, "validate payload")
     labels = list(PAYLOAD_EFFECTS) + ["none", "unexplained", "error"]
     conf = {c: {lab: 0 for lab in labels} for c in PAYLOAD_CATEGORIES}
     for r in results:

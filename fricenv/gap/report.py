@@ -11,6 +11,7 @@ from __future__ import annotations
 import os
 import shutil
 import tempfile
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -51,8 +52,17 @@ def summary_line(dg: Diagnosis) -> str:
             f"(noise units, held-out){worst}")
 
 
-def report_markdown(dg: Diagnosis, report: dict) -> str:
-    """A readable report."""
+def image_links(images: Sequence[str]) -> list[str]:
+    """Markdown lines linking the plots written (``images``: file names), none for plots not written."""
+    captions = {PLOT_TIME: "residual over time", PLOT_REGIMES: "residual by regime"}
+    return [line for name in images for line in (f"![{captions.get(name, name)}]({name})", "")]
+
+
+def report_markdown(dg: Diagnosis, report: dict, images: Sequence[str] = (PLOT_TIME, PLOT_REGIMES)) -> str:
+    """A readable report.
+
+    :param images: the plot files written beside it, linked at the end (empty: no image links).
+    """
     w = report["where"]
     lines = [f"# Sim-to-real gap report: {Path(dg.source).name}", "",
              f"**Verdict: `{report['verdict']}`**" + (f" with {report['params']}" if report["params"] else ""), "",
@@ -105,10 +115,8 @@ def report_markdown(dg: Diagnosis, report: dict) -> str:
                    "(both reported only). A verdict needs a significant candidate whose robust held-out gap (the "
                    f"worst {TRIM_SHARE:.0%} of windows left out, for every model alike) is at most "
                    "DiagnoseConfig.ratio_explained of the nominal one, or below gap_within_noise. The robust "
-                   f"nominal gap is {w.get('robust_gap_before', float('nan')):.3f}."), "",
-              f"![residual over time]({PLOT_TIME})", "",
-              f"![residual by regime]({PLOT_REGIMES})", ""]
-    return "\n".join(lines)
+                   f"nominal gap is {w.get('robust_gap_before', float('nan')):.3f}."), ""]
+    return "\n".join(lines + image_links(images))
 
 
 def _plots(dg: Diagnosis, report: dict, tmpdir: Path) -> None:
@@ -168,7 +176,9 @@ def write_report(dg: Diagnosis, out_dir, plant: str = "quarter-car", plots: bool
 
     Files are produced in a temporary directory beside the final ones, then renamed into place (report.json last).
 
-    :param markdown: ``(dg, report) -> str`` for report.md (default :func:`report_markdown`, the quarter car's).
+    :param plots: write the PNG plots; report.md links only the plots actually written (none without plots).
+    :param markdown: ``(dg, report, images=...) -> str`` for report.md (default :func:`report_markdown`, the quarter
+        car's); ``images`` are the plot files written.
     :param plotter: ``(dg, report, directory) -> None`` writing the PNG plots named ``PLOT_TIME`` and
         ``PLOT_REGIMES`` (default the quarter car's).
     """
@@ -179,8 +189,9 @@ def write_report(dg: Diagnosis, out_dir, plant: str = "quarter-car", plots: bool
     try:
         if plots:
             (plotter or _plots)(dg, report, tmp)
+        images = [name for name in (PLOT_TIME, PLOT_REGIMES) if (tmp / name).exists()]
         with atomic_write(tmp / "report.md") as fh:
-            fh.write((markdown or report_markdown)(dg, report))
+            fh.write((markdown or report_markdown)(dg, report, images=images))
         write_json(tmp / "report.json", report)
         for name in [PLOT_TIME, PLOT_REGIMES, "report.md", "report.json"]:
             if (tmp / name).exists():

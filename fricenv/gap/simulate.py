@@ -2,8 +2,8 @@
 
 The stand-in is :class:`fricenv.effects.quarter_car.EffectSimulator` (the same code as the diagnosis' augmented
 simulators). Logs follow DESIGN.md: ``t, T_b, omega[, v][, a_x]``; ``T_b`` is the commanded torque, before any
-actuator effect; every log starts with a short free-rolling stretch; the wheel speed carries white noise of variance
-0.2 (rad/s)^2 (Sui & Johansen, Section IV), ``v`` and ``a_x`` small white noise.
+actuator effect; every log starts with a short free-rolling stretch; the wheel speed carries white noise of the
+paper's variance (:data:`fricenv.plants.sui_johansen.OMEGA_NOISE_VAR`), ``v`` and ``a_x`` small white noise.
 
 Drivers (self-contained; fricenv does not depend on ``agents``):
 
@@ -28,14 +28,15 @@ from fricenv.effects.quarter_car import (
 )
 from fricenv.logs import QuarterCarLog, write_log
 from fricenv.plants import quarter_car as qc
+from fricenv.plants import sui_johansen as sj
 from fricenv.plants.tire import MagicFormula
 from fricenv.utils import as_generator
 
 __all__ = ["DRIVERS", "NoiseSpec", "make_driver", "simulate_log", "write_simulated_log"]
 
 DRIVERS = ("abs", "open-loop")
-DT = 0.01  # sample time [s], the paper's
-OMEGA_NOISE_VAR = 0.2  # wheel-speed noise variance [(rad/s)^2], Sui & Johansen Section IV
+DT = sj.SAMPLE_TIME  # sample time [s], the paper's
+OMEGA_NOISE_VAR = sj.OMEGA_NOISE_VAR  # wheel-speed noise variance [(rad/s)^2], Sui & Johansen
 V_NOISE_STD = 0.05  # reference-speed noise [m/s]
 AX_NOISE_STD = 0.1  # accelerometer noise [m/s^2]
 V_END = 3.0  # the log stops when the car is slower than this [m/s]

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from fricenv.effects import registry
 from fricenv.effects.quarter_car import ModelBatch
 from fricenv.plants import quarter_car as qc
 from fricenv.plants.tire import magic_formula_and_dslip, slip_and_partials
@@ -57,6 +58,9 @@ class _SpeedModel:
         col = lambda a: np.asarray(a, dtype=float)[:, None]
         t = t0 + dt * np.arange(len(omega))
         theta = np.where(t[None, :] >= col(batch.t_change), col(batch.theta_after), col(batch.road[:, 3]))
+        for entry in registry.REGISTRY.values():  # plug-in effects on the road's peak factor
+            if not entry.builtin and entry.theta is not None and entry.param_names[0] in batch.extra:
+                theta = entry.theta({q: col(batch.extra[q]) for q in entry.param_names}, theta, t[None, :])
         relax = col(batch.sigma) > 0
         return cls(r=col(batch.r_eff), c0=col(batch.c0), c2=col(batch.c2),
                    shape=tuple(col(batch.road[:, i]) for i in range(3)), theta=theta, relax=relax,

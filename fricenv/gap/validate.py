@@ -15,29 +15,36 @@ import os
 import tempfile
 import time
 import warnings
-from concurrent.futures import ProcessPoolExecutor
+from contextlib import nullcontext
 from dataclasses import dataclass
 
 import numpy as np
 
-from fricenv.effects.quarter_car import EFFECTS, effect_params, make_effect
+from fricenv import progress
+from fricenv.effects import registry
+from fricenv.effects.quarter_car import EFFECTS, effect_params
 from fricenv.gap.diagnose import DiagnoseConfig, diagnose
+from fricenv.gap.pool import map_tasks
 from fricenv.gap.simulate import DRIVERS, simulate_log
 from fricenv.logs import read_log, write_log
 from fricenv.plants import quarter_car as qc
 from fricenv.plants.tire import ROADS, MagicFormula
-from fricenv.utils import as_generator, progress
+from fricenv.utils import as_generator
 
 __all__ = ["CATEGORIES", "PARAM_TOLERANCE", "Case", "draw_case", "main_error", "run_case", "summarize",
            "true_model_detectable", "validate"]
 
 NONE, OUT = "none", "out_of_library"
-CATEGORIES = tuple(EFFECTS) + (NONE, OUT)
+CATEGORIES = tuple(EFFECTS) + (NONE, OUT)  # the library at import; categories() includes effects registered later
+OUT_DRAWN = ("brake_fade", "sliding_speed_friction")  # out-of-library effects drawn, with equal chance
 PARAM_TOLERANCE = 0.15  # relative parameter error counted as right [-]
 ROAD_JITTER = {"B": 0.15, "theta": 0.1}  # relative perturbation of the preset roads [-]
 DURATION = 5.0  # log length [s]
-# A road speed for the drag force used as drag's single error figure [m/s].
-DRAG_REFERENCE_SPEED = 15.0
+
+
+def categories() -> tuple[str, ...]:
+    """The validation categories: every library effect (registered now), ``none`` and ``out_of_library``."""
+    return tuple(EFFECTS) + (NONE, OUT)
 
 
 @dataclass(frozen=True)
@@ -60,32 +67,18 @@ def _random_road(rng: np.random.Generator) -> MagicFormula:
 
 
 def _random_effect(category: str, road: MagicFormula, rng: np.random.Generator, p: qc.QuarterCarParams):
-    """A library or out-of-library effect at a realistic size."""
-    u = rng.uniform
-    if category == "brake_lag":
-        return make_effect(category, tau=u(0.02, 0.08))
-    if category == "brake_delay":
-        return make_effect(category, delay=u(0.015, 0.06))
-    if category == "brake_gain":
-        return make_effect(category, gain=u(0.75, 0.88) if rng.random() < 0.5 else u(1.12, 1.3))
-    if category == "relaxation_length":
-        return make_effect(category, sigma=u(0.2, 0.6))
-    if category == "radius_error":
-        return make_effect(category, r_eff=p.r * (1 + rng.choice([-1, 1]) * u(0.02, 0.05)))
-    if category == "mu_change":
-        rise = road.theta < 0.85 and rng.random() < 0.5
-        factor = u(1.2, 1.4) if rise else u(0.55, 0.8)
-        return make_effect(category, t_change=u(1.0, 2.2), theta_after=road.theta * factor)
-    if category == "drag":
-        return make_effect(category, c0=u(100.0, 300.0), c2=u(0.2, 0.6))
+    """A library effect at a realistic size (its registry draw), or an out-of-library one for ``OUT``."""
     if category == OUT:
         # Not drawn: the pitch load transfer (LoadTransfer). At the quasi-steady deceleration of a stop it scales
         # the friction force like a higher theta, which the calibrated nominal road absorbs: no gap is left for the
         # tool to call unexplained (measured: gap_before <= 0.3 noise units on 5 of 6 such logs).
-        if rng.random() < 0.5:
-            return make_effect("brake_fade", allow_out_of_library=True, k=u(3e-6, 6e-6))
-        return make_effect("sliding_speed_friction", allow_out_of_library=True, c4=u(0.02, 0.04))
-    raise ValueError(f"unknown category {category!r}; valid: {', '.join(CATEGORIES)}")
+        category = OUT_DRAWN[0] if rng.random() < 0.5 else OUT_DRAWN[1]
+    elif category not in EFFECTS:
+        raise ValueError(f"unknown category {category!r}; valid: {', '.join(categories())}")
+    entry = registry.get(category)
+    if entry.draw is None:
+        raise ValueError(f"effect {category!r} has no validation draw in the registry; give its entry a draw")
+    return entry.draw(road, rng, p)
 
 
 def draw_case(category: str, rng: np.random.Generator, drop_optional: bool = False,
@@ -98,20 +91,15 @@ def draw_case(category: str, rng: np.random.Generator, drop_optional: bool = Fal
 
 
 def main_error(category: str, truth: dict, fitted: dict) -> tuple[float, dict]:
-    """Relative errors of the fitted parameters, and the single figure the 15 % target is checked on."""
+    """Relative errors of the fitted parameters, and the single figure the 15 % target is checked on (the
+    registry entry's ``main_error``, default the first parameter's)."""
     errs = {}
     for k, v in truth.items():
         if k in fitted:
             errs[k] = abs(fitted[k] - v) / abs(v) if v != 0 else abs(fitted[k])
-    if category == "mu_change":
-        errs["t_change_abs_s"] = abs(fitted.get("t_change", np.nan) - truth["t_change"])
-        return errs.get("theta_after", np.nan), errs
-    if category == "drag":
-        ref = DRAG_REFERENCE_SPEED**2
-        f_true = truth["c0"] + truth["c2"] * ref
-        f_fit = fitted.get("c0", np.nan) + fitted.get("c2", np.nan) * ref
-        errs[f"force_at_{DRAG_REFERENCE_SPEED:g}_m_s"] = abs(f_fit - f_true) / f_true
-        return errs[f"force_at_{DRAG_REFERENCE_SPEED:g}_m_s"], errs
+    entry = registry.REGISTRY.get(category)
+    if entry is not None and entry.main_error is not None:
+        return entry.main_error(truth, fitted, errs), errs
     return next(iter(errs.values()), np.nan), errs
 
 
@@ -155,20 +143,22 @@ def true_model_detectable(effect: str, params: dict, road: dict, dg, cfg: Diagno
     :param effect: library effect name; :param params: its true parameters (DESIGN.md names, SI units).
     :param road: the true road, keys ``B, C, E, theta``; :param dg: the log's :class:`Diagnosis`.
     """
-    from fricenv.gap.diagnose import ROAD_NAMES, _param_names, _score, paired_z
+    from fricenv.gap.diagnose import ROAD_NAMES, paired_z, param_names, score
 
-    names = _param_names([effect])
-    x = np.array([road[k] for k in ROAD_NAMES] + [params[k] for k in names[len(ROAD_NAMES):]], dtype=float)
+    names = param_names([effect])
+    x = np.array([road[k] for k in ROAD_NAMES] + [params[k] for k in registry.get(effect).param_names], dtype=float)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        true_fit = _score(effect, [effect], names, x, dg.data, 0.0)
+        true_fit = score(effect, [effect], names, x, dg.data, 0.0)
     return bool(paired_z(dg.nominal, true_fit, dg.data) > cfg.sig_z)
 
 
-def _run(args):
-    case, cfg = args
+def _run_one(case: Case, cfg: DiagnoseConfig) -> dict:
+    """:func:`run_case`, a log the reader rejects counting as a wrong verdict (``"error"``); the diagnosis' own
+    progress is not reported (one validation log is the step)."""
     try:
-        return run_case(case, cfg)
+        with progress.use_sink(None):
+            return run_case(case, cfg)
     except ValueError as exc:  # LogFormatError included: a log the reader rejects counts as a wrong verdict
         expected = {NONE: "none", OUT: "unexplained"}.get(case.category, case.category)
         return {"category": case.category, "true_effect": case.effects[0].name if case.effects else "none",
@@ -194,17 +184,12 @@ def validate(n: int, seed=None, jobs: int = 1, drop_optional_share: float = 0.0,
         raise ValueError(f"n must be >= 1, got {n}")
     cfg = cfg or DiagnoseConfig(jobs=1)
     rng = as_generator(seed)
-    cats = [CATEGORIES[i % len(CATEGORIES)] for i in range(n)]
+    cats = [categories()[i % len(categories())] for i in range(n)]
     rng.shuffle(cats)
     cases = [draw_case(c, rng, bool(rng.random() < drop_optional_share)) for c in cats]
     t0 = time.perf_counter()
-    if jobs > 1:
-        with ProcessPoolExecutor(max_workers=jobs) as pool:
-            results = list(progress(pool.map(_run, [(c, cfg) for c in cases]), total=n, desc="validate",
-                                    disable=None if show_progress else True))
-    else:
-        results = [_run((c, cfg)) for c in progress(cases, total=n, desc="validate",
-                                                      disable=None if show_progress else True)]
+    with nullcontext() if show_progress else progress.use_sink(None):
+        results = map_tasks(_run_one, [(c, cfg) for c in cases], jobs, "validate")
     summary = summarize(results)
     summary["wall_seconds"] = time.perf_counter() - t0
     summary["n"] = n
@@ -215,7 +200,7 @@ def validate(n: int, seed=None, jobs: int = 1, drop_optional_share: float = 0.0,
 def summarize(results: list[dict]) -> dict:
     """Confusion matrix, accuracy, median gap ratio on effect logs, parameter errors."""
     labels = list(EFFECTS) + ["none", "unexplained"]
-    conf = {c: {lab: 0 for lab in labels} for c in CATEGORIES}
+    conf = {c: {lab: 0 for lab in labels} for c in categories()}
     for r in results:
         conf[r["category"]][r["verdict"]] = conf[r["category"]].get(r["verdict"], 0) + 1
     errors = [r.get("error") for r in results if r["verdict"] == "error"]
@@ -237,7 +222,7 @@ def summarize(results: list[dict]) -> dict:
     all_main = np.array([r["param_error"] for r in results if "param_error" in r], dtype=float)
     secs = np.array([r["seconds"] for r in results])
     by_cat = {c: float(np.mean([r["right"] for r in results if r["category"] == c]))
-              for c in CATEGORIES if any(r["category"] == c for r in results)}
+              for c in categories() if any(r["category"] == c for r in results)}
     det = [r for r in results if r.get("detectable", True)]
     return {
         "accuracy": float(np.mean([r["right"] for r in results])) if results else float("nan"),

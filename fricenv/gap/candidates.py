@@ -1,0 +1,80 @@
+"""Candidate fits: the road plus one or more effects fitted per fold by the effect's registry strategy, in worker
+processes, and tested against the nominal model on held-out windows."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Sequence
+
+import numpy as np
+
+from fricenv.effects import registry
+from fricenv.gap.changepoint import fit_change_point
+from fricenv.gap.config import DiagnoseConfig
+from fricenv.gap.fitting import effect_start_matrix, fit, score
+from fricenv.gap.params import ROAD_NAMES, param_names
+from fricenv.gap.pool import map_tasks
+from fricenv.gap.stats import CandidateFit, improvement_z, paired_t, paired_z
+from fricenv.gap.windows import Data, window_nuisances
+
+__all__ = ["FIT_STRATEGIES", "fit_candidate", "nested_nominal", "run_fits", "test_against"]
+
+
+def _least_squares(effects: Sequence[str], road: np.ndarray, d: Data, cfg: DiagnoseConfig,
+                   seeds: dict | None = None) -> np.ndarray:
+    """Multi-start least squares from the roads times the effects' start lists (``seeds`` replace a list)."""
+    return fit(effects, param_names(effects), effect_start_matrix(effects, road, d, seeds), d, cfg,
+               runs=int(cfg.fit_starts))
+
+
+# The registry's fit strategies: (effects, nominal road, data, settings, seeds) -> fitted parameter vector.
+FIT_STRATEGIES = {"least_squares": _least_squares, "change_point": fit_change_point}
+
+
+def fit_candidate(effects: Sequence[str], road: np.ndarray, d: Data, cfg: DiagnoseConfig,
+                  seeds: dict | None = None) -> CandidateFit:
+    """Fit road + the effects' parameters on the training windows; score on all windows. A single effect is fitted
+    by its registry strategy, a joint fit by least squares."""
+    t = time.perf_counter()
+    effects = list(effects)
+    strategy = registry.get(effects[0]).fit if len(effects) == 1 else "least_squares"
+    x = FIT_STRATEGIES[strategy](effects, road, d, cfg, seeds)
+    return score("+".join(effects), effects, param_names(effects), x, d, time.perf_counter() - t)
+
+
+def _fit_cost(effects: Sequence[str], d: Data) -> int:
+    """Relative cost of a candidate fit: each evaluation simulates (fitted parameters + 1) parameter sets, each with
+    one replica per fitted window state (a searched parameter is held during the least squares)."""
+    fitted = len(ROAD_NAMES) + sum(len(registry.get(e).param_names) for e in effects)
+    if len(effects) == 1:
+        fitted -= len(registry.get(effects[0]).searched)
+    return (fitted + 1) * (1 + window_nuisances(effects, d))
+
+
+def run_fits(tasks: list, jobs: int, label: str = "fit candidates") -> list:
+    """Candidate fits (:func:`fit_candidate` argument tuples), in worker processes when there are several; the
+    longest fits go first, which keeps the workers busy. Results in task order."""
+    order = sorted(range(len(tasks)), key=lambda i: -_fit_cost(tasks[i][0], tasks[i][2]))
+    done = dict(zip(order, map_tasks(fit_candidate, [tasks[i] for i in order], jobs, label)))
+    return [done[i] for i in range(len(tasks))]
+
+
+def nested_nominal(nominal: CandidateFit, fits: Sequence[CandidateFit], d: Data, cfg: DiagnoseConfig) \
+        -> CandidateFit:
+    """The nominal fit, refitted from the candidates' roads when one of them fits the training windows better.
+
+    The nominal model is every candidate with its effect switched off, so its best road is at least as good as any
+    candidate's road; a candidate whose multi-start found a better road optimum than the nominal fit would
+    otherwise look like an effect (a ``brake_gain`` of 1.000 beating the nominal model).
+    """
+    starts = np.vstack([nominal.x[None]] + [f.road_x()[None] for f in fits])
+    x = fit([], nominal.names, starts, d, cfg)
+    better = score("nominal", [], nominal.names, x, d, nominal.seconds)
+    return better if better.train_mse < nominal.train_mse else nominal
+
+
+def test_against(nominal: CandidateFit, f: CandidateFit, d: Data) -> None:
+    """Store ``f``'s held-out tests against the nominal model (t, z and paired z) in ``f``."""
+    f.t_stat = paired_t(nominal, f, d)
+    f.z = improvement_z(nominal, f, d)
+    f.z_paired = paired_z(nominal, f, d)

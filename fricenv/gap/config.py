@@ -1,0 +1,50 @@
+"""Settings of the quarter-car gap diagnosis (:class:`DiagnoseConfig`)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from fricenv.effects.quarter_car import DEFAULT_SUBSTEPS, EFFECTS
+
+__all__ = ["DEFAULT_CONFIG", "FIT_LOSSES", "DiagnoseConfig"]
+
+FIT_LOSSES = ("linear", "soft_l1", "cauchy")  # losses of the least-squares fits (scipy's names)
+
+
+@dataclass(frozen=True)
+class DiagnoseConfig:
+    """Settings of the diagnosis."""
+
+    horizon: int = 10  # prediction window [samples]
+    folds: int = 2  # cross-fitting folds: window i belongs to fold i % folds; each fold is held out once [-]
+    max_nfev: int = 30  # least-squares iterations per start [-]
+    # Least-squares runs per candidate fit, from the best starts with distinct roads: a run started in the nominal
+    # road's basin can stop there (a non-smooth point of the windowed residuals) far from the effect's optimum [-]
+    fit_starts: int = 2
+    # Loss of the fits on the normalised residuals (scale FIT_LOSS_SCALE noise std). A robust loss keeps the few
+    # lock-up windows, whose timing no model predicts, from bending the road away from the bulk of the data.
+    fit_loss: str = "soft_l1"
+    sig_z: float = 4.0  # robust held-out improvement (noise standard deviations) a candidate must exceed [-]
+    ratio_explained: float = 0.35  # a verdict leaves at most this share: gap_after <= ratio * gap_before [-]
+    gap_none: float = 1.1  # nominal gap (noise units) below which the model fits within noise [-]
+    gap_within_noise: float = 0.3  # a candidate leaving a robust held-out gap below this explains the gap [-]
+    substeps: int = DEFAULT_SUBSTEPS  # physics substeps per sample
+    jobs: int | None = None  # processes for the candidate fits (None: min(2, available cores))
+    joint: bool = True  # also fit the two best significant candidates together
+    drift_check: bool = True  # refit the verdict's model on each half of the log; a drift makes it unexplained
+    drift_z: float = 3.0  # paired z of the early/late refit over the constant model for a drift (one test) [-]
+    candidates: tuple[str, ...] = tuple(EFFECTS)  # effects to try
+
+    def check(self) -> None:
+        """Reject unknown candidates and losses (at diagnosis time: effects may be registered after import).
+
+        :raises ValueError: with the valid names.
+        """
+        unknown = [c for c in self.candidates if c not in EFFECTS]
+        if unknown:
+            raise ValueError(f"unknown candidate effect(s) {', '.join(unknown)}; valid effects: {', '.join(EFFECTS)}")
+        if self.fit_loss not in FIT_LOSSES:
+            raise ValueError(f"DiagnoseConfig.fit_loss must be one of {', '.join(FIT_LOSSES)}, got {self.fit_loss!r}")
+
+
+DEFAULT_CONFIG = DiagnoseConfig()

@@ -1,0 +1,178 @@
+"""Least-squares fits of the quarter-car models on the training windows (named parameter vectors, see
+:mod:`fricenv.gap.params`): the robust loss, multi-start from distinct road shapes, the scoring of a fit on all
+windows, the nominal calibration and the noise refinement."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Sequence
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from fricenv.effects import registry
+from fricenv.effects.registry import FitContext
+from fricenv.gap.config import FIT_LOSSES, DiagnoseConfig
+from fricenv.gap.params import fd_steps, param_bounds, param_names, road_of, x_scales
+from fricenv.gap.stats import WINDOW_MSE_CAP, CandidateFit
+from fricenv.gap.windows import NOISE_FLOOR, Data, window_nuisances, window_residuals
+from fricenv.plants.tire import ROADS
+
+__all__ = ["FIT_LOSS_SCALE", "bounds", "distinct_starts", "effect_start_matrix", "fit", "fit_loss", "fit_nominal",
+           "refine_noise", "road_starts", "score"]
+
+# Residual scale (noise std) of the fits' robust loss; the change-point search bounds a sample's squared residual
+# at (2 FIT_LOSS_SCALE)^2. Either way one lock-up cannot place the road or the change.
+FIT_LOSS_SCALE = 3.0
+
+
+def bounds(names: Sequence[str], d: Data):
+    """Lower and upper bounds of the parameters ``names`` for a fit on ``d``'s training windows."""
+    return param_bounds(names, d.starts[~d.test], d.t0, d.dt, d.horizon)
+
+
+def fit_loss(r: np.ndarray, loss: str) -> np.ndarray:
+    """Per-sample loss of normalised residuals ``r``, as ``scipy.optimize.least_squares`` scales it with
+    ``f_scale = FIT_LOSS_SCALE`` (used to pick the best start on the same loss the fit minimises)."""
+    z = (r / FIT_LOSS_SCALE) ** 2
+    if loss == "linear":
+        rho = z
+    elif loss == "soft_l1":
+        rho = 2.0 * (np.sqrt(1.0 + z) - 1.0)
+    elif loss == "cauchy":
+        rho = np.log1p(z)
+    else:
+        raise ValueError(f"DiagnoseConfig.fit_loss must be one of {', '.join(FIT_LOSSES)}, got {loss!r}")
+    return FIT_LOSS_SCALE**2 * rho
+
+
+def distinct_starts(starts: np.ndarray, cost: np.ndarray, k: int) -> list[np.ndarray]:
+    """The ``k`` best of ``starts`` by ``cost`` whose road parts (B, C, E, theta) differ: a fit started from the
+    nominal model's road can stay in that road's basin, so the further starts come from other road shapes."""
+    chosen: list[np.ndarray] = []
+    for i in np.argsort(cost, kind="stable"):
+        if not np.isfinite(cost[i]) or len(chosen) == k:
+            break
+        if all(not np.allclose(road_of(starts[i]), road_of(c)) for c in chosen):
+            chosen.append(starts[i].copy())
+    return chosen or [starts[0].copy()]
+
+
+def fit(effects: Sequence[str], names: Sequence[str], starts: np.ndarray, d: Data, cfg: DiagnoseConfig,
+         fixed: dict | None = None, runs: int = 1) -> np.ndarray:
+    """Least squares on the training windows from the best ``runs`` of ``starts`` (K, len(names)) with distinct
+    roads; the lowest final loss wins. ``fixed`` params are held."""
+    train = np.flatnonzero(~d.test)
+    lo, hi = bounds(names, d)
+    starts = np.clip(np.atleast_2d(starts), lo, hi)
+    fixed = fixed or {}
+    for k, v in fixed.items():
+        starts[:, names.index(k)] = v
+    r = window_residuals(effects, names, starts, d, train)
+    cost = np.sum(fit_loss(r.reshape(len(starts), -1), cfg.fit_loss), axis=1)
+    cost = np.where(np.isfinite(cost), cost, np.inf)
+    fidx = np.flatnonzero([n not in fixed for n in names])
+    if fidx.size == 0:
+        return starts[int(np.argmin(cost))].copy()
+    results = [least_squares_run(effects, names, x0, fidx, lo, hi, train, d, cfg)
+               for x0 in distinct_starts(starts, cost, runs)]
+    return min(results, key=lambda res: res[1])[0]
+
+
+def least_squares_run(effects: Sequence[str], names: Sequence[str], x0: np.ndarray, fidx: np.ndarray, lo, hi,
+                   train: np.ndarray, d: Data, cfg: DiagnoseConfig) -> tuple[np.ndarray, float]:
+    """One trust-region least-squares run from ``x0`` over the parameters ``fidx``: (solution, final loss)."""
+    steps = fd_steps([names[i] for i in fidx])
+    cache: dict = {}
+
+    def full(z):
+        x = x0.copy()
+        x[fidx] = z
+        return x
+
+    def evaluate(Z):
+        R = window_residuals(effects, names, np.array([full(z) for z in Z]), d, train).reshape(len(Z), -1)
+        return np.where(np.isfinite(R), R, 1e3)
+
+    def fun(z):
+        key = z.tobytes()
+        if key not in cache:
+            cache.clear()
+            cache[key] = evaluate([z])[0]
+        return cache[key]
+
+    def jac(z):
+        # forward differences, stepping inwards at an upper bound; all perturbations in one batch
+        h = np.where(z + steps > hi[fidx], -steps, steps)
+        Z = [z] + [z + h[i] * np.eye(len(z))[i] for i in range(len(z))]
+        R = evaluate(Z)
+        cache.clear()
+        cache[z.tobytes()] = R[0]
+        return ((R[1:] - R[0]) / h[:, None]).T
+
+    z0 = np.clip(x0[fidx], lo[fidx] + 1e-12, hi[fidx] - 1e-12)
+    sol = least_squares(fun, z0, jac=jac, bounds=(lo[fidx], hi[fidx]),
+                        x_scale=x_scales([names[i] for i in fidx]), max_nfev=cfg.max_nfev, method="trf",
+                        loss=cfg.fit_loss, f_scale=FIT_LOSS_SCALE)
+    return full(sol.x), float(sol.cost)
+
+
+def score(effect: str, effects: Sequence[str], names, x, d: Data, seconds: float) -> CandidateFit:
+    r = window_residuals(effects, names, x, d)[0]
+    wm = np.minimum(np.mean(r**2, axis=-1), WINDOW_MSE_CAP)
+    return CandidateFit(effect=effect, names=tuple(names), x=np.asarray(x, dtype=float),
+                        train_mse=float(np.mean(wm[~d.test])), test_mse=float(np.mean(wm[d.test])), window_mse=wm,
+                        seconds=seconds, resid=r, nuisances=window_nuisances(effects, d),
+                        samples=d.horizon * len(d.channels))
+
+
+
+def road_starts(d: Data) -> np.ndarray:
+    return np.array([ROADS[k].as_array() for k in ROADS])
+
+
+def fit_nominal(d: Data, cfg: DiagnoseConfig) -> CandidateFit:
+    """Calibrate the nominal model's road on the training windows."""
+    t = time.perf_counter()
+    names = param_names([])
+    x = fit([], names, road_starts(d), d, cfg)
+    return score("nominal", [], names, x, d, time.perf_counter() - t)
+
+
+def effect_start_matrix(effects: Sequence[str], road: np.ndarray, d: Data, seeds: dict | None = None) -> np.ndarray:
+    """Starting points (K, 4 + q) for the effects' fit: the product of the roads (the nominal fit's and the presets)
+    and each effect's start list. The nominal road has absorbed part of the effect, so it is not always the best
+    start."""
+    rows = [road.copy()] + [r for r in road_starts(d)]
+    ctx = fit_context(d)
+    for e in effects:
+        entry = registry.get(e)
+        opts = [seeds[e]] if seeds and e in seeds else entry.starts(ctx)
+        rows = [np.concatenate([r, [o[k] for k in entry.param_names]]) for r in rows for o in opts]
+    return np.array(rows)
+
+
+def fit_context(d: Data) -> FitContext:
+    """What the effects' start rules may use from the log: the vehicle and, when ``v`` is logged, the median ratio
+    ``v / omega`` over the free-rolling start (at most 50 samples)."""
+    ratio = None
+    if d.v_smooth is not None and d.free_end >= 3:
+        m = min(d.free_end, 50)
+        r = np.median(d.v_smooth[:m] / np.maximum(d.omega[:m], 1e-6))
+        ratio = float(r) if np.isfinite(r) else None
+    return FitContext(p=d.p, free_roll_ratio=ratio)
+
+
+def refine_noise(nominal: CandidateFit, d: Data) -> None:
+    """Noise level per channel: the smaller of the difference-based estimate and the calibrated nominal model's
+    training residual (corrected for the fitted wheel-speed nuisance). Both over-estimate (the first by the signal's
+    own curvature, the second by any model error), so the smaller is the better estimate."""
+    train = np.flatnonzero(~d.test)
+    _, r_ch = window_residuals([], nominal.names, nominal.x, d, train, per_channel=True)
+    for c in d.channels:
+        rms = float(np.sqrt(np.mean(r_ch[c][0] ** 2))) * d.sigma[c]
+        if c == "omega" or c == "v":  # one fitted nuisance state per window in this channel
+            rms *= np.sqrt(d.horizon / (d.horizon - 1.0))
+        d.sigma[c] = max(min(d.sigma[c], rms), NOISE_FLOOR[c])
+
+

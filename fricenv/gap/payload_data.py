@@ -1,0 +1,183 @@
+"""The payload log prepared for the gap diagnosis (:class:`PayloadData`): the same zero-phase filter on the vision
+pose's second difference and on the model's generalised force, the residual noise levels propagated from the raw
+channels' noise, and the train / held-out blocks (see :mod:`fricenv.gap.payload_diagnose`)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.signal import butter, sosfilt, sosfiltfilt
+
+from fricenv.effects.payload import PAYLOAD_EFFECTS
+from fricenv.gap.stats import estimate_noise
+from fricenv.logs import PayloadLog
+from fricenv.plants import payload as pl
+
+__all__ = ["CHANNELS", "DEFAULT_PAYLOAD_CONFIG", "WRENCH", "PayloadData", "PayloadDiagnoseConfig", "generalised_force_map", "lowpass",
+           "prepare_payload"]
+
+CHANNELS = ("theta", "X", "Y")  # residual channels: I_G theta'' [N m], m X'' [N], m Y'' [N]
+WRENCH = ("M", "f_x", "f_y")
+NOISE_DIFF_ORDER = 4  # difference order of the raw noise estimate (suppresses the smooth signal at coarse dt)
+NOISE_FLOOR = 1e-9  # smallest accepted raw noise std (SI) [-]
+NUMEROV = np.array([1.0, 10.0, 1.0]) / 12.0  # 3-tap weights matching the second difference's triangle kernel
+REL_NOISE_FLOOR = 1e-3  # smallest residual noise std as a share of the channel's RMS acceleration signal [-]
+MIN_BLOCKS = 4  # a log must have at least this many scored blocks
+
+
+@dataclass(frozen=True)
+class PayloadDiagnoseConfig:
+    """Settings of the payload diagnosis."""
+
+    cutoff_hz: float = 4.0  # low-pass cutoff of both sides [Hz]
+    filter_order: int = 4  # Butterworth order (applied forward and backward) [-]
+    margin_s: float = 0.5  # not scored at each end of the log (filter transients, delay start-up) [s]
+    block_s: float = 0.5  # train / held-out block length [s]
+    guard_s: float = 0.05  # not scored at each block edge [s]
+    test_every: int = 2  # every test_every-th block is held out [-]
+    sig_z: float = 4.0  # held-out improvement (noise standard deviations) a candidate must exceed [-]
+    ratio_explained: float = 0.35  # a verdict leaves at most this share: gap_after <= ratio * gap_before [-]
+    gap_none: float = 1.1  # nominal gap (noise units) below which the model fits within noise [-]
+    max_delay_s: float = 0.25  # largest vision delay searched [s]
+    max_rate: float = 0.05  # largest |calibration drift rate| searched [1/s]
+    joint: bool = True  # also fit the two best significant candidates together
+    candidates: tuple[str, ...] = tuple(PAYLOAD_EFFECTS)  # effects to try
+
+    def __post_init__(self):
+        unknown = [c for c in self.candidates if c not in PAYLOAD_EFFECTS]
+        if unknown:
+            raise ValueError(f"unknown payload candidate effect(s) {', '.join(unknown)}; valid effects: "
+                             f"{', '.join(PAYLOAD_EFFECTS)}")
+        if self.max_delay_s >= self.margin_s:
+            raise ValueError(f"max_delay_s ({self.max_delay_s}) must be below margin_s ({self.margin_s})")
+
+
+DEFAULT_PAYLOAD_CONFIG = PayloadDiagnoseConfig()
+
+
+@dataclass
+class PayloadData:
+    """The log prepared for fitting."""
+
+    t: np.ndarray  # (n,) time [s]
+    dt: float
+    w_hat: np.ndarray  # (n, 3) raw readings
+    theta_f: np.ndarray  # (n,) low-passed orientation [rad]
+    y: np.ndarray  # (n, 3) (I_G theta'', m X'', m Y'') from the filtered pose
+    sos: np.ndarray  # the low-pass
+    sigma: np.ndarray  # (3,) residual noise std per channel [N m, N, N]
+    raw_noise: dict  # raw noise std per log column
+    rho2: float  # sum over lags of the squared residual autocorrelation (effective-sample divisor) [-]
+    block: np.ndarray  # (n,) block index of scored samples, -1 where not scored
+    block_test: np.ndarray  # (n_blocks,) held out
+    S_known: np.ndarray
+    p: pl.PayloadParams
+
+    @property
+    def n(self) -> int:
+        return len(self.t)
+
+    @property
+    def train(self) -> np.ndarray:
+        return (self.block >= 0) & ~self.block_test[np.maximum(self.block, 0)]
+
+    @property
+    def test(self) -> np.ndarray:
+        return (self.block >= 0) & self.block_test[np.maximum(self.block, 0)]
+
+
+
+def _impulse_norms(sos: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray, float, float]:
+    """Impulse responses of the force-side filter (low-pass + 3-tap weights) and of the pose-side filter
+    (low-pass + second difference, per dt^2 = 1), and their squared norms."""
+    imp = np.zeros(n)
+    imp[n // 2] = 1.0
+    h_lp = sosfiltfilt(sos, imp)
+    h_force = np.convolve(h_lp, NUMEROV, mode="same")
+    h_pose = np.convolve(h_lp, [1.0, -2.0, 1.0], mode="same")
+    return h_force, h_pose, float(np.sum(h_force**2)), float(np.sum(h_pose**2))
+
+
+def _acf_sq_sum(h: np.ndarray) -> float:
+    """Sum over all lags of the squared autocorrelation of white noise passed through ``h``."""
+    ac = np.correlate(h, h, mode="full")
+    ac = ac / ac[len(h) - 1]
+    return float(np.sum(ac**2))
+
+
+def generalised_force_map(theta: np.ndarray, p: pl.PayloadParams) -> np.ndarray:
+    """(n, 3, 3): generalised force = G(theta) w, eq. (1) (moment arm, body force rotated into the vision frame)."""
+    c, s = np.cos(theta), np.sin(theta)
+    G = np.zeros(theta.shape + (3, 3))
+    G[..., 0, :] = p.moment_row
+    G[..., 1, 1], G[..., 1, 2] = c, -s
+    G[..., 2, 1], G[..., 2, 2] = s, c
+    return G
+
+
+def lowpass(d_sos: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """The force-side filter along axis 0: zero-phase low-pass, then the 3-tap weights."""
+    x = np.asarray(x, dtype=float)
+    out = np.zeros_like(x)
+    out[1:-1] = NUMEROV[0] * x[:-2] + NUMEROV[1] * x[1:-1] + NUMEROV[2] * x[2:]
+    return _zero_filtfilt(d_sos, out)
+
+
+def _zero_filtfilt(sos: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """Zero-phase filtering along axis 0 of the signal extended by zeros (zero initial state, forward and
+    backward). A plain linear operator without data-dependent edge padding: two signals that agree up to noise stay
+    in agreement up to the filtered noise, right to the edges (the huge noise of a differenced pose would otherwise
+    set the edge padding)."""
+    y = sosfilt(sos, x, axis=0)
+    return sosfilt(sos, y[::-1], axis=0)[::-1]
+
+
+def prepare_payload(log: PayloadLog, S_known: np.ndarray, p: pl.PayloadParams, cfg: PayloadDiagnoseConfig) -> PayloadData:
+    t = np.asarray(log.t, dtype=float)
+    dt = log.dt
+    n = len(t)
+    fs = 1.0 / dt
+    if cfg.cutoff_hz >= 0.4 * fs:
+        raise ValueError(f"{log.source}: sample time {dt:g} s too coarse for the {cfg.cutoff_hz:g} Hz filter "
+                         f"(need a sample rate above {cfg.cutoff_hz / 0.4:g} Hz)")
+    sos = butter(cfg.filter_order, cfg.cutoff_hz, fs=fs, output="sos")
+    w_hat = np.column_stack([log.M, log.f_x, log.f_y]).astype(float)
+    # an orientation logged wrapped into (-pi, pi] is unwrapped (the rotation per sample is far below pi)
+    pose = np.column_stack([np.unwrap(np.asarray(log.theta, dtype=float)), log.X, log.Y]).astype(float)
+    raw = {c: max(estimate_noise(getattr(log, c), order=NOISE_DIFF_ORDER), NOISE_FLOOR) for c in CHANNELS + WRENCH}
+    pose_f = sosfiltfilt(sos, pose, axis=0)
+    # second difference first, then the filter: the filter (with its edge padding) is one linear operator applied
+    # to both sides, so its edge transients cancel instead of acting on the large drift of the pose
+    acc = np.empty_like(pose)
+    acc[1:-1] = (pose[2:] - 2.0 * pose[1:-1] + pose[:-2]) / dt**2
+    acc[0], acc[-1] = 0.0, 0.0
+    y = _zero_filtfilt(sos, acc) * np.array([p.I_G, p.m, p.m])
+    # noise propagation
+    n_imp = int(min(n, max(8 * fs / cfg.cutoff_hz, 64)))
+    h_force, h_pose, e_force, e_pose = _impulse_norms(sos, n_imp)
+    GS = generalised_force_map(pose_f[:, 0], p) @ S_known
+    w_var = np.array([raw[c] ** 2 for c in WRENCH])
+    force_var = np.mean(np.einsum("nij,j->ni", GS**2, w_var), axis=0) * e_force
+    pose_var = (np.array([raw[c] for c in CHANNELS]) * np.array([p.I_G, p.m, p.m]) / dt**2) ** 2 * e_pose
+    # a floor relative to the signal: a noise-free log is judged at a relative accuracy, not at rounding level
+    sigma = np.maximum(np.sqrt(force_var + pose_var), REL_NOISE_FLOOR * np.sqrt(np.mean(y**2, axis=0)))
+    share = pose_var / (force_var + pose_var)
+    rho2 = float(np.mean(share * _acf_sq_sum(h_pose) + (1 - share) * _acf_sq_sum(h_force)))
+    # blocks
+    margin = round(cfg.margin_s / dt)
+    blen = max(round(cfg.block_s / dt), 1)
+    guard = round(cfg.guard_s / dt)
+    block = np.full(n, -1)
+    usable = np.arange(margin, n - margin)
+    nb = len(usable) // blen
+    if nb < MIN_BLOCKS:
+        raise ValueError(f"{log.source}: log too short for diagnosis: {n * dt:.3g} s; need at least "
+                         f"{2 * cfg.margin_s + MIN_BLOCKS * cfg.block_s:.3g} s ({MIN_BLOCKS} blocks of "
+                         f"{cfg.block_s:g} s plus {cfg.margin_s:g} s margins)")
+    for b in range(nb):
+        s0 = margin + b * blen
+        block[s0 + guard:s0 + blen - guard] = b
+    block_test = (np.arange(nb) % cfg.test_every) == (cfg.test_every - 1)
+    return PayloadData(t=t, dt=dt, w_hat=w_hat, theta_f=pose_f[:, 0], y=y, sos=sos, sigma=sigma, raw_noise=raw,
+                       rho2=rho2, block=block, block_test=block_test, S_known=np.asarray(S_known, dtype=float), p=p)

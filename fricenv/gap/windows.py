@@ -1,0 +1,252 @@
+"""The log prepared for the quarter-car fits (:class:`Data`) and the windowed simulation: each prediction window
+starts from a state estimated from data and is simulated ``horizon`` samples ahead by
+:class:`fricenv.effects.quarter_car.EffectSimulator`; :func:`window_residuals` returns the normalised residuals
+of any number of parameter sets at once, the per-window nuisance states (wheel speed, speed, transient slip)
+fitted by Gauss-Newton.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.signal import savgol_filter
+
+from fricenv.effects import registry
+from fricenv.effects.quarter_car import EffectSimulator, ModelBatch
+from fricenv.gap.config import DiagnoseConfig
+from fricenv.gap.params import ROAD_NAMES
+from fricenv.gap.speed import filtered_transient_slip, reconstruct_speed
+from fricenv.gap.stats import estimate_noise
+from fricenv.logs import QuarterCarLog
+from fricenv.plants import quarter_car as qc
+from fricenv.plants.tire import longitudinal_slip
+
+__all__ = ["NOISE_FLOOR", "Data", "model_batch", "prepare", "speed_states", "window_nuisances",
+           "window_residuals"]
+
+V0_STEP = 0.02  # finite-difference step of the per-window speed nuisance (v logged) [m/s]
+LAMT_STEP = 0.005  # finite-difference step of the transient-slip nuisance [-]
+LAMT_MAX_MOVE = 0.1  # largest Gauss-Newton move of the transient slip per iteration [-]
+OMEGA0_STEP = 0.1  # finite-difference step of the per-window wheel-speed nuisance [rad/s]
+OMEGA0_MAX_MOVE = 3.0  # largest Gauss-Newton move of that nuisance per iteration, in noise std [-]
+GN_ITERS = 2  # Gauss-Newton iterations of the wheel-speed nuisance
+FREE_ROLL_TORQUE = 0.02  # free rolling: |T_b| below this share of max |T_b| [-]
+SAVGOL = (11, 2)  # speed smoother: window [samples], polynomial order
+NOISE_FLOOR = {"omega": 1e-3, "v": 1e-3, "a_x": 1e-3}  # smallest accepted noise std per channel (SI)
+# Transient slip at a window start: False = the slip of the window's start state (the wheel-speed nuisance fit then
+# absorbs the difference); True = the measured slip filtered through the relaxation equation.
+RELAX_STATE_FROM_FILTER = True
+# Whether the transient slip is also fitted per window, like the wheel speed (the filtered estimate alone predicts
+# the relaxation model's transients poorly). It is a state fitted on the window's own samples, so it lowers the
+# relaxation model's held-out error by about one noise variance per window even on pure noise; the significance
+# tests subtract that (:func:`window_nuisances`).
+RELAX_STATE_FITTED = True
+
+
+@dataclass
+class Data:
+    """The log prepared for fitting (picklable for the worker processes)."""
+
+    t0: float
+    dt: float
+    Tb: np.ndarray
+    omega: np.ndarray
+    v: np.ndarray | None
+    a_x: np.ndarray | None
+    sigma: dict  # noise std per logged channel
+    v_smooth: np.ndarray | None
+    starts: np.ndarray  # window start indices
+    fold: np.ndarray  # cross-fitting fold of each window
+    test: np.ndarray  # bool per window: held out in the fit at hand (the others are its training windows)
+    horizon: int
+    free_end: int  # first sample after the free-rolling stretch
+    p: qc.QuarterCarParams
+    substeps: int
+
+    @property
+    def n(self) -> int:
+        return len(self.Tb)
+
+    @property
+    def channels(self) -> list[str]:
+        return ["omega"] + (["v"] if self.v is not None else []) + (["a_x"] if self.a_x is not None else [])
+
+
+
+def prepare(log: QuarterCarLog, p: qc.QuarterCarParams, cfg: DiagnoseConfig) -> Data:
+    """The log cut into prediction windows, dealt into cross-fitting folds (fold 0 held out), with its noise levels.
+
+    :raises ValueError: a log shorter than three windows, or fewer than two folds.
+    """
+    n = len(log)
+    H = cfg.horizon
+    if n < 3 * H:
+        raise ValueError(f"{log.source}: log too short for diagnosis: {n} samples, need at least {3 * H} "
+                         f"(3 prediction windows of {H} samples)")
+    sigma = {"omega": max(estimate_noise(log.omega), NOISE_FLOOR["omega"])}
+    if log.v is not None:
+        sigma["v"] = max(estimate_noise(log.v), NOISE_FLOOR["v"])
+    if log.a_x is not None:
+        sigma["a_x"] = max(estimate_noise(log.a_x), NOISE_FLOOR["a_x"])
+    v_smooth = None
+    if log.v is not None:
+        win = min(SAVGOL[0], n - (1 - n % 2))
+        v_smooth = savgol_filter(log.v, win, SAVGOL[1])
+    T = np.asarray(log.T_b, dtype=float)
+    tmax = max(float(np.max(np.abs(T))), 1e-9)
+    braking = np.flatnonzero(np.abs(T) > FREE_ROLL_TORQUE * tmax)
+    free_end = int(braking[0]) if braking.size else n
+    starts = np.arange(0, n - H + 1, H)
+    if int(cfg.folds) != cfg.folds or cfg.folds < 2:
+        raise ValueError(f"DiagnoseConfig.folds must be an integer >= 2, got {cfg.folds!r}")
+    fold = np.arange(len(starts)) % int(cfg.folds)
+    test = fold == 0
+    return Data(t0=float(log.t[0]), dt=log.dt, Tb=T, omega=np.asarray(log.omega, dtype=float),
+                v=None if log.v is None else np.asarray(log.v, dtype=float),
+                a_x=None if log.a_x is None else np.asarray(log.a_x, dtype=float), sigma=sigma, v_smooth=v_smooth,
+                starts=starts, fold=fold, test=test, horizon=H, free_end=free_end, p=p, substeps=cfg.substeps)
+
+
+def model_batch(effects: Sequence[str], names: Sequence[str], X: np.ndarray, p: qc.QuarterCarParams) -> ModelBatch:
+    """A ModelBatch of K elements from a (K, len(names)) parameter matrix."""
+    X = np.atleast_2d(X)
+    col = {name: X[:, i] for i, name in enumerate(names)}
+    road = np.column_stack([col[k] for k in ROAD_NAMES])
+    return ModelBatch.nominal(road, X.shape[0], p).with_params({k: v.copy() for k, v in col.items()}, effects)
+
+
+def speed_states(batch: ModelBatch, d: Data) -> np.ndarray:
+    """Speed estimate (K, n) used to start the windows."""
+    if d.v_smooth is not None:
+        return np.broadcast_to(d.v_smooth, (len(batch), d.n))
+    return reconstruct_speed(batch, d.omega, d.t0, d.dt, d.free_end, d.p)
+
+
+def _effect_states(batch: ModelBatch, d: Data, vhat: np.ndarray):
+    """Lag-filter output and transient slip (K, n) estimated from the command log and the measured slip."""
+    Ta = None
+    if np.any(batch.tau > 0):
+        sim = EffectSimulator(batch, d.dt, d.n, d.p, d.substeps, d.t0, commands=d.Tb)
+        sim.reset(vhat[:, 0], d.omega[0], k0=0, Ta=d.Tb[0])
+        Ta = sim.actuator_run(d.n)
+    lt = None
+    if RELAX_STATE_FROM_FILTER and np.any(batch.sigma > 0):
+        lam = longitudinal_slip(vhat, d.omega[None, :], batch.r_eff[:, None])
+        sig = np.where(batch.sigma > 0, batch.sigma, 1.0)
+        lt = filtered_transient_slip(lam, vhat, d.dt / sig[:, None])
+    return Ta, lt
+
+
+def _simulate_windows(batch: ModelBatch, d: Data, widx: np.ndarray, v0, w0, Ta0, lt0, reps: int):
+    """Simulate the windows ``widx`` for every element of ``batch`` and ``reps`` wheel-speed starts each.
+
+    v0, w0, Ta0, lt0 have shape (K, W, reps) (Ta0, lt0 may be None). Returns dict channel -> (K, W, reps, H).
+    """
+    K, W, H = len(batch), len(widx), d.horizon
+    full = batch.repeat(W * reps)
+    sim = EffectSimulator(full, d.dt, d.n, d.p, d.substeps, d.t0, commands=d.Tb)
+    k0 = np.tile(np.repeat(d.starts[widx], reps), K)
+    sim.reset(v0.ravel(), w0.ravel(), k0=k0, Ta=None if Ta0 is None else Ta0.ravel(),
+              lam_t=None if lt0 is None else lt0.ravel())
+    out = {"omega": np.empty((K * W * reps, H))}
+    if d.v is not None:
+        out["v"] = np.empty_like(out["omega"])
+    if d.a_x is not None:
+        out["a_x"] = np.empty_like(out["omega"])
+    for j in range(H):
+        out["omega"][:, j] = sim.omega
+        if "v" in out:
+            out["v"][:, j] = sim.v
+        if "a_x" in out:
+            out["a_x"][:, j] = sim.accel()
+        if j < H - 1:
+            sim.step()
+    return {k: v.reshape(K, W, reps, H) for k, v in out.items()}
+
+
+def _measured(d: Data, widx: np.ndarray) -> dict:
+    rows = d.starts[widx][:, None] + np.arange(d.horizon)[None, :]
+    out = {"omega": d.omega[rows]}
+    if d.v is not None:
+        out["v"] = d.v[rows]
+    if d.a_x is not None:
+        out["a_x"] = d.a_x[rows]
+    return out
+
+
+def _normalised(pred: dict, meas: dict, d: Data) -> np.ndarray:
+    """Residuals (..., M): all channels concatenated, each divided by its noise std."""
+    parts = [(pred[c] - meas[c]) / d.sigma[c] for c in d.channels]
+    return np.concatenate(parts, axis=-1)
+
+
+def window_nuisances(effects: Sequence[str], d: Data) -> int:
+    """Number of states fitted per window on that window's own samples: the wheel speed, the speed when ``v`` is
+    logged, and the transient slip of a relaxation model. Each lowers a model's error on the window by about one
+    noise variance even where it explains nothing, so tests between models subtract the difference."""
+    states = sum(registry.get(e).window_states for e in effects)
+    return 1 + (d.v is not None) + (states if RELAX_STATE_FITTED else 0)
+
+
+def window_residuals(effects: Sequence[str], names: Sequence[str], X: np.ndarray, d: Data,
+                     widx: np.ndarray | None = None, per_channel: bool = False):
+    """Normalised residuals (K, W, M) of K parameter sets on windows ``widx``, wheel-speed nuisance fitted.
+
+    :param per_channel: also return the per-channel residual blocks, dict channel -> (K, W, H).
+    """
+    X = np.atleast_2d(X)
+    widx = np.arange(len(d.starts)) if widx is None else np.asarray(widx)
+    batch = model_batch(effects, names, X, d.p)
+    K, W = X.shape[0], len(widx)
+    vhat = speed_states(batch, d)
+    Ta, lt = _effect_states(batch, d, vhat)
+    s = d.starts[widx]
+    meas = _measured(d, widx)
+    # nuisance states of each window, fitted by Gauss-Newton: omega0 always, v0 if v is logged, the transient slip
+    # if the model has tire relaxation
+    state = {"omega": np.broadcast_to(d.omega[s][None, :], (K, W)).copy(), "v": vhat[:, s].copy()}
+    relax = bool(np.any(batch.sigma > 0))
+    if relax:
+        state["lam_t"] = lt[:, s].copy() if lt is not None else \
+            longitudinal_slip(state["v"], state["omega"], batch.r_eff[:, None])
+    free = ["omega"] + (["v"] if d.v is not None else []) + (["lam_t"] if relax and RELAX_STATE_FITTED else [])
+    steps = {"omega": OMEGA0_STEP, "v": V0_STEP, "lam_t": LAMT_STEP}
+    max_move = {"omega": OMEGA0_MAX_MOVE * d.sigma["omega"], "v": OMEGA0_MAX_MOVE * d.sigma.get("v", 1.0),
+                "lam_t": LAMT_MAX_MOVE}
+    lower = {"omega": 0.0, "v": 0.0, "lam_t": -1.0}
+    upper = {"omega": np.inf, "v": np.inf, "lam_t": 1.0}
+    reps = 1 + len(free)
+    Ta0 = None if Ta is None else np.repeat(Ta[:, s][:, :, None], reps, axis=2)
+    meas_b = {c: m[None, :, None, :] for c, m in meas.items()}
+
+    def replicas(name):
+        x = np.repeat(state[name][:, :, None], reps, axis=2)
+        if name in free:
+            x[:, :, 1 + free.index(name)] += steps[name]
+        return x
+
+    for _ in range(GN_ITERS):
+        pred = _simulate_windows(batch, d, widx, replicas("v"), replicas("omega"), Ta0,
+                                 replicas("lam_t") if relax else None, reps)
+        r = _normalised(pred, meas_b, d)  # (K, W, reps, M)
+        J = np.stack([(r[:, :, 1 + i] - r[:, :, 0]) / steps[n] for i, n in enumerate(free)], axis=-1)  # (K,W,M,q)
+        A = np.einsum("kwmi,kwmj->kwij", J, J) + 1e-9 * np.eye(len(free))
+        g = -np.einsum("kwmi,kwm->kwi", J, r[:, :, 0])
+        try:
+            move = np.linalg.solve(A, g[..., None])[..., 0]
+        except np.linalg.LinAlgError:
+            move = np.zeros_like(g)
+        move = np.nan_to_num(move)
+        for i, n in enumerate(free):
+            state[n] = np.clip(state[n] + np.clip(move[..., i], -max_move[n], max_move[n]), lower[n], upper[n])
+    pred = _simulate_windows(batch, d, widx, state["v"][:, :, None], state["omega"][:, :, None],
+                             None if Ta0 is None else Ta0[:, :, :1],
+                             state["lam_t"][:, :, None] if relax else None, 1)
+    pred = {c: x[:, :, 0] for c, x in pred.items()}
+    r = _normalised(pred, {c: m[None] for c, m in meas.items()}, d)
+    if per_channel:
+        return r, {c: (pred[c] - meas[c][None]) / d.sigma[c] for c in d.channels}
+    return r
+
