@@ -1,15 +1,35 @@
-"""The ``fricenv`` console script: one verb per module.
+"""The ``fricenv`` console script: one verb per module, one error path, progress bars, clean interrupts.
 
 Each verb lives in its own module exposing ``add_arguments(parser)`` and ``run(args) -> int``; this file only maps
 verb names to modules, so adding a verb never touches another verb's code. Modules are imported when the parser is
 built, so they keep heavy imports (torch, casadi, SB3) inside ``run``.
+
+:func:`main` is the one place where errors meet the user:
+
+* a user's mistake (a :class:`fricenv.errors.FricenvError`, a known domain error, a bad option, a missing or
+  unwritable file) prints one line ``fricenv VERB: error: ...`` on stderr and returns 2;
+* SIGINT (Ctrl-C) and SIGTERM stop the work and its worker processes, print one line and return 130 / 143;
+* anything else is a bug and keeps its traceback.
+
+Input files and output paths named by the options in :data:`PATH_OPTIONS` are checked before the verb runs, so a
+bad ``--out`` or ``--params`` is reported before any long work.
 """
 
 from __future__ import annotations
 
 import argparse
 import importlib
+import multiprocessing
+import os
+import signal
 import sys
+import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
+
+from fricenv import progress
+from fricenv.errors import FricenvError, InvalidInputError, is_user_error, one_line
+from fricenv.utils import check_input_file, check_output_dir, check_output_file
 
 # (verb, sub-verb or None) -> module. Order is the order shown by --help.
 VERBS: dict[tuple[str, str | None], str] = {
@@ -28,6 +48,37 @@ VERBS: dict[tuple[str, str | None], str] = {
     ("gap", "validate"): "fricenv.commands.gap_validate",
 }
 
+# Option dest -> what it names, checked before the verb runs. A verb module overrides an entry with a module-level
+# ``PATH_OPTIONS`` dict (e.g. gap simulate's --out is a file, not a directory).
+PATH_CHECKS = {"input file": check_input_file, "output file": check_output_file, "output dir": check_output_dir}
+PATH_OPTIONS: dict[str, str] = {
+    "log": "input file",
+    "params": "input file",
+    "report": "input file",
+    "json": "output file",
+    "log_out": "output file",
+    "out": "output dir",
+    "report_out": "output dir",
+}
+
+EXIT_USER_ERROR = 2
+EXIT_SIGNAL_BASE = 128  # exit code 128 + signal number: 130 for SIGINT, 143 for SIGTERM
+
+
+class _Parser(argparse.ArgumentParser):
+    """An argument parser whose usage errors take the one error path (one line, exit code 2)."""
+
+    def error(self, message: str):
+        raise InvalidInputError(f"{message} (see {self.prog} --help)")
+
+
+class Interrupted(KeyboardInterrupt):
+    """SIGINT or SIGTERM arrived; raised in the main thread by the handler :func:`main` installs."""
+
+    def __init__(self, signum: int):
+        super().__init__(signal.Signals(signum).name)
+        self.signum = signum
+
 
 def _load(module_name: str):
     """The verb module, or None if that verb is not part of this installation yet."""
@@ -39,11 +90,20 @@ def _load(module_name: str):
         raise
 
 
+def _version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("fricenv")
+    except PackageNotFoundError:
+        return "unknown (not installed)"
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The full argument parser, one sub-parser per available verb."""
-    parser = argparse.ArgumentParser(
-        prog="fricenv", description="Tire-road friction and force-sensor calibration workbench."
-    )
+    parser = _Parser(prog="fricenv", description="Tire-road friction and force-sensor calibration workbench.")
+    parser.add_argument("--version", action="version", version=f"fricenv {_version()}")
+    parser.add_argument("-q", "--quiet", action="store_true", help="no progress bars")
     verbs = parser.add_subparsers(dest="verb", metavar="VERB", required=True)
     groups: dict[str, argparse._SubParsersAction] = {}
     for (verb, sub), module_name in VERBS.items():
@@ -62,14 +122,129 @@ def build_parser() -> argparse.ArgumentParser:
             p = groups[verb].add_parser(sub, help=help_text, description=module.__doc__,
                                         formatter_class=argparse.RawDescriptionHelpFormatter)
         module.add_arguments(p)
-        p.set_defaults(_run=module.run)
+        p.set_defaults(_run=module.run, _prog=p.prog, _paths={**PATH_OPTIONS, **getattr(module, "PATH_OPTIONS", {})})
     return parser
 
 
+def check_paths(args: argparse.Namespace) -> None:
+    """Check every input file and output path the options name (see :data:`PATH_OPTIONS`); nothing is created.
+
+    :raises FricenvError: one line naming the option, the path and what is wrong.
+    """
+    for dest, kind in args._paths.items():
+        value = getattr(args, dest, None)
+        if value is not None:
+            what = dest if kind == "input file" and dest == "log" else "--" + dest.replace("_", "-")
+            PATH_CHECKS[kind](value, what)
+
+
+class TqdmSink:
+    """The CLI's progress sink: one tqdm bar per open task on ``stream`` (stderr), nested tasks below their parent.
+
+    Events from another process (a forked worker inherits the sink) are ignored, so only the front end draws.
+    """
+
+    def __init__(self, stream=None):
+        self._stream = stream if stream is not None else sys.stderr
+        self._bars: list = []
+        self._pid = os.getpid()
+
+    def start(self, label: str, total: int | None) -> None:
+        from tqdm.auto import tqdm
+
+        if os.getpid() == self._pid:
+            self._bars.append(tqdm(total=total, desc=label, file=self._stream, leave=False,
+                                   position=len(self._bars), dynamic_ncols=True))
+
+    def advance(self, n: int) -> None:
+        if os.getpid() == self._pid and self._bars:
+            self._bars[-1].update(n)
+
+    def finish(self) -> None:
+        if os.getpid() == self._pid and self._bars:
+            self._bars.pop().close()
+
+
+def progress_sink(quiet: bool, stdout_is_terminal: bool) -> TqdmSink | None:
+    """The sink :func:`main` installs: a bar on stderr, or None with ``--quiet`` or when stdout is not a terminal."""
+    return None if quiet or not stdout_is_terminal else TqdmSink()
+
+
+def stop_workers() -> None:
+    """Terminate this process's worker processes (process pools, subprocess vector envs) and reap them."""
+    children = multiprocessing.active_children()
+    for child in children:
+        child.terminate()
+    for child in children:
+        child.join(timeout=5.0)
+        if child.is_alive():
+            child.kill()
+            child.join()
+
+
+@contextmanager
+def _interrupt_handlers() -> Iterator[None]:
+    """SIGINT and SIGTERM stop the workers and raise :class:`Interrupted` in this process; a forked worker that
+    inherited the handler exits at once, quietly. Previous handlers are restored on exit."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    main_pid = os.getpid()
+
+    def handler(signum, frame):
+        if os.getpid() != main_pid:
+            os._exit(EXIT_SIGNAL_BASE + signum)
+        stop_workers()
+        raise Interrupted(signum)
+
+    previous = {sig: signal.signal(sig, handler) for sig in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for sig, old in previous.items():
+            signal.signal(sig, old)
+
+
+def _fail(prog: str, message: str) -> None:
+    print(f"{prog}: error: {message}", file=sys.stderr)
+
+
+def _run_verb(args: argparse.Namespace) -> int:
+    """Check the paths, then run the verb with the progress sink installed."""
+    check_paths(args)
+    sink = progress_sink(args.quiet, sys.stdout.isatty())
+    args.show_progress = sink is not None
+    with progress.use_sink(sink):
+        return int(args._run(args) or 0)
+
+
 def main(argv: list[str] | None = None) -> int:
-    """Entry point of the ``fricenv`` console script."""
-    args = build_parser().parse_args(argv)
-    return int(args._run(args) or 0)
+    """Entry point of the ``fricenv`` console script; returns the exit code (see the module docstring)."""
+    prog = "fricenv"
+    with _interrupt_handlers():
+        try:
+            parser = build_parser()
+            try:
+                args = parser.parse_args(argv)
+            except InvalidInputError as exc:
+                _fail(prog, one_line(exc))
+                return EXIT_USER_ERROR
+            prog = args._prog
+            return _run_verb(args)
+        except Interrupted as exc:
+            stop_workers()
+            print(f"{prog}: interrupted by {signal.Signals(exc.signum).name}; stopped", file=sys.stderr)
+            return EXIT_SIGNAL_BASE + exc.signum
+        except SystemExit as exc:  # --help, --version, or a verb that exits with a message
+            if isinstance(exc.code, str):
+                print(" ".join(exc.code.split()), file=sys.stderr)
+                return EXIT_USER_ERROR
+            return 0 if exc.code is None else int(exc.code)
+        except (FricenvError, ValueError, TypeError, OSError) as exc:
+            if not is_user_error(exc):
+                raise
+            _fail(prog, one_line(exc))
+            return EXIT_USER_ERROR
 
 
 if __name__ == "__main__":

@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from fricenv.errors import InvalidInputError
 from fricenv.utils import atomic_write
 
 __all__ = [
@@ -43,8 +44,8 @@ _MAX_LINEAR_RATE = 20.0  # median |X'|, |Y'| [m/s]
 _NOMINAL_RADIUS = 0.345  # [m], Table I; only used for the unit checks
 
 
-class LogFormatError(ValueError):
-    """A log file that does not follow the DESIGN.md contract."""
+class LogFormatError(InvalidInputError):
+    """A log file that does not follow the DESIGN.md contract (a ``ValueError``; one line naming the file)."""
 
 
 @dataclass(frozen=True)
@@ -110,11 +111,15 @@ def _log_class(plant: str) -> type:
 def _parse(path: Path):
     """Comments, header and a float table with the file line number of each row."""
     try:
-        text = path.read_text()
+        text = path.read_text(encoding="utf-8-sig")  # -sig: a leading byte-order mark is not part of the header
     except FileNotFoundError:
         raise LogFormatError(f"{path}: no such file") from None
+    except IsADirectoryError:
+        raise LogFormatError(f"{path}: is a directory, expected a CSV file") from None
     except UnicodeDecodeError:
         raise LogFormatError(f"{path}: not a text (CSV) file") from None
+    except OSError as exc:
+        raise LogFormatError(f"{path}: cannot read the file ({exc.strerror})") from None
     comments: list[str] = []
     header: list[str] | None = None
     rows: list[list[float]] = []

@@ -27,6 +27,7 @@ from collections.abc import Callable
 from fricenv import bench_targets
 from fricenv.bench_targets import BRAKING_ENV, REFERENCE_ENV
 from fricenv.bench_targets import env_steps_per_s as _env_steps_per_s
+from fricenv.errors import InvalidInputError
 
 DEFAULT_REPEATS = 5
 DEFAULT_STEPS = 5000
@@ -75,7 +76,7 @@ def run(args) -> int:
     from fricenv.utils import write_json
 
     if args.repeats < 1 or args.steps < 1:
-        raise SystemExit("fricenv bench: --repeats and --steps must be >= 1")
+        raise InvalidInputError(f"--repeats and --steps must be >= 1, got {args.repeats} and {args.steps}")
     if args.target == "all":
         # "env" measures the reference
         targets = [name for name in TARGETS if name != "pendulum" and name not in bench_targets.SLOW_TARGETS]

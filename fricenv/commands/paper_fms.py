@@ -21,6 +21,8 @@ import time
 
 import numpy as np
 
+from fricenv.errors import InvalidInputError
+
 E_THRESHOLD = 1e-2  # "time until E stays below" threshold
 PAPER_E_100S = 9.1106e-4  # the paper's E at 100 s
 GRID_SAMPLES = 50  # E(t) is recorded every GRID_SAMPLES samples (50 ms at 1 ms)
@@ -124,7 +126,7 @@ def run(args) -> int:
     from fricenv.utils import progress, write_json
 
     if args.duration <= 0 or args.seeds < 1:
-        raise SystemExit("fricenv paper fms: --duration must be > 0 and --seeds >= 1")
+        raise InvalidInputError(f"--duration must be > 0 and --seeds >= 1, got {args.duration} and {args.seeds}")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     seeds = [args.seed + k for k in range(args.seeds)]
