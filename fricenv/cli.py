@@ -144,8 +144,10 @@ class TqdmSink:
     Events from another process (a forked worker inherits the sink) are ignored, so only the front end draws.
     """
 
-    def __init__(self, stream=None):
+    def __init__(self, stream=None, mininterval: float = 0.1):
+        """:param stream: where the bars go (default stderr). :param mininterval: least seconds between redraws."""
         self._stream = stream if stream is not None else sys.stderr
+        self._mininterval = mininterval
         self._bars: list = []
         self._pid = os.getpid()
 
@@ -154,7 +156,8 @@ class TqdmSink:
 
         if os.getpid() == self._pid:
             self._bars.append(tqdm(total=total, desc=label, file=self._stream, leave=False,
-                                   position=len(self._bars), dynamic_ncols=True))
+                                   position=len(self._bars), dynamic_ncols=True,
+                                   mininterval=self._mininterval))
 
     def advance(self, n: int) -> None:
         if os.getpid() == self._pid and self._bars:

@@ -39,12 +39,15 @@ def check_options(args: argparse.Namespace) -> None:
         raise InvalidInputError(f"--jobs must be >= 1, got {args.jobs}")
 
 
-def _candidates(args: argparse.Namespace) -> tuple[str, ...] | None:
+def _candidates(args: argparse.Namespace, valid: tuple[str, ...]) -> tuple[str, ...] | None:
+    """The --candidates names (None: the whole library), each checked against ``valid``."""
     if not args.candidates:
         return None
     names = tuple(c.strip() for c in args.candidates.split(",") if c.strip())
-    if not names:
-        raise InvalidInputError(f"--candidates {args.candidates!r}: no effect named")
+    unknown = [n for n in names if n not in valid]
+    if unknown or not names:
+        raise InvalidInputError(f"--candidates {args.candidates!r}: unknown candidate effect(s) "
+                                f"{', '.join(unknown) or '(none named)'}; valid effects: {', '.join(valid)}")
     return names
 
 
@@ -56,7 +59,7 @@ def run(args: argparse.Namespace) -> int:
     from fricenv.gap.diagnose import DiagnoseConfig, diagnose_file
     from fricenv.gap.report import summary_line, write_report
 
-    names = _candidates(args)
+    names = _candidates(args, DiagnoseConfig().candidates)
     cfg = DiagnoseConfig(jobs=args.jobs) if names is None else DiagnoseConfig(jobs=args.jobs, candidates=names)
     dg = diagnose_file(args.log, args.plant, args.params, cfg)
     return _report(args, dg, write_report(dg, args.out, args.plant, plots=not args.no_plots), summary_line(dg))
@@ -81,7 +84,7 @@ def _run_payload(args: argparse.Namespace) -> int:
     from fricenv.gap.payload_diagnose import PayloadDiagnoseConfig, diagnose_payload_file, summary_line
     from fricenv.gap.payload_report import write_payload_report
 
-    names = _candidates(args)
+    names = _candidates(args, PayloadDiagnoseConfig().candidates)
     cfg = PayloadDiagnoseConfig() if names is None else PayloadDiagnoseConfig(candidates=names)
     dg = diagnose_payload_file(args.log, args.params, cfg)
     return _report(args, dg, write_payload_report(dg, args.out, plots=not args.no_plots), summary_line(dg))
