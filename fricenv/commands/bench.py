@@ -73,7 +73,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args) -> int:
     from fricenv.bench_targets import ratios
-    from fricenv.utils import write_json
+    from fricenv.utils import progress, write_json
 
     if args.repeats < 1 or args.steps < 1:
         raise InvalidInputError(f"--repeats and --steps must be >= 1, got {args.repeats} and {args.steps}")
@@ -85,7 +85,7 @@ def run(args) -> int:
     else:
         targets = [args.target]
     figures: dict = {}
-    for name in targets:
+    for name in progress(targets, desc="bench targets"):
         figures.update(TARGETS[name](args))
     figures.update(ratios(figures))
     for key, value in figures.get("ratio_to_pendulum", {}).items():

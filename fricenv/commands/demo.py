@@ -30,20 +30,23 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run_demo(roads, v0: float, seed: int) -> tuple[list[dict], dict]:
     """Every controller on every road: (result rows, {road: {controller: Rollout}})."""
     from agents.controllers import CONTROLLERS, make_controller, rollout
+    from fricenv import progress
     from fricenv.envs.braking import BrakingEnv
 
     results, traces = [], {}
-    for road in roads:
-        env = BrakingEnv(road=road, v0=v0, observation="oracle")
-        traces[road] = {}
-        for name in CONTROLLERS:
-            ro = rollout(env, make_controller(name, env), seed=seed)
-            traces[road][name] = ro
-            info = ro.info
-            results.append({"road": road, "controller": name, "distance_m": info["stopping_distance"],
-                            "limit_m": info["limit_distance"], "ratio": info["ratio"],
-                            "locked": info["lock_seen"]})
-        env.close()
+    with progress.task("demo episodes", total=len(roads) * len(CONTROLLERS)) as advance:
+        for road in roads:
+            env = BrakingEnv(road=road, v0=v0, observation="oracle")
+            traces[road] = {}
+            for name in CONTROLLERS:
+                ro = rollout(env, make_controller(name, env), seed=seed)
+                traces[road][name] = ro
+                info = ro.info
+                results.append({"road": road, "controller": name, "distance_m": info["stopping_distance"],
+                                "limit_m": info["limit_distance"], "ratio": info["ratio"],
+                                "locked": info["lock_seen"]})
+                advance()
+            env.close()
     return results, traces
 
 

@@ -61,7 +61,7 @@ def run(args: argparse.Namespace) -> int:
 
     names = _candidates(args, DiagnoseConfig().candidates)
     cfg = DiagnoseConfig(jobs=args.jobs) if names is None else DiagnoseConfig(jobs=args.jobs, candidates=names)
-    dg = diagnose_file(args.log, args.plant, args.params, cfg)
+    dg = diagnose_file(args.log, args.plant, args.params, cfg)  # reports its phases through fricenv.progress
     return _report(args, dg, write_report(dg, args.out, args.plant, plots=not args.no_plots), summary_line(dg))
 
 
