@@ -128,14 +128,12 @@ def test_version(capsys):
     assert capsys.readouterr().out.strip() == f"fricenv {version('fricenv')}"
 
 
-def _fake_verb(monkeypatch, run, **module_attrs):
-    """Register a verb ``fake`` whose run is ``run``."""
+def register_fake_verb(monkeypatch, run, add_arguments=lambda parser: None) -> None:
+    """Make ``fake`` the only verb of the CLI, running ``run(args)`` (also used by the other test_cli_* files)."""
     module = types.ModuleType("fake_verb")
     module.__doc__ = "A verb for tests."
-    module.add_arguments = lambda parser: parser.add_argument("--out", default=None)
+    module.add_arguments = add_arguments
     module.run = run
-    for name, value in module_attrs.items():
-        setattr(module, name, value)
     monkeypatch.setitem(sys.modules, "fake_verb", module)
     monkeypatch.setattr(cli, "VERBS", {("fake", None): "fake_verb"})
 
@@ -146,7 +144,7 @@ def test_a_bug_keeps_its_traceback(monkeypatch, exc):
     def run(args):
         raise exc
 
-    _fake_verb(monkeypatch, run)
+    register_fake_verb(monkeypatch, run)
     with pytest.raises(type(exc)):
         main(["fake"])
 
@@ -161,7 +159,7 @@ def test_user_errors_from_anywhere_are_one_line(monkeypatch, capsys, exc, expect
     def run(args):
         raise exc
 
-    _fake_verb(monkeypatch, run)
+    register_fake_verb(monkeypatch, run)
     assert main(["fake"]) == 2
     assert _one_line_error(capsys).strip() == expected
 

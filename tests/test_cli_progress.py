@@ -3,13 +3,13 @@ stdout is not a terminal."""
 
 import io
 import sys
-import types
 
 import pytest
 
-from fricenv import cli, progress
+from fricenv import progress
 from fricenv.cli import TqdmSink, main, progress_sink
 from fricenv.utils import progress as progress_loop
+from tests.test_cli_errors import register_fake_verb
 
 
 def test_sink_shows_a_fake_task_to_its_end():
@@ -76,12 +76,7 @@ def test_main_installs_the_sink_for_a_command(monkeypatch, capsys, argv, termina
             advance(2)
         return 0
 
-    module = types.ModuleType("fake_verb")
-    module.__doc__ = "A verb for tests."
-    module.add_arguments = lambda parser: None
-    module.run = run
-    monkeypatch.setitem(sys.modules, "fake_verb", module)
-    monkeypatch.setattr(cli, "VERBS", {("fake", None): "fake_verb"})
+    register_fake_verb(monkeypatch, run)
     if terminal:
         monkeypatch.setattr(sys, "stdout", _Terminal())
     assert main(argv) == 0

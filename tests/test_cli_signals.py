@@ -6,13 +6,12 @@ import signal
 import subprocess
 import sys
 import time
-import types
 from pathlib import Path
 
 import pytest
 
-from fricenv import cli
 from fricenv.cli import main
+from tests.test_cli_errors import register_fake_verb
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -55,12 +54,7 @@ def test_signal_stops_the_command_and_its_workers_in_process(monkeypatch, capsys
         time.sleep(60)  # interrupted by the handler
         raise AssertionError("the signal did not stop the command")
 
-    module = types.ModuleType("fake_verb")
-    module.__doc__ = "A verb for tests."
-    module.add_arguments = lambda parser: None
-    module.run = run
-    monkeypatch.setitem(sys.modules, "fake_verb", module)
-    monkeypatch.setattr(cli, "VERBS", {("fake", None): "fake_verb"})
+    register_fake_verb(monkeypatch, run)
     previous = signal.getsignal(signum)
     assert main(["fake"]) == code
     err = capsys.readouterr().err
