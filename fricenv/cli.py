@@ -9,6 +9,7 @@ built, so they keep heavy imports (torch, casadi, SB3) inside ``run``.
 * a user's mistake (a :class:`fricenv.errors.FricenvError`, a known domain error, a bad option, a missing or
   unwritable file) prints one line ``fricenv VERB: error: ...`` on stderr and returns 2;
 * SIGINT (Ctrl-C) and SIGTERM stop the work and its worker processes, print one line and return 130 / 143;
+* a closed stdout (``fricenv ... | head``) ends the command quietly with 141;
 * anything else is a bug and keeps its traceback.
 
 Input files and output paths named by the options in :data:`PATH_OPTIONS` are checked before the verb runs, so a
@@ -208,6 +209,14 @@ def _interrupt_handlers() -> Iterator[None]:
             signal.signal(sig, old)
 
 
+def _silence_stdout() -> None:
+    """Point stdout at /dev/null, so the interpreter's final flush into a closed pipe raises nothing."""
+    try:
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+    except (OSError, ValueError):  # a stdout without a file descriptor (captured in tests)
+        pass
+
+
 def _fail(prog: str, message: str) -> None:
     print(f"{prog}: error: {message}", file=sys.stderr)
 
@@ -243,6 +252,9 @@ def main(argv: list[str] | None = None) -> int:
                 print(" ".join(exc.code.split()), file=sys.stderr)
                 return EXIT_USER_ERROR
             return 0 if exc.code is None else int(exc.code)
+        except BrokenPipeError:  # stdout closed early (e.g. piped into head): stop quietly, as POSIX tools do
+            _silence_stdout()
+            return EXIT_SIGNAL_BASE + signal.SIGPIPE
         except (FricenvError, ValueError, TypeError, OSError) as exc:
             if not is_user_error(exc):
                 raise

@@ -198,3 +198,12 @@ def test_no_plots_report_has_no_image_links(tmp_path, small_log):
     assert ".png" not in md, "report.md links plots that --no-plots did not write"
     report = json.loads((out / "report.json").read_text())
     assert report["verdict"]
+
+
+def test_closed_stdout_ends_quietly(monkeypatch, capsys):
+    def run(args):
+        raise BrokenPipeError(32, "Broken pipe")
+
+    register_fake_verb(monkeypatch, run)
+    assert main(["fake"]) == 141
+    assert capsys.readouterr().err == ""
