@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 
 from fricenv.errors import InvalidInputError
+from fricenv.utils import read_json_object
 
 PLANTS = ("quarter-car", "payload")
 
@@ -37,6 +38,8 @@ def check_options(args: argparse.Namespace) -> None:
                                 f"valid plants: {', '.join(PLANTS)}")
     if args.jobs is not None and args.jobs < 1:
         raise InvalidInputError(f"--jobs must be >= 1, got {args.jobs}")
+    if args.params is not None:  # its syntax now, before the diagnosis' imports; its keys when the plant loads it
+        read_json_object(args.params, f"{args.plant} parameters")
 
 
 def _candidates(args: argparse.Namespace, valid: tuple[str, ...]) -> tuple[str, ...] | None:
