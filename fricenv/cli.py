@@ -19,17 +19,18 @@ bad ``--out`` or ``--params`` is reported before any long work.
 from __future__ import annotations
 
 import argparse
+import contextlib
+import glob
 import importlib
 import multiprocessing
 import os
 import signal
 import sys
 import threading
-from collections.abc import Iterator
-from contextlib import contextmanager
+import time
 
 from fricenv import progress
-from fricenv.errors import FricenvError, InvalidInputError, is_user_error, one_line
+from fricenv.errors import InvalidInputError, is_user_error, one_line
 from fricenv.utils import check_input_file, check_output_dir, check_output_file
 
 # (verb, sub-verb or None) -> module. Order is the order shown by --help.
@@ -174,39 +175,125 @@ def progress_sink(quiet: bool, stdout_is_terminal: bool) -> TqdmSink | None:
     return None if quiet or not stdout_is_terminal else TqdmSink()
 
 
-def stop_workers() -> None:
-    """Terminate this process's worker processes (process pools, subprocess vector envs) and reap them."""
+def _child_pids() -> set[int]:
+    """Direct child processes of this one, from /proc (Linux; empty elsewhere)."""
+    pids: set[int] = set()
+    for path in glob.glob(f"/proc/{os.getpid()}/task/*/children"):
+        try:
+            with open(path) as fh:
+                pids.update(int(pid) for pid in fh.read().split())
+        except OSError:
+            continue
+    return pids
+
+
+def _reap(pid: int, timeout: float) -> bool:
+    """Wait up to ``timeout`` seconds for child ``pid`` to exit; True once it has (or is not our child)."""
+    deadline = time.monotonic() + timeout
+    while True:
+        try:
+            done, _ = os.waitpid(pid, os.WNOHANG)
+        except ChildProcessError:
+            return True
+        if done or time.monotonic() > deadline:
+            return bool(done)
+        time.sleep(0.02)
+
+
+def stop_workers(timeout: float = 5.0) -> None:
+    """Terminate this process's worker processes and reap them: multiprocessing children (process pools, subprocess
+    vector envs) and any other direct child, e.g. one forked just as an interrupt arrived and so never recorded by
+    the pool that started it (SIGTERM, then SIGKILL after ``timeout`` seconds)."""
     children = multiprocessing.active_children()
+    others = _child_pids() - {child.pid for child in children}
     for child in children:
         child.terminate()
+    for pid in others:
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(pid, signal.SIGTERM)
     for child in children:
-        child.join(timeout=5.0)
+        child.join(timeout=timeout)
         if child.is_alive():
             child.kill()
             child.join()
+    for pid in others:
+        if not _reap(pid, timeout):
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, signal.SIGKILL)
+            _reap(pid, timeout)
 
 
-@contextmanager
-def _interrupt_handlers() -> Iterator[None]:
-    """SIGINT and SIGTERM stop the workers and raise :class:`Interrupted` in this process; a forked worker that
-    inherited the handler exits at once, quietly. Previous handlers are restored on exit."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    main_pid = os.getpid()
+class _Signals:
+    """SIGINT and SIGTERM while a command runs: stop the workers and raise :class:`Interrupted` in the main thread.
 
-    def handler(signum, frame):
-        if os.getpid() != main_pid:
+    The raise can land where Python swallows it (e.g. inside an at-fork callback while a process pool starts a
+    worker), so the signal is also recorded in :attr:`signum` and delivered again every ``REDELIVER_S`` seconds until
+    :meth:`settle`. A forked worker that inherited the handler exits at once, quietly. Previous handlers are restored
+    on exit.
+    """
+
+    REDELIVER_S = 1.0
+
+    def __init__(self):
+        self.signum: int | None = None
+        self._lock = threading.Lock()
+        self._active = False
+        self._timer: threading.Timer | None = None
+        self._previous: dict = {}
+        self._unraisablehook = sys.unraisablehook
+        self._excepthook = threading.excepthook
+        self._pid = os.getpid()
+
+    def __enter__(self) -> _Signals:  # noqa: PYI034  (typing.Self needs Python 3.11)
+        if threading.current_thread() is threading.main_thread():
+            self._active = True
+            self._previous = {sig: signal.signal(sig, self._handle) for sig in (signal.SIGINT, signal.SIGTERM)}
+            self._unraisablehook, sys.unraisablehook = sys.unraisablehook, self._unraisable
+            self._excepthook, threading.excepthook = threading.excepthook, self._thread_error
+        return self
+
+    def _unraisable(self, unraisable) -> None:
+        """An :class:`Interrupted` Python had to swallow is not printed: it is recorded and delivered again."""
+        if not isinstance(unraisable.exc_value, Interrupted):
+            self._unraisablehook(unraisable)
+
+    def _thread_error(self, args) -> None:
+        """After an interrupt, a helper thread that fails as its workers vanish (a process pool's manager thread)
+        is a consequence of the interrupt, not news: not printed."""
+        if self.signum is None:
+            self._excepthook(args)
+
+    def _handle(self, signum: int, frame) -> None:
+        if os.getpid() != self._pid:
             os._exit(EXIT_SIGNAL_BASE + signum)
+        if not self._active:  # already settled: main is reporting the interrupt
+            return
+        self.signum = signum
         stop_workers()
+        self._timer = threading.Timer(self.REDELIVER_S, self._redeliver, args=(signum,))
+        self._timer.daemon = True
+        self._timer.start()
         raise Interrupted(signum)
 
-    previous = {sig: signal.signal(sig, handler) for sig in (signal.SIGINT, signal.SIGTERM)}
-    try:
-        yield
-    finally:
-        for sig, old in previous.items():
+    def _redeliver(self, signum: int) -> None:
+        with self._lock:
+            if self._active:
+                os.kill(self._pid, signum)
+
+    def settle(self) -> None:
+        """The command has ended: no more raising, no redelivery."""
+        with self._lock:
+            self._active = False
+        if self._timer is not None:
+            self._timer.cancel()
+
+    def __exit__(self, *exc_info) -> None:
+        self.settle()
+        for sig, old in self._previous.items():
             signal.signal(sig, old)
+        if self._previous:
+            sys.unraisablehook = self._unraisablehook
+            threading.excepthook = self._excepthook
 
 
 def _silence_stdout() -> None:
@@ -215,6 +302,12 @@ def _silence_stdout() -> None:
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
     except (OSError, ValueError):  # a stdout without a file descriptor (captured in tests)
         pass
+
+
+def _interrupted(prog: str, signum: int) -> int:
+    stop_workers()
+    print(f"{prog}: interrupted by {signal.Signals(signum).name}; stopped", file=sys.stderr)
+    return EXIT_SIGNAL_BASE + signum
 
 
 def _fail(prog: str, message: str) -> None:
@@ -230,36 +323,46 @@ def _run_verb(args: argparse.Namespace) -> int:
         return int(args._run(args) or 0)
 
 
+def _dispatch(argv: list[str] | None, context: dict, signals: _Signals) -> int:
+    """Parse and run; a user's error becomes one line and exit code 2 (see :func:`main`)."""
+    try:
+        parser = build_parser()
+        try:
+            args = parser.parse_args(argv)
+        except InvalidInputError as exc:
+            _fail(context["prog"], one_line(exc))
+            return EXIT_USER_ERROR
+        context["prog"] = args._prog
+        return _run_verb(args)
+    except SystemExit as exc:  # --help, --version, or a verb that exits with a message
+        if isinstance(exc.code, str):
+            print(" ".join(exc.code.split()), file=sys.stderr)
+            return EXIT_USER_ERROR
+        return 0 if exc.code is None else int(exc.code)
+    except BrokenPipeError:  # stdout closed early (e.g. piped into head): stop quietly, as POSIX tools do
+        _silence_stdout()
+        return EXIT_SIGNAL_BASE + signal.SIGPIPE
+    except Exception as exc:
+        if signals.signum is not None or not is_user_error(exc):
+            raise
+        _fail(context["prog"], one_line(exc))
+        return EXIT_USER_ERROR
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``fricenv`` console script; returns the exit code (see the module docstring)."""
-    prog = "fricenv"
-    with _interrupt_handlers():
+    context = {"prog": "fricenv"}
+    with _Signals() as signals:
         try:
-            parser = build_parser()
-            try:
-                args = parser.parse_args(argv)
-            except InvalidInputError as exc:
-                _fail(prog, one_line(exc))
-                return EXIT_USER_ERROR
-            prog = args._prog
-            return _run_verb(args)
-        except Interrupted as exc:
-            stop_workers()
-            print(f"{prog}: interrupted by {signal.Signals(exc.signum).name}; stopped", file=sys.stderr)
-            return EXIT_SIGNAL_BASE + exc.signum
-        except SystemExit as exc:  # --help, --version, or a verb that exits with a message
-            if isinstance(exc.code, str):
-                print(" ".join(exc.code.split()), file=sys.stderr)
-                return EXIT_USER_ERROR
-            return 0 if exc.code is None else int(exc.code)
-        except BrokenPipeError:  # stdout closed early (e.g. piped into head): stop quietly, as POSIX tools do
-            _silence_stdout()
-            return EXIT_SIGNAL_BASE + signal.SIGPIPE
-        except (FricenvError, ValueError, TypeError, OSError) as exc:
-            if not is_user_error(exc):
+            code = _dispatch(argv, context, signals)
+        except BaseException:
+            signals.settle()
+            if signals.signum is None:
                 raise
-            _fail(prog, one_line(exc))
-            return EXIT_USER_ERROR
+        signals.settle()
+        if signals.signum is not None:  # also when the interrupt was swallowed or the work ended anyway
+            return _interrupted(context["prog"], signals.signum)
+        return code
 
 
 if __name__ == "__main__":

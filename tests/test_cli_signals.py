@@ -85,7 +85,56 @@ def test_sigterm_stops_gap_diagnose_and_leaves_no_child(tmp_path):
         if proc.poll() is None:
             proc.kill()
             proc.wait()
-    assert proc.returncode == 143
+    assert proc.returncode == 143, err
     assert err == "fricenv gap diagnose: interrupted by SIGTERM; stopped\n"
     assert not [k for k in kids if _alive(k)]
     assert not (tmp_path / "rep" / "report.json").exists()
+
+
+def test_a_cleanup_error_during_the_interrupt_is_still_the_interrupt(monkeypatch, capsys):
+    """A pool's shutdown interrupted half-way raises its own error while the interrupt unwinds: still exit 143."""
+
+    def run(args):
+        try:
+            os.kill(os.getpid(), signal.SIGTERM)
+            time.sleep(60)
+        finally:
+            raise RuntimeError("cannot join thread before it is started")
+
+    register_fake_verb(monkeypatch, run)
+    assert main(["fake"]) == 143
+    assert capsys.readouterr().err == "fricenv fake: interrupted by SIGTERM; stopped\n"
+
+
+class _SignalInDel:
+    """Sends SIGTERM from ``__del__``, where Python swallows any exception (as in an at-fork callback)."""
+
+    def __del__(self):
+        os.kill(os.getpid(), signal.SIGTERM)
+        for _ in range(1000):  # give the handler its chance to run (and raise) inside __del__
+            pass
+
+
+def test_a_swallowed_interrupt_is_delivered_again(monkeypatch, capsys):
+    def run(args):
+        _SignalInDel()
+        time.sleep(30)  # the redelivery interrupts this
+        raise AssertionError("the swallowed interrupt was not delivered again")
+
+    register_fake_verb(monkeypatch, run)
+    assert main(["fake"]) == 143
+    assert capsys.readouterr().err == "fricenv fake: interrupted by SIGTERM; stopped\n"
+
+
+def test_children_unknown_to_multiprocessing_are_stopped_too(monkeypatch, capsys):
+    started = []
+
+    def run(args):
+        started.append(subprocess.Popen(["sleep", "120"]))
+        os.kill(os.getpid(), signal.SIGTERM)
+        time.sleep(30)
+
+    register_fake_verb(monkeypatch, run)
+    assert main(["fake"]) == 143
+    assert started[0].poll() is not None or not _alive(started[0].pid)
+    capsys.readouterr()
