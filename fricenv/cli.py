@@ -175,8 +175,18 @@ def progress_sink(quiet: bool, stdout_is_terminal: bool) -> TqdmSink | None:
     return None if quiet or not stdout_is_terminal else TqdmSink()
 
 
+def _multiprocessing_helpers() -> set[int]:
+    """The resource tracker and fork server of multiprocessing: they end with this process and are reused by later
+    pools, so they are not stopped."""
+    from multiprocessing import forkserver, resource_tracker
+
+    pids = {getattr(resource_tracker._resource_tracker, "_pid", None),
+            getattr(forkserver._forkserver, "_forkserver_pid", None)}
+    return {pid for pid in pids if pid is not None}
+
+
 def _child_pids() -> set[int]:
-    """Direct child processes of this one, from /proc (Linux; empty elsewhere)."""
+    """Direct child processes of this one, from /proc (Linux; empty elsewhere), multiprocessing's helpers left out."""
     pids: set[int] = set()
     for path in glob.glob(f"/proc/{os.getpid()}/task/*/children"):
         try:
@@ -184,7 +194,7 @@ def _child_pids() -> set[int]:
                 pids.update(int(pid) for pid in fh.read().split())
         except OSError:
             continue
-    return pids
+    return pids - _multiprocessing_helpers()
 
 
 def _reap(pid: int, timeout: float) -> bool:
