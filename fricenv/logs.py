@@ -9,12 +9,14 @@ with a warning. Every error names the file, and where it can the line and the co
 from __future__ import annotations
 
 import os
+import re
 import warnings
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 
 import numpy as np
 
+from fricenv.errors import InvalidInputError
 from fricenv.plants.sui_johansen import RADIUS
 from fricenv.utils import atomic_write
 
@@ -44,8 +46,22 @@ _MAX_LINEAR_RATE = 20.0  # median |X'|, |Y'| [m/s]
 _NOMINAL_RADIUS = RADIUS  # [m], Sui & Johansen Table I; only used for the unit checks
 
 
-class LogFormatError(ValueError):
-    """A log file that does not follow the DESIGN.md contract."""
+# SI unit of each column; a header cell may carry it as "omega [rad/s]" or "omega (rad/s)".
+_SI_UNITS = {"t": "s", "T_b": "N m", "omega": "rad/s", "v": "m/s", "a_x": "m/s^2",
+             "M": "N m", "f_x": "N", "f_y": "N", "theta": "rad", "X": "m", "Y": "m"}
+_HEADER_UNIT = re.compile(r"^(?P<name>[^\[\]()]+?)\s*(\[(?P<u1>[^\]]*)\]|\((?P<u2>[^)]*)\))$")
+# A number as a CSV holds it: ASCII decimal, optional exponent, or nan/inf (rejected later with their line). Python's
+# float() alone would also take "1_0" and non-ASCII digits.
+_NUMBER = re.compile(r"^\s*[+-]?((\d+\.?\d*|\.\d+)([eE][+-]?\d+)?|nan|inf|infinity)\s*$", re.IGNORECASE | re.ASCII)
+
+
+def _unit_key(unit: str) -> str:
+    """A unit spelling reduced for comparison: "N m", "N*m", "N.m" and "Nm" agree, so do "m/s^2" and "m/s2"."""
+    return re.sub(r"[\s*.^]", "", unit).replace("\u00b2", "2")
+
+
+class LogFormatError(InvalidInputError):
+    """A log file that does not follow the DESIGN.md contract (a ``ValueError``; one line naming the file)."""
 
 
 @dataclass(frozen=True)
@@ -111,11 +127,15 @@ def _log_class(plant: str) -> type:
 def _parse(path: Path):
     """Comments, header and a float table with the file line number of each row."""
     try:
-        text = path.read_text()
+        text = path.read_text(encoding="utf-8-sig")  # -sig: a leading byte-order mark is not part of the header
     except FileNotFoundError:
         raise LogFormatError(f"{path}: no such file") from None
+    except IsADirectoryError:
+        raise LogFormatError(f"{path}: is a directory, expected a CSV file") from None
     except UnicodeDecodeError:
         raise LogFormatError(f"{path}: not a text (CSV) file") from None
+    except OSError as exc:
+        raise LogFormatError(f"{path}: cannot read the file ({exc.strerror})") from None
     comments: list[str] = []
     header: list[str] | None = None
     rows: list[list[float]] = []
@@ -128,7 +148,7 @@ def _parse(path: Path):
             if line.startswith("#"):
                 comments.append(line[1:].strip())
                 continue
-            header = [name.strip() for name in line.split(",")]
+            header = [_column_name(path, lineno, cell) for cell in line.split(",")]
             if len(set(header)) != len(header):
                 dup = sorted({h for h in header if header.count(h) > 1})
                 raise LogFormatError(f"{path}:{lineno}: duplicate column(s) {', '.join(dup)} in header")
@@ -136,13 +156,10 @@ def _parse(path: Path):
         cells = line.split(",")
         if len(cells) != len(header):
             raise LogFormatError(f"{path}:{lineno}: {len(cells)} values, the header has {len(header)} columns")
-        row = []
         for name, cell in zip(header, cells):
-            try:
-                row.append(float(cell))
-            except ValueError:
-                raise LogFormatError(f"{path}:{lineno}: column {name!r}: {cell.strip()!r} is not a number") from None
-        rows.append(row)
+            if not _NUMBER.match(cell):
+                raise LogFormatError(f"{path}:{lineno}: column {name!r}: {cell.strip()!r} is not a number")
+        rows.append([float(cell) for cell in cells])
         line_numbers.append(lineno)
     if header is None:
         raise LogFormatError(f"{path}: no header row")
@@ -151,8 +168,27 @@ def _parse(path: Path):
     return comments, header, np.array(rows, dtype=float), np.array(line_numbers)
 
 
+def _column_name(path: Path, lineno: int, cell: str) -> str:
+    """The column name of a header cell; a unit in brackets is accepted if it is the column's SI unit."""
+    cell = cell.strip()
+    match = _HEADER_UNIT.match(cell)
+    if match is None or match["name"].strip() not in _SI_UNITS:
+        return cell
+    name, unit = match["name"].strip(), (match["u1"] if match["u1"] is not None else match["u2"]).strip()
+    if _unit_key(unit) != _unit_key(_SI_UNITS[name]):
+        raise LogFormatError(f"{path}:{lineno}: column {cell!r}: unit {unit!r}, expected {_SI_UNITS[name]}; "
+                             f"convert the column to SI units")
+    return name
+
+
 def _check_time(path: Path, t: np.ndarray, lines: np.ndarray) -> None:
-    dt = np.diff(t)
+    with np.errstate(over="ignore"):
+        dt = np.diff(t)
+    huge = np.flatnonzero(~np.isfinite(dt))
+    if huge.size:
+        i = huge[0] + 1
+        raise LogFormatError(f"{path}:{lines[i]}: column 't' jumps from {t[i - 1]:.6g} to {t[i]:.6g}; "
+                             f"expected a time in seconds")
     bad = np.flatnonzero(dt <= 0)
     if bad.size:
         i = bad[0] + 1
@@ -202,7 +238,8 @@ def _check_quarter_car(path: Path, cols: dict[str, np.ndarray], lines: np.ndarra
 def _check_rate(path: Path, name: str, x: np.ndarray, t: np.ndarray, lines: np.ndarray, limit: float,
                 hint: str) -> None:
     """The median rate |dx/dt| must be plausible; a median, so a free body may drift far over a long log."""
-    rates = np.abs(np.diff(x)) / np.diff(t)
+    with np.errstate(over="ignore"):  # a jump too large for a float is an infinite rate, flagged below
+        rates = np.abs(np.diff(x)) / np.diff(t)
     rate = float(np.median(rates))
     if rate > limit:
         first = int(np.flatnonzero(rates > limit)[0]) + 1

@@ -24,9 +24,11 @@ def test_demo_writes_table_json_and_png(tmp_path, capsys):
     assert "rule-abs" in printed and "limit [m]" in printed
 
 
-def test_demo_rejects_unknown_road(tmp_path):
-    with pytest.raises(SystemExit, match="valid"):
-        main(["demo", "--roads", "gravel", "--out", str(tmp_path)])
+def test_demo_rejects_unknown_road(tmp_path, capsys):
+    assert main(["demo", "--roads", "gravel", "--out", str(tmp_path / "demo")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "unknown road 'gravel'; valid: dry, wet" in err
+    assert not (tmp_path / "demo").exists()
 
 
 def test_bench_env_writes_medians_and_ratio(tmp_path):

@@ -31,14 +31,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args) -> int:
     """Evaluate, print a table, optionally write JSON."""
+    import gymnasium as gym
+
+    import fricenv  # noqa: F401  (registers the envs)
     from agents.excitation import evaluate
+    from fricenv.errors import InvalidInputError, user_input
     from fricenv.utils import write_json
 
     if args.episodes < 1:
-        raise SystemExit("fricenv excitation: --episodes must be >= 1")
-    rows = evaluate(args.policies, episodes=args.episodes, seed=args.seed,
-                    env_kwargs={"calibration": args.calibration, "noise_scale": args.noise_scale},
-                    progress_bar=True)
+        raise InvalidInputError(f"--episodes must be >= 1, got {args.episodes}")
+    env_kwargs = {"calibration": args.calibration, "noise_scale": args.noise_scale}
+    with user_input("--noise-scale"):
+        gym.make("fricenv/PayloadExcitation-v0", **env_kwargs).close()
+    rows = evaluate(args.policies, episodes=args.episodes, seed=args.seed, env_kwargs=env_kwargs, progress_bar=True)
     print(f"PayloadExcitation-v0, calibration={args.calibration}, noise x{args.noise_scale:g}, "
           f"{args.episodes} episode(s) per policy (medians; effort = mean a^2)")
     print(f"{'policy':<10} {'t_below_1e-2':>13} {'E_end':>10} {'effort':>8} {'return':>8} {'left ws':>8}")

@@ -27,6 +27,7 @@ from collections.abc import Callable
 from fricenv import bench_targets
 from fricenv.bench_targets import BRAKING_ENV, REFERENCE_ENV
 from fricenv.bench_targets import env_steps_per_s as _env_steps_per_s
+from fricenv.errors import InvalidInputError
 
 DEFAULT_REPEATS = 5
 DEFAULT_STEPS = 5000
@@ -72,10 +73,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args) -> int:
     from fricenv.bench_targets import ratios
-    from fricenv.utils import write_json
+    from fricenv.utils import progress, write_json
 
     if args.repeats < 1 or args.steps < 1:
-        raise SystemExit("fricenv bench: --repeats and --steps must be >= 1")
+        raise InvalidInputError(f"--repeats and --steps must be >= 1, got {args.repeats} and {args.steps}")
     if args.target == "all":
         # "env" measures the reference
         targets = [name for name in TARGETS if name != "pendulum" and name not in bench_targets.SLOW_TARGETS]
@@ -84,7 +85,7 @@ def run(args) -> int:
     else:
         targets = [args.target]
     figures: dict = {}
-    for name in targets:
+    for name in progress(targets, desc="bench targets"):
         figures.update(TARGETS[name](args))
     figures.update(ratios(figures))
     for key, value in figures.get("ratio_to_pendulum", {}).items():

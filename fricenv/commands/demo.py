@@ -10,6 +10,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from fricenv.errors import InvalidInputError, user_input
+
 DEFAULT_ROADS = ("dry", "wet", "snow", "ice")
 DEFAULT_V0 = 20.0  # [m/s]
 PLOT_FILE = "demo_{road}.png"
@@ -28,20 +30,23 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run_demo(roads, v0: float, seed: int) -> tuple[list[dict], dict]:
     """Every controller on every road: (result rows, {road: {controller: Rollout}})."""
     from agents.controllers import CONTROLLERS, make_controller, rollout
+    from fricenv import progress
     from fricenv.envs.braking import BrakingEnv
 
     results, traces = [], {}
-    for road in roads:
-        env = BrakingEnv(road=road, v0=v0, observation="oracle")
-        traces[road] = {}
-        for name in CONTROLLERS:
-            ro = rollout(env, make_controller(name, env), seed=seed)
-            traces[road][name] = ro
-            info = ro.info
-            results.append({"road": road, "controller": name, "distance_m": info["stopping_distance"],
-                            "limit_m": info["limit_distance"], "ratio": info["ratio"],
-                            "locked": info["lock_seen"]})
-        env.close()
+    with progress.task("demo episodes", total=len(roads) * len(CONTROLLERS)) as advance:
+        for road in roads:
+            env = BrakingEnv(road=road, v0=v0, observation="oracle")
+            traces[road] = {}
+            for name in CONTROLLERS:
+                ro = rollout(env, make_controller(name, env), seed=seed)
+                traces[road][name] = ro
+                info = ro.info
+                results.append({"road": road, "controller": name, "distance_m": info["stopping_distance"],
+                                "limit_m": info["limit_distance"], "ratio": info["ratio"],
+                                "locked": info["lock_seen"]})
+                advance()
+            env.close()
     return results, traces
 
 
@@ -49,6 +54,8 @@ def plot_traces(traces: dict, road: str, path: Path) -> None:
     """Speed, slip and torque against time for every controller on ``road``, saved as a PNG."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
+
+    from fricenv.utils import save_figure
 
     fig = Figure(figsize=(9, 8), dpi=100)
     FigureCanvasAgg(fig)
@@ -66,8 +73,7 @@ def plot_traces(traces: dict, road: str, path: Path) -> None:
     ax_t.set_xlabel("time [s]")
     fig.suptitle(f"Braking from {traces[next(iter(traces))].v[0]:.0f} m/s on {road}")
     fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path)
+    save_figure(fig, path)
 
 
 def format_table(results: list[dict]) -> str:
@@ -83,15 +89,23 @@ def format_table(results: list[dict]) -> str:
     return "\n".join(lines)
 
 
-def run(args) -> int:
+def check_options(args) -> None:
+    """Reject unknown roads and an impossible --v0 before any episode runs."""
+    from fricenv.envs.braking import BrakingEnv
     from fricenv.envs.braking_core import valid_road_names
+
+    valid = [r for r in valid_road_names() if not r.startswith("random")]
+    for road in [*args.roads, args.plot_road]:
+        if road not in valid:
+            raise InvalidInputError(f"unknown road {road!r}; valid: {', '.join(valid)}")
+    with user_input("--v0"):
+        BrakingEnv(road=args.roads[0], v0=args.v0, observation="oracle").close()
+
+
+def run(args) -> int:
     from fricenv.utils import write_json
 
-    valid = valid_road_names()
-    for road in [*args.roads, args.plot_road]:
-        if road not in valid or road.startswith("random"):
-            raise SystemExit(f"fricenv demo: unknown road {road!r}; valid: "
-                             f"{', '.join(r for r in valid if not r.startswith('random'))}")
+    check_options(args)
     roads = list(dict.fromkeys([*args.roads, args.plot_road]))
     results, traces = run_demo(roads, args.v0, args.seed)
     shown = [r for r in results if r["road"] in args.roads]

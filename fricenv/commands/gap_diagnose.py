@@ -11,7 +11,11 @@ optionally m, I_G, rho_x, rho_y.
 from __future__ import annotations
 
 import argparse
-import sys
+
+from fricenv.errors import InvalidInputError
+from fricenv.utils import read_json_object
+
+PLANTS = ("quarter-car", "payload")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -27,26 +31,40 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="comma-separated candidate effects to try (default: the whole library)")
 
 
+def check_options(args: argparse.Namespace) -> None:
+    """Reject option values the diagnosis cannot use, before it starts (the paths are checked by fricenv.cli)."""
+    if args.plant not in PLANTS:
+        raise InvalidInputError(f"plant {args.plant!r} is not supported by gap diagnose; "
+                                f"valid plants: {', '.join(PLANTS)}")
+    if args.jobs is not None and args.jobs < 1:
+        raise InvalidInputError(f"--jobs must be >= 1, got {args.jobs}")
+    if args.params is not None:  # its syntax now, before the diagnosis' imports; its keys when the plant loads it
+        read_json_object(args.params, f"{args.plant} parameters")
+
+
+def _candidates(args: argparse.Namespace, valid: tuple[str, ...]) -> tuple[str, ...] | None:
+    """The --candidates names (None: the whole library), each checked against ``valid``."""
+    if not args.candidates:
+        return None
+    names = tuple(c.strip() for c in args.candidates.split(",") if c.strip())
+    unknown = [n for n in names if n not in valid]
+    if unknown or not names:
+        raise InvalidInputError(f"--candidates {args.candidates!r}: unknown candidate effect(s) "
+                                f"{', '.join(unknown) or '(none named)'}; valid effects: {', '.join(valid)}")
+    return names
+
+
 def run(args: argparse.Namespace) -> int:
     """Read, diagnose, report."""
-    from fricenv.gap.diagnose import DiagnoseConfig, diagnose_file
-    from fricenv.gap.report import summary_line, write_report
-    from fricenv.logs import LogFormatError
-
+    check_options(args)
     if args.plant == "payload":
         return _run_payload(args)
-    if args.plant != "quarter-car":
-        print(f"error: plant {args.plant!r} is not supported by gap diagnose; valid plants: quarter-car, payload",
-              file=sys.stderr)
-        return 2
-    cfg = DiagnoseConfig(jobs=args.jobs)
-    if args.candidates:
-        cfg = DiagnoseConfig(jobs=args.jobs, candidates=tuple(c.strip() for c in args.candidates.split(",")))
-    try:
-        dg = diagnose_file(args.log, args.plant, args.params, cfg)
-    except (LogFormatError, ValueError, TypeError) as exc:  # bad log, params file or option
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+    from fricenv.gap.diagnose import DiagnoseConfig, diagnose_file
+    from fricenv.gap.report import summary_line, write_report
+
+    names = _candidates(args, DiagnoseConfig().candidates)
+    cfg = DiagnoseConfig(jobs=args.jobs) if names is None else DiagnoseConfig(jobs=args.jobs, candidates=names)
+    dg = diagnose_file(args.log, args.plant, args.params, cfg)  # reports its phases through fricenv.progress
     return _report(args, dg, write_report(dg, args.out, args.plant, plots=not args.no_plots), summary_line(dg))
 
 
@@ -68,13 +86,8 @@ def _run_payload(args: argparse.Namespace) -> int:
     linear least squares and 1-D searches, about a second in total)."""
     from fricenv.gap.payload_diagnose import PayloadDiagnoseConfig, diagnose_payload_file, summary_line
     from fricenv.gap.payload_report import write_payload_report
-    from fricenv.logs import LogFormatError
 
-    try:
-        cfg = PayloadDiagnoseConfig() if not args.candidates else PayloadDiagnoseConfig(
-            candidates=tuple(c.strip() for c in args.candidates.split(",")))
-        dg = diagnose_payload_file(args.log, args.params, cfg)
-    except (LogFormatError, ValueError, TypeError) as exc:  # bad log, params file or option
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+    names = _candidates(args, PayloadDiagnoseConfig().candidates)
+    cfg = PayloadDiagnoseConfig() if names is None else PayloadDiagnoseConfig(candidates=names)
+    dg = diagnose_payload_file(args.log, args.params, cfg)
     return _report(args, dg, write_payload_report(dg, args.out, plots=not args.no_plots), summary_line(dg))

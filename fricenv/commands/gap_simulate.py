@@ -16,6 +16,13 @@ fricenv gap simulate --plant payload --effect vision_delay --param delay=0.03 --
 from __future__ import annotations
 
 import argparse
+import math
+
+from fricenv.errors import InvalidInputError, user_input
+
+# --out is the log file (not a directory); checked with the other paths by fricenv.cli before the simulation.
+PATH_OPTIONS = {"out": "output file"}
+MAX_V0 = 100.0  # [m/s], the log reader's plausibility limit of v
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -47,28 +54,29 @@ def parse_effects(names: list[str], params: list[str]) -> list:
     names = [n for n in names if n != "none"]
     for n in names:
         if n not in EFFECT_PARAMS:
-            raise ValueError(f"unknown effect {n!r}; valid effects: {', '.join(EFFECT_PARAMS)}")
+            raise InvalidInputError(f"unknown effect {n!r}; valid effects: {', '.join(EFFECT_PARAMS)}")
     values: dict[str, dict[str, float]] = {n: {} for n in names}
     for item in params:
         if "=" not in item:
-            raise ValueError(f"--param {item!r}: expected NAME=VALUE")
+            raise InvalidInputError(f"--param {item!r}: expected NAME=VALUE")
         key, value = item.split("=", 1)
         try:
             val = float(value)
         except ValueError:
-            raise ValueError(f"--param {item!r}: {value!r} is not a number") from None
+            raise InvalidInputError(f"--param {item!r}: {value!r} is not a number") from None
         if "." in key:
             eff, pname = key.split(".", 1)
             if eff not in values:
-                raise ValueError(f"--param {item!r}: effect {eff!r} is not among --effect {', '.join(names)}")
+                raise InvalidInputError(f"--param {item!r}: effect {eff!r} is not among --effect {', '.join(names)}")
             values[eff][pname] = val
             continue
         owners = [n for n in names if key in EFFECT_PARAMS[n]]
         if not owners:
             valid = ", ".join(f"{p} ({n})" for n in names for p in EFFECT_PARAMS[n]) or "none (no --effect given)"
-            raise ValueError(f"--param {item!r}: unknown parameter {key!r}; valid parameters: {valid}")
+            raise InvalidInputError(f"--param {item!r}: unknown parameter {key!r}; valid parameters: {valid}")
         values[owners[0]][key] = val
-    return [make_effect(n, **values[n]) for n in names]
+    with user_input("--param"):
+        return [make_effect(n, **values[n]) for n in names]
 
 
 def parse_payload_effects(names: list[str], params: list[str]) -> list:
@@ -79,11 +87,12 @@ def parse_payload_effects(names: list[str], params: list[str]) -> list:
     names = [n for n in names if n != "none"]
     for n in names:
         if n not in PAYLOAD_EFFECT_PARAMS:
-            raise ValueError(f"unknown payload effect {n!r}; valid effects: {', '.join(PAYLOAD_EFFECT_PARAMS)}")
+            raise InvalidInputError(f"unknown payload effect {n!r}; "
+                                    f"valid effects: {', '.join(PAYLOAD_EFFECT_PARAMS)}")
     values: dict[str, dict] = {n: {} for n in names}
     for item in params:
         if "=" not in item:
-            raise ValueError(f"--param {item!r}: expected NAME=VALUE")
+            raise InvalidInputError(f"--param {item!r}: expected NAME=VALUE")
         key, value = item.split("=", 1)
         if "." in key:
             eff, key = key.split(".", 1)
@@ -92,20 +101,23 @@ def parse_payload_effects(names: list[str], params: list[str]) -> list:
             owners = [n for n in names if key in PAYLOAD_EFFECT_PARAMS[n]]
         if not owners or key not in PAYLOAD_EFFECT_PARAMS[owners[0]]:
             valid = ", ".join(f"{p} ({n})" for n in names for p in PAYLOAD_EFFECT_PARAMS[n]) or "none (no --effect)"
-            raise ValueError(f"--param {item!r}: unknown parameter {key!r}; valid parameters: {valid}")
+            raise InvalidInputError(f"--param {item!r}: unknown parameter {key!r}; valid parameters: {valid}")
         try:
             nums = [float(v) for v in value.split(",")]
         except ValueError:
-            raise ValueError(f"--param {item!r}: {value!r} is not a number (S: 9 comma-separated numbers)") from None
+            raise InvalidInputError(f"--param {item!r}: {value!r} is not a number "
+                                    "(S: 9 comma-separated numbers)") from None
         if key == "S":
             if len(nums) != 9:
-                raise ValueError(f"--param {item!r}: S needs 9 comma-separated values (row-major), got {len(nums)}")
+                raise InvalidInputError(f"--param {item!r}: S needs 9 comma-separated values (row-major), "
+                                        f"got {len(nums)}")
             values[owners[0]][key] = [nums[0:3], nums[3:6], nums[6:9]]
         elif len(nums) != 1:
-            raise ValueError(f"--param {item!r}: expected one number")
+            raise InvalidInputError(f"--param {item!r}: expected one number")
         else:
             values[owners[0]][key] = nums[0]
-    return [make_payload_effect(n, **values[n]) for n in names]
+    with user_input("--param"):
+        return [make_payload_effect(n, **values[n]) for n in names]
 
 
 def payload_wrench(kind: str, rng):
@@ -131,8 +143,11 @@ def run_payload(args: argparse.Namespace) -> int:
 
     effects = parse_payload_effects(args.effect, args.param)
     dt = 1e-3 if args.dt is None else float(args.dt)
+    if not (math.isfinite(dt) and 0 < dt < args.duration):
+        raise InvalidInputError(f"--dt must be > 0 and below --duration, got {args.dt}")
     rng = as_generator(args.seed)
-    wrench = payload_wrench(args.wrench, rng)
+    with user_input("--wrench"):
+        wrench = payload_wrench(args.wrench, rng)
     log, _ = simulate_payload_with_effects(effects, args.duration, dt, wrench=wrench, rng=rng)
     desc = "; ".join(f"{e.name}({', '.join(f'{k}={getattr(e, k)}' for k in _names(e))})"
                      for e in effects) or "no effect"
@@ -142,7 +157,8 @@ def run_payload(args: argparse.Namespace) -> int:
         read_log(args.out, "payload")
     except LogFormatError as exc:  # the free payload drifts: a long log leaves the reader's plausible range
         os.unlink(args.out)
-        raise ValueError(f"the simulated log is not a valid payload log ({exc}); use a shorter --duration") from None
+        raise InvalidInputError(f"the simulated log is not a valid payload log ({exc}); "
+                                "use a shorter --duration") from None
     print(f"wrote {args.out}: {len(log)} samples ({len(log) * dt:.2f} s), payload, wrench {args.wrench}, {desc}")
     if args.json:
         write_json(args.json, {"log": args.out, "plant": "payload", "samples": len(log), "dt": dt,
@@ -153,14 +169,29 @@ def run_payload(args: argparse.Namespace) -> int:
     return 0
 
 
+def check_options(args: argparse.Namespace) -> None:
+    """Reject option values the simulation cannot use, before it starts (both plants)."""
+    from fricenv.gap.simulate import DRIVERS
+
+    if not (math.isfinite(args.duration) and args.duration > 0):
+        raise InvalidInputError(f"--duration must be a number > 0 [s], got {args.duration}")
+    if args.plant != "quarter-car":
+        return
+    if args.driver not in DRIVERS:
+        raise InvalidInputError(f"unknown driver {args.driver!r}; valid drivers: {', '.join(DRIVERS)}")
+    if args.v0 is not None and not (math.isfinite(args.v0) and 0 < args.v0 <= MAX_V0):
+        raise InvalidInputError(f"--v0 must be a speed in (0, {MAX_V0:g}] m/s, got {args.v0}")
+
+
 def run(args: argparse.Namespace) -> int:
     """Simulate and write the log."""
+    check_options(args)
     if args.plant == "payload":
         return run_payload(args)
     if args.plant != "quarter-car":
-        raise ValueError(f"unknown plant {args.plant!r}; valid plants: quarter-car, payload")
+        raise InvalidInputError(f"unknown plant {args.plant!r}; valid plants: quarter-car, payload")
     if args.dt is not None or args.wrench != "paper":
-        raise ValueError("--dt and --wrench apply to --plant payload only")
+        raise InvalidInputError("--dt and --wrench apply to --plant payload only")
     from fricenv.effects.quarter_car import effect_params
     from fricenv.gap.simulate import write_simulated_log
     from fricenv.plants.tire import get_road

@@ -12,6 +12,10 @@ from __future__ import annotations
 
 import argparse
 
+from fricenv.errors import InvalidInputError
+
+PLANTS = ("quarter-car", "payload")
+
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of ``fricenv gap validate``."""
@@ -32,7 +36,13 @@ def run(args: argparse.Namespace) -> int:
     from fricenv.utils import write_json
 
     if args.n < 1:
-        raise ValueError(f"--n must be >= 1, got {args.n}")
+        raise InvalidInputError(f"--n must be >= 1, got {args.n}")
+    if args.jobs < 1:
+        raise InvalidInputError(f"--jobs must be >= 1, got {args.jobs}")
+    if not 0.0 <= args.required_only_share <= 1.0:
+        raise InvalidInputError(f"--required-only-share must be in [0, 1], got {args.required_only_share}")
+    if args.plant not in PLANTS:
+        raise InvalidInputError(f"unknown plant {args.plant!r}; valid plants: {', '.join(PLANTS)}")
     if args.plant == "payload":
         from fricenv.gap.payload_validate import format_payload_summary, validate_payload
 
@@ -42,9 +52,7 @@ def run(args: argparse.Namespace) -> int:
         if args.json:
             write_json(args.json, summary)
         return 0
-    if args.plant != "quarter-car":
-        raise ValueError(f"unknown plant {args.plant!r}; valid plants: quarter-car, payload")
-    summary = validate(args.n, args.seed, jobs=max(args.jobs, 1), drop_optional_share=args.required_only_share)
+    summary = validate(args.n, args.seed, jobs=args.jobs, drop_optional_share=args.required_only_share)
     print(format_summary(summary))
     print(f"wall time {summary['wall_seconds']:.0f} s")
     if args.json:

@@ -21,6 +21,8 @@ import time
 
 import numpy as np
 
+from fricenv.errors import InvalidInputError
+
 E_THRESHOLD = 1e-2  # "time until E stays below" threshold
 PAPER_E_100S = 9.1106e-4  # the paper's E at 100 s
 GRID_SAMPLES = 50  # E(t) is recorded every GRID_SAMPLES samples (50 ms at 1 ms)
@@ -112,22 +114,10 @@ def _median(values):
     return m if np.isfinite(m) else None
 
 
-def run(args) -> int:
-    """Run the three settings (and the sweep), print, plot and write JSON."""
-    from pathlib import Path
+def _run_estimators(duration: float, seeds: list[int]) -> tuple[dict, dict]:
+    """Every estimator on every setting and seed: ({(setting, name, seed): (t, E, schedule)}, wall times [s])."""
+    from fricenv.utils import progress
 
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from fricenv.utils import progress, write_json
-
-    if args.duration <= 0 or args.seeds < 1:
-        raise SystemExit("fricenv paper fms: --duration must be > 0 and --seeds >= 1")
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    seeds = [args.seed + k for k in range(args.seeds)]
     curves: dict = {}
     runs = [(s, e, seed) for s in SETTINGS for seed in seeds for e in ESTIMATORS]
     timing = {}
@@ -137,29 +127,35 @@ def run(args) -> int:
         if key not in traj_cache:
             traj_cache.clear()
             t0 = time.perf_counter()
-            traj_cache[key] = _trajectory(setting, args.duration, seed)
+            traj_cache[key] = _trajectory(setting, duration, seed)
             timing[("plant",) + key] = time.perf_counter() - t0
         traj, schedule = traj_cache[key]
         t, E, wall = _error_curve(_estimator(name, setting, seed), traj)
         timing[(name,) + key] = wall
         curves[(setting, name, seed)] = (t, E, schedule)
+    return curves, timing
 
+
+def _seed_row(t: np.ndarray, E: np.ndarray, schedule) -> dict:
+    """The figures of one E(t) curve (and, with a schedule, the recovery after each change)."""
+    row = {"E_20s": _at(t, E, REPORT_TIMES[0]), "E_100s": _at(t, E, REPORT_TIMES[1] - DT),
+           "t_below_1e-2": _stays_below(t, E)}
+    if schedule is not None:
+        changes = (0.0,) + schedule.change_times
+        ends = schedule.change_times + (float(t[-1]),)
+        row["t_recover"] = [_stays_below(t, E, a, b - DT) for a, b in zip(changes, ends)]
+        row["E_before_change"] = [_at(t, E, b - DT) for b in ends]
+    return row
+
+
+def _summarize(curves: dict, seeds: list[int]) -> list[dict]:
+    """Medians over the seeds per (setting, estimator), printed as a table; returns the rows."""
     results = []
     print(f"E = ||I - S_hat S^-1||_2 (paper: E = {PAPER_E_100S:.4e} at 100 s); median over {len(seeds)} seed(s)")
     print(f"{'estimator':<20} {'setting':<14} {'E_20s':>10} {'E_100s':>10} {'t_below_1e-2':>13}  notes")
     for setting in SETTINGS:
         for name in ESTIMATORS:
-            rows = []
-            for seed in seeds:
-                t, E, schedule = curves[(setting, name, seed)]
-                row = {"E_20s": _at(t, E, REPORT_TIMES[0]), "E_100s": _at(t, E, REPORT_TIMES[1] - DT),
-                       "t_below_1e-2": _stays_below(t, E)}
-                if schedule is not None:
-                    changes = (0.0,) + schedule.change_times
-                    ends = schedule.change_times + (float(t[-1]),)
-                    row["t_recover"] = [_stays_below(t, E, a, b - DT) for a, b in zip(changes, ends)]
-                    row["E_before_change"] = [_at(t, E, b - DT) for b in ends]
-                rows.append(row)
+            rows = [_seed_row(*curves[(setting, name, seed)]) for seed in seeds]
             agg = {"estimator": name, "setting": setting}
             for k in ("E_20s", "E_100s", "t_below_1e-2"):
                 agg[k] = _median([r[k] for r in rows])
@@ -175,7 +171,50 @@ def run(args) -> int:
             tb = agg["t_below_1e-2"]
             print(f"{name:<20} {setting:<14} {_fmt(agg['E_20s']):>10} {_fmt(agg['E_100s']):>10} "
                   f"{'never' if tb is None else f'{tb:.1f} s':>13}  {note}")
+    return results
 
+
+def _plot_settings(curves: dict, seed: int, out, plt) -> None:
+    """One PNG of E(t) per setting, all estimators, for ``seed``."""
+    from fricenv.utils import save_figure
+
+    for setting in SETTINGS:
+        fig, ax = plt.subplots(figsize=(8, 4.5))
+        for name in ESTIMATORS:
+            t, E, schedule = curves[(setting, name, seed)]
+            ax.semilogy(t, np.maximum(E, 1e-16), label=name)
+        ax.axhline(E_THRESHOLD, color="grey", ls="--", lw=0.8, label="1e-2")
+        ax.axhline(PAPER_E_100S, color="k", ls=":", lw=0.8, label="paper, 100 s")
+        if schedule is not None:
+            for tc in schedule.change_times:
+                ax.axvline(tc, color="r", lw=0.6)
+        ax.set_xlabel("t [s]")
+        ax.set_ylabel("E = ||I - S_hat S^-1||_2")
+        ax.set_title(f"FMS calibration, {setting} (seed {seed})")
+        ax.legend(loc="upper right", fontsize=8)
+        fig.tight_layout()
+        save_figure(fig, out / f"E_{setting}.png", dpi=110)
+        plt.close(fig)
+
+
+def run(args) -> int:
+    """Run the three settings (and the sweep), print, plot and write JSON."""
+    from pathlib import Path
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from fricenv.utils import write_json
+
+    if args.duration <= 0 or args.seeds < 1:
+        raise InvalidInputError(f"--duration must be > 0 and --seeds >= 1, got {args.duration} and {args.seeds}")
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    seeds = [args.seed + k for k in range(args.seeds)]
+    curves, timing = _run_estimators(args.duration, seeds)
+    results = _summarize(curves, seeds)
     print("observer-paper = eq. (8) as printed; observer-corrected = translational update times 1/m. Noise-free, "
           "the observer stops at an O(dt) floor: its Euler step against the accurate plant (see the sweep's "
           "Euler-plant rows and estimators/fms_observer.py).")
@@ -185,25 +224,7 @@ def run(args) -> int:
     cost = scale * (timing[("plant", "stated-noise", seed0)] + timing[("observer-paper", "stated-noise", seed0)]
                     + timing[("rls", "stated-noise", seed0)])
     print(f"wall time for 100 s of simulation with the observer and RLS (stated noise): {cost:.2f} s")
-
-    for setting in SETTINGS:
-        fig, ax = plt.subplots(figsize=(8, 4.5))
-        for name in ESTIMATORS:
-            t, E, schedule = curves[(setting, name, seed0)]
-            ax.semilogy(t, np.maximum(E, 1e-16), label=name)
-        ax.axhline(E_THRESHOLD, color="grey", ls="--", lw=0.8, label="1e-2")
-        ax.axhline(PAPER_E_100S, color="k", ls=":", lw=0.8, label="paper, 100 s")
-        if schedule is not None:
-            for tc in schedule.change_times:
-                ax.axvline(tc, color="r", lw=0.6)
-        ax.set_xlabel("t [s]")
-        ax.set_ylabel("E = ||I - S_hat S^-1||_2")
-        ax.set_title(f"FMS calibration, {setting} (seed {seed0})")
-        ax.legend(loc="upper right", fontsize=8)
-        fig.tight_layout()
-        fig.savefig(out / f"E_{setting}.png", dpi=110)
-        plt.close(fig)
-
+    _plot_settings(curves, seed0, out, plt)
     payload = {"results": results, "wall_time_100s_both_estimators_s": cost, "seeds": seeds,
                "duration_s": args.duration,
                "noise": "sensor std 5 % of each wrench amplitude (1.5, 1.5, 2.6); vision std 0.1 deg, 0.1 mm"}
@@ -219,7 +240,7 @@ def run(args) -> int:
 def _sweep(args, seeds, out, plt) -> list[dict]:
     """E at the end of the run for the paper-reading observer, noise scaled by fixed factors."""
     from fricenv.plants.payload import calibration_error
-    from fricenv.utils import progress
+    from fricenv.utils import progress, save_figure
 
     rows = []
     jobs = [(integ, sc) for integ in ("rk4", "euler") for sc in SWEEP_SCALES]
@@ -250,6 +271,6 @@ def _sweep(args, seeds, out, plt) -> list[dict]:
     ax.set_ylabel(f"E at {args.duration:g} s")
     ax.legend(fontsize=8)
     fig.tight_layout()
-    fig.savefig(out / "observer_noise_sweep.png", dpi=110)
+    save_figure(fig, out / "observer_noise_sweep.png", dpi=110)
     plt.close(fig)
     return rows
