@@ -6,6 +6,7 @@ import pytest
 from estimators.base import EstimatorConfigError, Health, run
 from estimators.fms_observer import FmsObserver
 from estimators.fms_rls import FmsRLS
+from estimators.scenarios import payload_log
 from fricenv.plants import payload as pl
 
 S = pl.PAPER_S
@@ -129,7 +130,7 @@ def test_rls_config_errors():
 
 def test_run_over_a_payload_log():
     tr = pl.simulate(2.0, noise=pl.NO_NOISE)
-    out = run(FmsRLS(), pl.to_log(tr))
+    out = run(FmsRLS(), payload_log(tr))
     assert out["S"].shape == (len(tr.t), 3, 3)
     assert pl.calibration_error(out["S"][-1], S) < 1e-2
 
