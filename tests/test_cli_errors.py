@@ -184,9 +184,6 @@ def test_log_format_error_is_in_the_family(tmp_path):
     assert isinstance(info.value, InvalidInputError) and isinstance(info.value, ValueError)
 
 
-@pytest.mark.xfail(reason="needs fricenv/gap/report.py (gap engineer): write_report must pass plots to the markdown "
-                          "writer, report_markdown(dg, report, plots=plots), which leaves out the image links",
-                   strict=False)
 def test_no_plots_report_has_no_image_links(tmp_path, small_log):
     """--no-plots: no PNG written and report.md links none (stale plots of an earlier run included)."""
     out = tmp_path / "rep"

@@ -92,16 +92,9 @@ def test_in_shape_finite_actions_of_any_numeric_dtype_are_clipped_not_rejected(e
         env.reset()
 
 
-# ENV FIX NEEDED (fricenv/envs/braking.py BrakingEnv.step, fricenv/envs/payload.py PayloadExcitationEnv.step):
-# np.asarray(action) of a ragged list raises numpy's own ValueError ("setting an array element with a sequence ..."),
-# which does not say it is about the action. Fix: wrap the conversion, see the report of the CLI engineer.
-RAGGED = pytest.mark.xfail(reason="ENV FIX NEEDED: a ragged action raises numpy's message, not one about the action",
-                           raises=AssertionError, strict=False)
-
-
 @pytest.mark.parametrize("env_id", ENV_IDS)
-@pytest.mark.parametrize("action", [pytest.param([[0.1], [0.2, 0.3]], marks=RAGGED, id="ragged"),
-                                    pytest.param([0.1, [0.2]], marks=RAGGED, id="nested-mixed"),
+@pytest.mark.parametrize("action", [pytest.param([[0.1], [0.2, 0.3]], id="ragged"),
+                                    pytest.param([0.1, [0.2]], id="nested-mixed"),
                                     pytest.param(np.array([1.0], dtype=object), id="object-array")])
 def test_ragged_and_object_actions_are_rejected_with_a_message_about_the_action(env_id, action):
     env = _env(env_id)

@@ -3,7 +3,6 @@
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
 from typing import Any, ClassVar
 
@@ -12,6 +11,7 @@ import numpy as np
 from gymnasium import spaces
 
 from fricenv.envs import braking_core as core
+from fricenv.envs.actions import check_action
 from fricenv.envs.effect_plant import effect_plant_or_none
 from fricenv.envs.rendering import EpisodeHistory
 from fricenv.plants import quarter_car as qc
@@ -213,13 +213,7 @@ class BrakingEnv(gym.Env):
     def step(self, action):
         if self.sim.scenarios[0] is None:
             raise gym.error.ResetNeeded("call reset() before step()")
-        a = np.asarray(action)
-        if a.dtype.kind not in "fiu":
-            raise ValueError(f"action must be numeric, got dtype {a.dtype}")
-        if a.shape != (1,):
-            raise ValueError(f"action must have shape (1,), got shape {a.shape}")
-        if not math.isfinite(a.item(0)):
-            raise ValueError(f"action must be finite, got {a[0]!r} (NaN or inf)")
+        a = check_action(action, (1,))
         obs, reward, terminated, truncated = self.sim.step(a)
         term, trunc = terminated.item(0), truncated.item(0)
         if self.render_mode is not None:

@@ -13,6 +13,7 @@ import numpy as np
 from gymnasium import spaces
 
 from estimators.fms_rls import FmsRLS
+from fricenv.envs.actions import check_action
 from fricenv.envs.braking_core import ObsField, decode_observation
 from fricenv.plants import payload as pl
 
@@ -221,13 +222,7 @@ class PayloadExcitationEnv(gym.Env):
     def step(self, action):
         if self._state is None:
             raise gym.error.ResetNeeded("call reset() before step()")
-        a = np.asarray(action)
-        if a.dtype.kind not in "fiu":
-            raise ValueError(f"action must be numeric, got dtype {a.dtype}")
-        if a.shape != (3,):
-            raise ValueError(f"action must have shape (3,) (M, f_x, f_y normalised), got shape {a.shape}")
-        if not np.all(np.isfinite(a)):
-            raise ValueError(f"action must be finite, got {a.tolist()!r} (NaN or inf)")
+        a = check_action(action, (3,), "(M, f_x, f_y normalised)")
         a = np.clip(a.astype(float), -1.0, 1.0)
         w = a * self.limits
         rng = self.np_random
