@@ -120,7 +120,7 @@ def bench_vector(args: argparse.Namespace) -> dict[str, Any]:
         print(f"vector: {n:5d} envs {medians[str(n)]:,.0f} env-steps/s "
               f"({cpu_medians[str(n)]:,.0f} per CPU second; median of {args.repeats} x {batched} batched steps)")
     # Not the default: 2 physics substeps per control step (physics_dt = 5 ms), within 0.1 % of the Radau
-    # stopping distances (tests/test_braking_vector.py, slow), for users who trade accuracy margin for speed.
+    # stopping distances (tests/envs/test_braking_vector.py, slow), for users who trade accuracy margin for speed.
     n = VECTOR_SIZES[-1]
     batched = max(MIN_VECTOR_STEPS, args.steps // n)
     coarse = [_vector_env_steps_per_s(n, batched, seed=args.seed + k, physics_dt=COARSE_PHYSICS_DT)

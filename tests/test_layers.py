@@ -80,3 +80,39 @@ def test_wrong_way_import_breaks_a_contract(tmp_path, module, line, contract, ch
     names = {c["id"]: c["name"] for c in _contracts()}  # (an indirect chain may break another contract too)
     assert f"{names[contract]} BROKEN" in out, res.stdout
     assert chain in out, res.stdout
+
+
+# Test folders that must stay apart from the RL side (DESIGN.md: estimators are tested on their own), and what
+# they may not import, directly or through tests.* helpers.
+ISOLATED_TESTS = {"estimators": ("agents", "fricenv.envs", "stable_baselines3", "gymnasium"),
+                  "plants": ("agents", "fricenv.envs", "stable_baselines3", "gymnasium")}
+
+
+def _imports(path: Path) -> set[str]:
+    import ast
+
+    names = set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Import):
+            names.update(a.name for a in node.names)
+        elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+            names.add(node.module)
+    return names
+
+
+def _banned(names: set[str], banned: tuple[str, ...]) -> list[str]:
+    return sorted(n for n in names if any(n == b or n.startswith(b + ".") for b in banned))
+
+
+@pytest.mark.parametrize("folder", sorted(ISOLATED_TESTS))
+def test_estimator_and_plant_tests_never_touch_the_rl_side(folder):
+    files = sorted((ROOT / "tests" / folder).glob("*.py"))
+    assert len(files) >= 3  # the folder exists and holds its tests
+    offending = {f.name: _banned(_imports(f), ISOLATED_TESTS[folder]) for f in files}
+    assert {k: v for k, v in offending.items() if v} == {}
+
+
+def test_the_isolation_check_sees_a_wrong_import(tmp_path):
+    bad = tmp_path / "test_bad.py"
+    bad.write_text("import numpy\nfrom fricenv.envs.braking import BrakingEnv\nimport agents.training\n")
+    assert _banned(_imports(bad), ISOLATED_TESTS["estimators"]) == ["agents.training", "fricenv.envs.braking"]

@@ -3,8 +3,8 @@
 :func:`fricenv.plants.quarter_car.step` is the reference integrator (and :mod:`fricenv.plants.tire` the one home of
 the Magic Formula and the slip); these two kernels are fast paths of the same substep (ROS2 with the exact
 Jacobian, the lock event, ``v >= 0``) for the braking env's hot loop, with the Magic Formula and its slope written
-out to share subexpressions. They are tested to equal the reference to 1e-12 (``tests/test_braking_vector.py``,
-``tests/test_quarter_car_plant.py``), and a substep that breaks the braking invariant is redone by the reference:
+out to share subexpressions. They are tested to equal the reference to 1e-12 (``tests/envs/test_braking_vector.py``,
+``tests/plants/test_quarter_car_plant.py``), and a substep that breaks the braking invariant is redone by the reference:
 
 * :func:`make_scalar_substep` (and :func:`ros2_substep_scalar`): one car in Python floats (``math``), for the single env, where numpy's per-call
   overhead on 1-element arrays costs more than the arithmetic;

@@ -15,7 +15,7 @@ from gymnasium.wrappers import TimeAwareObservation
 import fricenv  # noqa: F401  (registers the envs)
 from fricenv.envs import ENV_IDS
 from fricenv.envs.sb3_vec import BrakingSB3VecEnv
-from tests.test_record_video import assert_one_video
+from tests.envs.test_record_video import assert_one_video
 
 SHORT = 0.3  # time limit [s] that truncates every episode of the tests below
 

@@ -9,7 +9,7 @@ import pytest
 from fricenv import progress
 from fricenv.cli import TqdmSink, main, progress_sink
 from fricenv.utils import progress as progress_loop
-from tests.test_cli_errors import register_fake_verb
+from tests.cli.test_cli_errors import register_fake_verb
 
 
 def test_sink_shows_a_fake_task_to_its_end():

@@ -166,7 +166,7 @@ def test_brake_release_past_peak_at_low_speed_is_physical(road, lam, v0):
 
 @pytest.mark.parametrize("road, lam, v0", RELEASE_PAST_PEAK, ids=lambda x: getattr(x, "name", x))
 def test_env_kernels_equal_the_plant_on_refined_steps(road, lam, v0):
-    from fricenv.envs.braking_kernels import Ros2Batch, make_scalar_substep, scalar_road
+    from fricenv.plants.quarter_car_fast import Ros2Batch, make_scalar_substep, scalar_road
 
     w0 = v0 * (1 - lam) / P.r
     ref = qc.step(np.array([v0]), np.array([w0]), np.zeros(1), road.as_array(), 0.002, P, substeps=1)

@@ -11,9 +11,9 @@ from pathlib import Path
 import pytest
 
 from fricenv.cli import main
-from tests.test_cli_errors import register_fake_verb
+from tests.cli.test_cli_errors import register_fake_verb
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def _sleep_forever():
