@@ -113,7 +113,7 @@ def sample_instants(t_end: float, rate_hz: float, jitter: float, drop_prob: floa
     :return: the kept instants [s] (increasing, in ``[0, t_end]``) and the indices of the dropped rows.
     """
     h = 1.0 / rate_hz
-    n = int(math.floor(t_end / h + ZOH_EPS)) + 1
+    n = math.floor(t_end / h + ZOH_EPS) + 1
     s = np.arange(n) * h + rng.uniform(-jitter, jitter, n) * h
     s[0], s[-1] = 0.0, min(s[-1], t_end)
     s = np.clip(s, 0.0, t_end)
