@@ -37,6 +37,7 @@ __all__ = [
     "LogFormatError",
     "PayloadLog",
     "QuarterCarLog",
+    "log_notes",
     "read_log",
     "write_log",
 ]
@@ -390,3 +391,17 @@ def write_log(path: str | os.PathLike, log: QuarterCarLog | PayloadLog, comments
             fh.write(f"# {line}\n")
         fh.write(",".join(names) + "\n")
         np.savetxt(fh, table, delimiter=",", fmt="%.10g")
+
+
+def log_notes(log: QuarterCarLog | PayloadLog) -> tuple[str, ...]:
+    """What the reader did to a log, one line each (for a converted log's comments and the reports)."""
+    notes = []
+    if log.resampled is not None:
+        r = log.resampled
+        notes.append(f"resampled: {r['rows']} rows onto a uniform grid of {r['samples']} samples, step "
+                     f"{r['step']:.6g} s ({r['method']}); largest jitter {r['max_jitter']:.0%} of the step, "
+                     f"{r['filled']} dropped sample(s) filled")
+    partial = {name: share for name, share in log.missing.items() if share > 0}
+    if partial:
+        notes.append("missing (held or absent, nan): " + ", ".join(f"{n} {s:.1%}" for n, s in partial.items()))
+    return tuple(notes)

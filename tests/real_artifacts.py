@@ -64,7 +64,7 @@ class QuarterCarArtifacts:
     """What a vehicle logger does to a quarter-car braking log (defaults: a typical CAN export)."""
 
     rate_hz: float = 50.0  # logger rate [Hz], 25-200 in the real-like tests
-    jitter: float = 0.15  # each sample instant moves uniformly by up to this share of the step [-]
+    jitter: float = 0.1  # each sample instant moves uniformly by up to this share of the step [-] (steps: 2x)
     drop_prob: float = 0.01  # probability that a row is lost [-] (never the first or the last)
     imu_cutoff_hz: float | None = 5.0  # Butterworth cut-off on a_x and v [Hz]; None: no filter
     imu_order: int = 2
@@ -81,7 +81,7 @@ class PayloadArtifacts:
     """What a rig's acquisition does to a payload log: F/T at the logger rate, a slower camera."""
 
     rate_hz: float = 100.0  # logger (F/T) rate [Hz]
-    jitter: float = 0.15  # share of the step [-]
+    jitter: float = 0.1  # share of the step [-]
     drop_prob: float = 0.01  # [-]
     ft_cutoff_hz: float | None = 20.0  # Butterworth cut-off on M, f_x, f_y [Hz]; None: no filter
     ft_order: int = 2
