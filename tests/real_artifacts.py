@@ -168,9 +168,10 @@ def held_camera(t: np.ndarray, x: np.ndarray, s: np.ndarray, camera_hz: float, o
 
     :param t: clean times (uniform) [s]; ``x`` the clean pose channel there.
     :param camera_hz: frame rate [Hz]; frames at ``offset + j / camera_hz``.
-    :param offset: first frame time, ``0 <= offset < 1 / camera_hz`` [s]; instants before it hold frame 0.
+    :param offset: time of frame 0, ``0 <= offset < 1 / camera_hz`` [s]; instants before it hold frame -1, taken
+        before the log starts (the clean value at ``t[0]``).
     """
-    j = np.maximum(np.floor((s - offset) * camera_hz + ZOH_EPS), 0.0)
+    j = np.floor((s - offset) * camera_hz + ZOH_EPS)
     return np.interp(offset + j / camera_hz, t, x)
 
 
@@ -247,7 +248,7 @@ def _glitched(pose: np.ndarray, s: np.ndarray, spec: PayloadArtifacts, offset: f
               rng: np.random.Generator) -> tuple[np.ndarray, list[int]]:
     """``pose`` (held camera samples) with ``spec.glitches`` camera frames moved by ``glitch_m``; the frames'
     indices are returned."""
-    frame = np.maximum(np.floor((s - offset) * spec.camera_hz + ZOH_EPS), 0.0).astype(int)
+    frame = np.floor((s - offset) * spec.camera_hz + ZOH_EPS).astype(int)
     frames = np.unique(frame)
     inner = frames[2:-2]
     chosen = rng.choice(inner, size=min(spec.glitches, len(inner)), replace=False) if len(inner) else []
