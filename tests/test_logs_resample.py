@@ -180,7 +180,9 @@ def test_payload_round_trip_keeps_fresh_frames_and_marks_held_ones(tmp_path):
 
 def test_a_wrong_map_on_the_command_line_is_one_line(tmp_path, capsys):
     csv, mp = write_export(tmp_path / "run", real_like_quarter_car(_clean_quarter_car(), np.random.default_rng(1)))
-    mp_text = open(mp).read().replace('"wheel_rl"', '"wheel_rx"')
+    from pathlib import Path
+
+    mp_text = Path(mp).read_text().replace('"wheel_rl"', '"wheel_rx"')
     (tmp_path / "bad.json").write_text(mp_text)
     code = cli.main(["gap", "convert", csv, "--map", str(tmp_path / "bad.json"), "--out", str(tmp_path / "o.csv")])
     err = capsys.readouterr().err.strip()
