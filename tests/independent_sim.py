@@ -21,12 +21,16 @@ The physics (constants, model, RK4, drivers) lives in :mod:`tests.independent_mo
 
 Measurement command (imports the diagnosis only there)::
 
-    python -m tests.independent_sim --n 45 --seed 7 --jobs 2 [--json P]
+    python -m tests.independent_sim --n 45 --seed 7 --jobs 2 [--json P] [--real] [--combos]
+
+``--real`` writes each log through :mod:`tests.real_artifacts` (a real-like export with its column map, converted by
+``fricenv gap convert``); ``--combos`` puts several effects in each log.
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 import os
 import tempfile
@@ -77,6 +81,7 @@ from tests.independent_model import (  # the physics; re-exported: tests and wor
     make_model,
     stopping_distance,
 )
+from tests.real_artifacts import QuarterCarArtifacts, real_like_quarter_car, write_export
 
 __all__ = [
     "CATEGORIES",
@@ -100,6 +105,7 @@ __all__ = [
     "simulate_case",
     "stopping_distance",
     "write_independent_log",
+    "write_real_log",
 ]
 
 
@@ -118,6 +124,7 @@ class IndependentCase:
     v_std: float  # reference-speed noise std [m/s]
     a_x_std: float  # accelerometer noise std [m/s^2]
     seed: int  # seed of driver and noise
+    real: dict | None = None  # with --real: tests.real_artifacts.QuarterCarArtifacts settings of the export
 
     def truth(self) -> dict:
         """The truth in plain types: effect name, params, road, driver."""
@@ -126,7 +133,8 @@ class IndependentCase:
                 "effects": [{"name": e.name, "params": dict(e.params)} for e in self.effects],
                 "road": {"B": self.road.B, "C": self.road.C, "E": self.road.E, "theta": self.road.theta,
                          "preset": self.road.name},
-                "driver": self.driver, "v0": self.v0, "columns": list(self.columns), "seed": self.seed}
+                "driver": self.driver, "v0": self.v0, "columns": list(self.columns), "seed": self.seed,
+                "real": self.real}
 
 
 def random_road(rng: np.random.Generator) -> Road:
@@ -266,26 +274,63 @@ def write_independent_log(path: str | os.PathLike, case: IndependentCase) -> dic
     return truth
 
 
+def write_real_log(stem: str | os.PathLike, case: IndependentCase) -> tuple[str, str, dict]:
+    """Simulate ``case`` and write it as a real-like export with its column map (tests/real_artifacts.py, settings
+    ``case.real``): ``STEM.csv`` and ``STEM.map.json``. Returns the two paths and the truth."""
+    sim = simulate_case(case)
+    clean = {"t": sim["t"], "T_b": sim["T_b"], "omega": sim["omega"],
+             "v": sim["v"] if "v" in case.columns else None, "a_x": sim["a_x"] if "a_x" in case.columns else None}
+    export = real_like_quarter_car(clean, np.random.default_rng(case.seed + 1), QuarterCarArtifacts(**case.real))
+    csv_path, map_path = write_export(stem, export)
+    truth = case.truth()
+    truth["samples"] = len(export.columns["timestamp"])
+    return csv_path, map_path, truth
+
+
 # ----------------------------------------------------------------------------------------------------- measurement
 EXPECTED = {NONE: "none", OUT: "unexplained"}
+# Several effects at once (--combos): the first is the expected verdict, all should be named in "effects".
+COMBOS = (("drag", "relaxation_length"), ("brake_gain", "radius_error", "drag"), ("brake_gain", "drag"),
+          ("radius_error", "relaxation_length"), ("brake_gain", "relaxation_length"))
+REAL_RATES = (25.0, 100.0)  # range of the real-like logger rate [Hz]
+
+
+def _diagnosable_log(tmp: str, case: IndependentCase) -> tuple[str, dict]:
+    """Write the case's log in ``tmp``: the contract CSV, or with ``case.real`` the export converted through its
+    map by ``fricenv gap convert`` (as ``fricenv gap diagnose --map`` does)."""
+    if case.real is None:
+        path = os.path.join(tmp, "log.csv")
+        return path, write_independent_log(path, case)
+    from fricenv.commands.gap_convert import convert
+
+    csv_path, map_path, truth = write_real_log(os.path.join(tmp, "export"), case)
+    path = os.path.join(tmp, "log.contract.csv")
+    convert(csv_path, map_path, "quarter-car", path)
+    return path, truth
+
+
+def _named_effects(dg) -> list[str]:
+    """The effects a diagnosis names: its selected set if it has one (issue 15), else its verdict."""
+    found = getattr(dg, "effects", None)
+    if not found:
+        return [dg.verdict]
+    return [e["effect"] if isinstance(e, dict) else getattr(e, "effect", str(e)) for e in found]
 
 
 def diagnose_case(case: IndependentCase) -> dict:
     """Write the case's log to a temporary directory and diagnose it blind; returns a result row."""
     from fricenv.gap.diagnose import DiagnoseConfig, diagnose_file
-    from fricenv.gap.validate import main_error, true_model_detectable
 
     expected = EXPECTED.get(case.category, case.category)
+    t0 = time.perf_counter()
     with tempfile.TemporaryDirectory() as tmp:
-        path = os.path.join(tmp, "log.csv")
-        truth = write_independent_log(path, case)
-        t0 = time.perf_counter()
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
+                path, truth = _diagnosable_log(tmp, case)
                 dg = diagnose_file(path, cfg=DiagnoseConfig(jobs=1))
         except Exception as exc:  # noqa: BLE001 -- a log the reader or the tool rejects (or crashes on) counts as wrong
-            return {"category": case.category, "truth": truth, "verdict": "error",
+            return {"category": case.category, "truth": case.truth(), "verdict": "error",
                     "error": f"{type(exc).__name__}: {exc}",
                     "expected": expected, "right": False, "gap_before": float("nan"), "gap_after": float("nan"),
                     "params": {}, "seconds": time.perf_counter() - t0}
@@ -293,27 +338,62 @@ def diagnose_case(case: IndependentCase) -> dict:
            "road": truth["road"], "columns": list(case.columns), "verdict": dg.verdict, "expected": expected,
            "right": dg.verdict == expected, "gap_before": float(dg.gap_before), "gap_after": float(dg.gap_after),
            "params": dict(dg.params), "seconds": time.perf_counter() - t0, "samples": truth["samples"],
-           "candidates": [c.effect for c in dg.candidates[:3]]}
+           "candidates": [c.effect for c in dg.candidates[:3]], "named": _named_effects(dg)}
+    if len(case.effects) > 1:
+        out["all_named"] = {e.name for e in case.effects} <= set(out["named"])
     if case.category in LIBRARY_EFFECTS:
-        out["ratio"] = out["gap_after"] / out["gap_before"] if out["gap_before"] > 0 else float("nan")
-        # the tool's own model class with the true values: the oracle of "could any tool see it in these data"
-        out["detectable"] = true_model_detectable(case.category, truth["params"], truth["road"], dg,
-                                                  DiagnoseConfig(jobs=1))
-        if out["right"]:
-            out["param_error"], out["param_errors"] = main_error(case.category, truth["params"], out["params"])
+        _effect_figures(out, case, dg)
     return out
 
 
-def draw_cases(n: int, seed: int) -> list[IndependentCase]:
-    """``n`` cases, categories in turn, shuffled."""
+def _effect_figures(out: dict, case: IndependentCase, dg) -> None:
+    """Gap ratio, detectability and (if right) parameter error of an effect log's result row."""
+    from fricenv.gap.diagnose import DiagnoseConfig
+    from fricenv.gap.validate import main_error, true_model_detectable
+
+    truth = out["truth"]
+    out["ratio"] = out["gap_after"] / out["gap_before"] if out["gap_before"] > 0 else float("nan")
+    # the tool's own model class with the true values: the oracle of "could any tool see it in these data"
+    out["detectable"] = true_model_detectable(case.category, truth["params"], truth["road"], dg,
+                                              DiagnoseConfig(jobs=1))
+    if out["right"]:
+        out["param_error"], out["param_errors"] = main_error(case.category, truth["params"], out["params"])
+
+
+def draw_cases(n: int, seed: int, real: bool = False, combos: bool = False) -> list[IndependentCase]:
+    """``n`` cases, categories in turn, shuffled.
+
+    :param real: write each log as a real-like export (settings drawn from a second generator, so the cases
+        themselves are those of the plain draw).
+    :param combos: every case carries one of :data:`COMBOS` (several effects at once) instead of one category.
+    """
     rng = np.random.default_rng(seed)
-    cats = [CATEGORIES[i % len(CATEGORIES)] for i in range(n)]
-    rng.shuffle(cats)
-    return [draw_independent_case(c, rng) for c in cats]
+    if combos:
+        sets = [COMBOS[i % len(COMBOS)] for i in range(n)]
+        rng.shuffle(sets)
+        cases = []
+        for names in sets:
+            road, v0 = random_road(rng), float(rng.uniform(*V0_RANGE))
+            effects = tuple(random_effect(name, road, v0, rng) for name in names)
+            cases.append(draw_independent_case(names[0], rng, road=road, effects=effects))
+    else:
+        cats = [CATEGORIES[i % len(CATEGORIES)] for i in range(n)]
+        rng.shuffle(cats)
+        cases = [draw_independent_case(c, rng) for c in cats]
+    if not real:
+        return cases
+    rng_real = np.random.default_rng([seed, 15])
+    return [dataclasses.replace(c, real=_real_settings(rng_real)) for c in cases]
 
 
-def measure(n: int, seed: int, jobs: int = 1) -> dict:
-    """Draw ``n`` independent logs, diagnose each blind, and summarise (fricenv.gap.validate's summary format)."""
+def _real_settings(rng: np.random.Generator) -> dict:
+    """Random settings of a real-like export: logger rate 25-100 Hz, the other artifacts at their defaults."""
+    return {"rate_hz": float(rng.uniform(*REAL_RATES))}
+
+
+def measure(n: int, seed: int, jobs: int = 1, real: bool = False, combos: bool = False) -> dict:
+    """Draw ``n`` independent logs, diagnose each blind, and summarise (fricenv.gap.validate's summary format;
+    with ``combos`` also the share of logs whose every effect is named)."""
     from concurrent.futures import ProcessPoolExecutor
 
     from fricenv.gap.validate import summarize
@@ -322,7 +402,7 @@ def measure(n: int, seed: int, jobs: int = 1) -> dict:
         raise ValueError(f"n must be >= 1, got {n}")
     if jobs < 1:
         raise ValueError(f"jobs must be >= 1, got {jobs}")
-    cases = draw_cases(n, seed)
+    cases = draw_cases(n, seed, real, combos)
     t0 = time.perf_counter()
     if jobs > 1:
         with ProcessPoolExecutor(max_workers=jobs) as pool:
@@ -330,7 +410,10 @@ def measure(n: int, seed: int, jobs: int = 1) -> dict:
     else:
         results = [diagnose_case(c) for c in cases]
     s = summarize(results)
-    s.update(n=n, seed=seed, jobs=jobs, wall_seconds=time.perf_counter() - t0, source="tests.independent_sim")
+    s.update(n=n, seed=seed, jobs=jobs, wall_seconds=time.perf_counter() - t0, source="tests.independent_sim",
+             real=real, combos=combos)
+    if combos:
+        s["all_effects_named"] = float(np.mean([r.get("all_named", False) for r in results]))
     return s
 
 
@@ -354,14 +437,22 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--seed", type=int, default=7, help="seed of the draw")
     ap.add_argument("--jobs", type=int, default=1, help="processes (one log each)")
     ap.add_argument("--json", default=None, help="write the summary and per-log results here")
+    ap.add_argument("--real", action="store_true",
+                    help="write each log as a real-like export (tests/real_artifacts.py: 25-100 Hz, jittered epoch "
+                         "stamps, km/h and kPa with a map, filtered a_x and v, quantised wheel speed, outliers) and "
+                         "diagnose it through its map")
+    ap.add_argument("--combos", action="store_true",
+                    help="several effects per log (COMBOS); reports the share with every effect named")
     args = ap.parse_args(argv)
     from fricenv.gap.validate import format_summary
     from fricenv.utils import write_json
     from tests import independent_sim as mod  # noqa: PLW0406 -- by its import name, so that the worker processes can unpickle
 
-    s = mod.measure(args.n, args.seed, args.jobs)
+    s = mod.measure(args.n, args.seed, args.jobs, args.real, args.combos)
     print(format_rows(s))
     print(format_summary(s))
+    if args.combos:
+        print(f"every effect named: {s['all_effects_named']:.0%} of {args.n} logs")
     print(f"wall time: {s['wall_seconds']:.0f} s on {args.jobs} process(es)")
     if args.json:
         write_json(args.json, s)
