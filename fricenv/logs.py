@@ -5,7 +5,7 @@ CSV in SI units: optional leading ``#`` lines, one header row, then rows. Quarte
 ``M``, ``f_x``, ``f_y`` (raw sensor readings), ``theta``, ``X``, ``Y`` (vision). Unknown extra columns are ignored
 with a warning. Every error names the file, and where it can the line and the column.
 
-Real exports (docs/contracts.md, sections 1-2): ``read_log(path, plant, column_map=MAP)`` reads any CSV whose columns a
+Real exports (docs/contracts.md, section 1): ``read_log(path, plant, column_map=MAP)`` reads any CSV whose columns a
 column map (:mod:`fricenv.logmap`) names, in the map's units. Jittered time stamps and dropped rows are resampled onto
 a uniform grid, held samples of a slower channel are marked missing (NaN), and the log records what was done
 (``resampled``, ``missing``, ``torque_from_pressure``); the rules are in :mod:`fricenv.resample`.
@@ -350,7 +350,7 @@ def read_log(path: str | os.PathLike, plant: str = "quarter-car",
 
     :param path: CSV file in the DESIGN.md format, or any export that ``column_map`` describes.
     :param plant: ``"quarter-car"`` or ``"payload"``.
-    :param column_map: a column map (file or :class:`fricenv.logmap.ColumnMap`; docs/contracts.md section 2).
+    :param column_map: a column map (file or :class:`fricenv.logmap.ColumnMap`; docs/contracts.md, "Column map").
     :return: a :class:`QuarterCarLog` or :class:`PayloadLog`; held or missing samples are NaN (see the classes).
     :raises LogFormatError: naming the file, line and column of the first problem.
     :raises ColumnMapError: naming the map file and key.

@@ -2,8 +2,8 @@
 
 Example: fricenv gap convert export.csv --map export.map.json --out log.csv [--plant payload]
 
-The map (docs/contracts.md, section 2) names, per contract channel, the source column, its unit and any factor (the
-wheel radius for a rim speed in km/h, the brake torque per pressure [N m per Pa] for a line pressure). Jittered time
+The map (docs/contracts.md, "Column map") names, per contract channel, the source column, its unit and any factor
+(the wheel radius for a rim speed in km/h, the brake torque per pressure [N m per Pa] for a line pressure). Jittered time
 stamps and dropped rows are resampled onto a uniform grid; held samples of a slower channel are written as nan. The
 output's '#' lines say what was done, and '# torque_source: pressure' marks a torque from a nominal pressure factor.
 """
@@ -20,7 +20,7 @@ PATH_OPTIONS = {"map": "input file", "out": "output file"}
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of ``fricenv gap convert``."""
     parser.add_argument("log", help="the export (CSV with a header row; '#' lines first are kept as comments)")
-    parser.add_argument("--map", required=True, metavar="MAP.json", help="column map (docs/contracts.md, section 2)")
+    parser.add_argument("--map", required=True, metavar="MAP.json", help='column map (docs/contracts.md, "Column map")')
     parser.add_argument("--out", required=True, metavar="CONTRACT.csv", help="the contract log to write")
     parser.add_argument("--plant", default="quarter-car", choices=PLANTS, help="plant of the log (default %(default)s)")
 

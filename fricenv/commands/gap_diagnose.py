@@ -33,7 +33,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def _add_map_option(parser: argparse.ArgumentParser) -> None:
-    """``--map``: read a real export through a column map (docs/contracts.md, section 2)."""
+    """``--map``: read a real export through a column map (docs/contracts.md, "Column map")."""
     parser.add_argument("--map", metavar="MAP.json", default=None,
                         help="column map of a real export: source column, unit and factor per channel; the "
                              "converted log is written to OUT/log.contract.csv and diagnosed")
