@@ -55,34 +55,38 @@ def _stamps_with_one_step(ratio: float, n=30) -> np.ndarray:
     return t
 
 
+def _stamps_with_a_gap(missing: int, n=30) -> np.ndarray:
+    """Uniform stamps with ``missing`` rows dropped before row 15."""
+    t = np.arange(n) * H
+    t[15:] += missing * H
+    return t
+
+
+def _log_at(tmp_path, t: np.ndarray, torque: float = 0.0):
+    return _write(tmp_path, "t,T_b,omega", np.column_stack([t, np.full(len(t), torque), _omega(t)]))
+
+
 @pytest.mark.parametrize("shift", [0.24, -0.24])
 def test_jitter_just_below_the_bound_is_resampled(tmp_path, shift):
-    t = _stamps_with_one_step(1.0 + shift)
-    log = read_log(_write(tmp_path, "t,T_b,omega", np.column_stack([t, np.zeros(30), _omega(t)])))
+    log = read_log(_log_at(tmp_path, _stamps_with_one_step(1.0 + shift)))
     assert log.resampled["max_jitter"] == pytest.approx(abs(shift), rel=1e-9) and len(log) == 30
 
 
-def test_jitter_above_the_bound_names_file_line_and_column(tmp_path):
+@pytest.mark.parametrize(("t", "message"), [
+    (_stamps_with_one_step(1.26), (r"log\.csv:13: column 't': step 0\.0126 s is 1\.26 median steps \(0\.01 s\): "
+                                   r"time-stamp jitter above 25% of the step")),
+    (_stamps_with_a_gap(MAX_FILL + 1), (r"log\.csv:17: column 't': gap of 0\.05 s \(5 steps of 0\.01 s\): more than "
+                                        r"3 missing samples in a row")),
+], ids=["jitter above 25%", "4 rows missing"])
+def test_a_step_beyond_the_bounds_names_file_line_and_column(tmp_path, t, message):
     assert MAX_JITTER == 0.25
-    t = _stamps_with_one_step(1.26)
-    path = _write(tmp_path, "t,T_b,omega", np.column_stack([t, np.zeros(30), _omega(t)]))
-    with pytest.raises(LogFormatError, match=r"log\.csv:13: column 't': step 0\.0126 s is 1\.26 median steps "
-                                             r"\(0\.01 s\): time-stamp jitter above 25% of the step"):
-        read_log(path)
-
-
-def test_a_gap_longer_than_the_fill_limit_is_rejected(tmp_path):
-    t = np.arange(30) * H
-    t[15:] += (MAX_FILL + 1) * H  # 4 rows missing in a row
-    path = _write(tmp_path, "t,T_b,omega", np.column_stack([t, np.zeros(30), _omega(t)]))
-    with pytest.raises(LogFormatError, match=r"log\.csv:17: column 't': gap of 0\.05 s \(5 steps of 0\.01 s\): "
-                                             r"more than 3 missing samples in a row"):
-        read_log(path)
+    with pytest.raises(LogFormatError, match=message):
+        read_log(_log_at(tmp_path, t))
 
 
 def test_a_uniform_log_is_kept_exactly(tmp_path):
     t = np.arange(40) * H
-    log = read_log(_write(tmp_path, "t,T_b,omega", np.column_stack([t, np.full(40, 5.0), _omega(t)])))
+    log = read_log(_log_at(tmp_path, t, 5.0))
     assert log.resampled is None
     np.testing.assert_array_equal(log.omega, _omega(t))
 
