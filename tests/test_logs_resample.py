@@ -152,6 +152,7 @@ def test_convert_round_trip_of_a_real_like_export(tmp_path, rate):
     assert cli.main(["-q", "gap", "convert", csv, "--map", mp, "--out", str(out)]) == 0
     log = read_log(out)
     assert log.torque_from_pressure and abs(1.0 / log.dt - rate) < 0.02 * rate
+    assert any(c.startswith("resampled: ") and "zero-order hold for T_b" in c for c in log.comments)
     truth = {k: np.interp(log.t, clean["t"], clean[k]) for k in ("omega", "v", "a_x")}
     # km/h quantum / 2 as omega, plus linear interpolation over a gap of two steps at up to 140 rad/s^2 curvature
     omega_tol = 0.05 / 3.6 / R + (2.4 / rate) ** 2 / 8 * 140.0
@@ -194,3 +195,14 @@ def test_a_wrong_map_on_the_command_line_is_one_line(tmp_path, capsys):
     assert "bad.json: channels.omega.column: 'wheel_rx': no such column in" in err
     code = cli.main(["gap", "diagnose", csv, "--map", str(tmp_path / "bad.json"), "--out", str(tmp_path / "rep")])
     assert code == 2 and "channels.omega.column: 'wheel_rx'" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_diagnose_with_a_map_reads_the_export_and_keeps_the_converted_log(tmp_path):
+    csv, mp = write_export(tmp_path / "run", real_like_quarter_car(_clean_quarter_car(), np.random.default_rng(2),
+                                                                   QuarterCarArtifacts(rate_hz=50.0)))
+    out = tmp_path / "report"
+    assert cli.main(["-q", "gap", "diagnose", csv, "--map", mp, "--out", str(out), "--no-plots", "--jobs", "1"]) == 0
+    assert (out / "report.json").is_file()
+    log = read_log(out / "log.contract.csv")
+    assert log.torque_from_pressure and abs(1.0 / log.dt - 50.0) < 1.0
