@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from fricenv.logmap import ColumnMapError, find_unit, split_header_cell
 from fricenv.logs import TORQUE_FROM_PRESSURE, read_log, write_log
+from fricenv.logs.logmap import ColumnMapError, find_unit, split_header_cell
 
 N = 12
 R = 0.3  # wheel radius given in the maps [m]

@@ -5,10 +5,10 @@ CSV in SI units: optional leading ``#`` lines, one header row, then rows. Quarte
 ``M``, ``f_x``, ``f_y`` (raw sensor readings), ``theta``, ``X``, ``Y`` (vision). Unknown extra columns are ignored
 with a warning. Every error names the file, and where it can the line and the column.
 
-Real exports (docs/contracts.md, section 1): ``read_log(path, plant, column_map=MAP)`` reads any CSV whose columns a
-column map (:mod:`fricenv.logmap`) names, in the map's units. Jittered time stamps and dropped rows are resampled onto
-a uniform grid, held samples of a slower channel are marked missing (NaN), and the log records what was done
-(``resampled``, ``missing``, ``torque_from_pressure``); the rules are in :mod:`fricenv.resample`.
+Real exports (docs/contracts.md, section 1): ``read_log(path, plant, column_map=MAP)`` reads any CSV whose columns
+a column map (:mod:`fricenv.logs.logmap`) names, in the map's units. Jittered time stamps and dropped rows are
+resampled onto a uniform grid, held samples of a slower channel are marked missing (NaN), and the log records what was done
+(``resampled``, ``missing``, ``torque_from_pressure``); the rules are in :mod:`fricenv.logs.resample`.
 """
 
 from __future__ import annotations
@@ -21,12 +21,12 @@ from pathlib import Path
 
 import numpy as np
 
-from fricenv import resample as rs
 from fricenv.errors import InvalidInputError
-from fricenv.logmap import HEADER_UNIT as _HEADER_UNIT
-from fricenv.logmap import SI_UNITS as _SI_UNITS
-from fricenv.logmap import UNITS, ColumnMap, ColumnMapError, apply_map, load_map
-from fricenv.logmap import unit_key as _unit_key
+from fricenv.logs import resample as rs
+from fricenv.logs.logmap import HEADER_UNIT as _HEADER_UNIT
+from fricenv.logs.logmap import SI_UNITS as _SI_UNITS
+from fricenv.logs.logmap import UNITS, ColumnMap, ColumnMapError, apply_map, load_map
+from fricenv.logs.logmap import unit_key as _unit_key
 from fricenv.plants.sui_johansen import RADIUS
 from fricenv.utils import atomic_write
 
@@ -71,7 +71,7 @@ class LogFormatError(InvalidInputError):
 @dataclass(frozen=True)
 class QuarterCarLog:
     """A quarter-car braking log; arrays share one length. A missing or held sample is NaN in ``v`` or ``a_x``,
-    never in ``t`` or ``T_b`` (``omega`` is filled, see :mod:`fricenv.resample`)."""
+    never in ``t`` or ``T_b`` (``omega`` is filled, see :mod:`fricenv.logs.resample`)."""
 
     t: np.ndarray  # time [s], uniform step
     T_b: np.ndarray  # commanded brake torque [N m]
@@ -82,7 +82,7 @@ class QuarterCarLog:
     comments: tuple[str, ...] = field(default=(), compare=False)  # the leading '#' lines, without '#'
     source: str = field(default="<memory>", compare=False)
     torque_from_pressure: bool = field(default=False, compare=False)  # T_b = pressure x nominal factor: expect a gain
-    resampled: dict | None = field(default=None, compare=False)  # fricenv.resample.Grid.summary(); None: not needed
+    resampled: dict | None = field(default=None, compare=False)  # resample.Grid.summary(); None: not needed
     missing: dict[str, float] = field(default_factory=dict, compare=False)  # channel -> share of NaN samples
 
     REQUIRED = ("t", "T_b", "omega")
@@ -338,7 +338,7 @@ def _check_values(path: Path, cls: type, cols: dict[str, np.ndarray], lines: np.
 
 
 def _mark_held(cols: dict[str, np.ndarray], step: float) -> None:
-    """Held samples (:func:`fricenv.resample.held_mask`) become NaN, in every channel but t, T_b and omega."""
+    """Held samples (:func:`fricenv.logs.resample.held_mask`) become NaN, in every channel but t, T_b and omega."""
     for name, x in cols.items():
         if name not in ("t", *_HOLD, *_FILLED):
             cols[name] = np.where(rs.held_mask(x, step), np.nan, x)
@@ -350,7 +350,8 @@ def read_log(path: str | os.PathLike, plant: str = "quarter-car",
 
     :param path: CSV file in the DESIGN.md format, or any export that ``column_map`` describes.
     :param plant: ``"quarter-car"`` or ``"payload"``.
-    :param column_map: a column map (file or :class:`fricenv.logmap.ColumnMap`; docs/contracts.md, "Column map").
+    :param column_map: a column map (file or :class:`fricenv.logs.logmap.ColumnMap`; docs/contracts.md,
+        "Column map").
     :return: a :class:`QuarterCarLog` or :class:`PayloadLog`; held or missing samples are NaN (see the classes).
     :raises LogFormatError: naming the file, line and column of the first problem.
     :raises ColumnMapError: naming the map file and key.
