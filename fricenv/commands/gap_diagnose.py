@@ -133,8 +133,9 @@ def _run_fleet(args: argparse.Namespace) -> int:
         from fricenv.gap.payload_diagnose import PayloadDiagnoseConfig as Config
     else:
         from fricenv.gap.diagnose import DiagnoseConfig as Config
-    library = Config().candidates
-    settings = FleetSettings(plant=args.plant, params_file=args.params, candidates=_candidates(args, library),
+    names = _candidates(args, Config().candidates)
+    settings = FleetSettings(plant=args.plant, params_file=args.params,
+                             config=Config() if names is None else Config(candidates=names),
                              plots=not args.no_plots, force=args.force, jobs=args.jobs, ray=args.ray)
     s = run_fleet(args.source, args.out, settings)
     counts = Counter(r["verdict"] for r in s["rows"])

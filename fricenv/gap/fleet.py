@@ -41,7 +41,9 @@ class FleetSettings:
 
     :param plant: ``"quarter-car"`` or ``"payload"`` (every log of the fleet).
     :param params_file: nominal plant parameters (JSON) for every log, or None for the paper's.
-    :param candidates: candidate effects to try (None: the plant's whole library).
+    :param config: the plant's diagnosis settings (:class:`fricenv.gap.diagnose.DiagnoseConfig` or
+        :class:`fricenv.gap.payload_diagnose.PayloadDiagnoseConfig`; None: the defaults). A quarter-car log runs its
+        candidate fits in its own process (``jobs=1``): the logs are the parallel unit.
     :param plots: write each log's PNG plots (the fleet plots are always written).
     :param force: diagnose again the logs whose report is already complete.
     :param jobs: local worker processes (None: up to 2); not used with ``ray``.
@@ -50,7 +52,7 @@ class FleetSettings:
 
     plant: str = "quarter-car"
     params_file: str | None = None
-    candidates: tuple[str, ...] | None = None
+    config: object | None = None
     plots: bool = True
     force: bool = False
     jobs: int | None = None
@@ -103,14 +105,12 @@ def _diagnose_and_write(log: Path, folder: Path, s: FleetSettings) -> tuple[dict
         from fricenv.gap.payload_diagnose import PayloadDiagnoseConfig, diagnose_payload_file
         from fricenv.gap.payload_report import write_payload_report
 
-        cfg = PayloadDiagnoseConfig() if s.candidates is None else PayloadDiagnoseConfig(candidates=s.candidates)
-        dg = diagnose_payload_file(log, s.params_file, cfg)
+        dg = diagnose_payload_file(log, s.params_file, s.config or PayloadDiagnoseConfig())
         return write_payload_report(dg, folder, plots=s.plots), dg.seconds
     from fricenv.gap.diagnose import DiagnoseConfig, diagnose_file
     from fricenv.gap.report import write_report
 
-    cfg = DiagnoseConfig(jobs=1) if s.candidates is None else DiagnoseConfig(jobs=1, candidates=s.candidates)
-    dg = diagnose_file(log, s.plant, s.params_file, cfg)
+    dg = diagnose_file(log, s.plant, s.params_file, replace(s.config or DiagnoseConfig(), jobs=1))
     return write_report(dg, folder, s.plant, plots=s.plots), dg.seconds
 
 
