@@ -16,6 +16,8 @@ fricenv installed (same version) and the input and output paths the tasks name (
 from __future__ import annotations
 
 import os
+import signal
+import threading
 import warnings
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
@@ -27,6 +29,7 @@ from fricenv.errors import InvalidInputError
 __all__ = ["RAY_AUTO", "default_jobs", "imap_tasks", "map_tasks", "ray_session"]
 
 RAY_AUTO = "auto"  # --ray value: join a running Ray instance or cluster, else start one in this process
+WAIT_S = 0.5  # longest wait on Ray between checks for an interrupt [s]
 
 
 def default_jobs(jobs: int | None) -> int:
@@ -70,12 +73,56 @@ def _import_ray():
     return ray
 
 
+class _Stopped(Exception):
+    """SIGINT or SIGTERM arrived during a Ray session (raised by its ``check``, handled by :func:`ray_session`)."""
+
+
+def _no_check() -> None:
+    """The ``check`` of a Ray session this process does not own: signals take their usual course."""
+
+
+@contextmanager
+def _deferred_signals():
+    """Hold SIGINT and SIGTERM during a Ray session; yields ``(install, check)``.
+
+    ``ray.init`` installs handlers that abort the process, and a front end's handler may kill Ray's processes under
+    the driver (which then exits). Instead the signal is recorded, ``check()`` raises :class:`_Stopped` in the loop
+    that waits on Ray, and after Ray is shut down the old handlers are restored and the signal is delivered to them
+    (the CLI's: exit 130 / 143; the defaults: KeyboardInterrupt, or the end of the process).
+    """
+    sigs = (signal.SIGINT, signal.SIGTERM)
+    if threading.current_thread() is not threading.main_thread():
+        yield (lambda: None), _no_check
+        return
+    got: list[int] = []
+    previous = {sig: signal.getsignal(sig) for sig in sigs}
+
+    def install() -> None:
+        for sig in sigs:
+            signal.signal(sig, lambda signum, frame: got.append(signum))
+
+    def check() -> None:
+        if got:
+            raise _Stopped(signal.Signals(got[0]).name)
+
+    install()
+    try:
+        yield install, check
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler if handler is not None else signal.SIG_DFL)
+        if got:
+            signal.raise_signal(got[0])
+
+
 @contextmanager
 def ray_session(address: str):
-    """Yield the ray module joined to ``address`` (``"auto"`` or a cluster address, see the module docstring).
+    """Yield ``(ray module, check)`` joined to ``address`` (``"auto"`` or a cluster address, see the module
+    docstring); ``check()`` raises when SIGINT or SIGTERM arrived (call it while waiting on Ray).
 
     If Ray is already initialised in this process it is used as it is and left running (its owner shuts it down);
-    otherwise this call connects (or starts a local instance) and always shuts it down at the end.
+    otherwise this call connects (or starts a local instance) and always shuts it down at the end, before an
+    interrupt that arrived meanwhile is delivered.
 
     :param address: ``"auto"`` or a Ray address.
     """
@@ -83,14 +130,16 @@ def ray_session(address: str):
         raise InvalidInputError(f"--ray must be 'auto' or a Ray cluster address, got {address!r}")
     ray = _import_ray()
     if ray.is_initialized():
-        yield ray
+        yield ray, _no_check
         return
     kwargs = {"include_dashboard": False, "log_to_driver": False, "configure_logging": False}
-    ray.init(**kwargs) if address == RAY_AUTO else ray.init(address=address, **kwargs)
-    try:
-        yield ray
-    finally:
-        ray.shutdown()
+    with _deferred_signals() as (install, check):
+        try:
+            ray.init(**kwargs) if address == RAY_AUTO else ray.init(address=address, **kwargs)
+            install()  # ray.init replaced the handlers
+            yield ray, check  # a _Stopped from check() passes: the signal replaces it once Ray is shut down
+        finally:
+            ray.shutdown()
 
 
 def _serial(fn: Callable, tasks: Sequence[tuple]) -> Iterator[tuple[int, object]]:
@@ -119,13 +168,14 @@ def _local(fn: Callable, tasks: Sequence[tuple], jobs: int) -> Iterator[tuple[in
 
 def _on_ray(fn: Callable, tasks: Sequence[tuple], address: str) -> Iterator[tuple[int, object]]:
     """The tasks as Ray tasks (one CPU each), as they complete; the unfinished ones cancelled on any early exit."""
-    with ray_session(address) as ray:
+    with ray_session(address) as (ray, check):
         remote = ray.remote(num_cpus=1, max_retries=0)(_worker)
         index = {remote.remote((fn, t)): i for i, t in enumerate(tasks)}
         pending = list(index)
         try:
             while pending:
-                done, pending = ray.wait(pending, num_returns=1)
+                check()
+                done, pending = ray.wait(pending, num_returns=1, timeout=WAIT_S)
                 for ref in done:
                     yield index[ref], ray.get(ref)
         except BaseException:
