@@ -63,3 +63,59 @@ def test_fleet_rows_identical_on_ray_and_in_the_process_pool(tmp_path, local_ray
     assert local_ray.is_initialized()  # the test's instance was used, and is the test's to shut down
     assert len(rows["ray"]) == 4 and [r["verdict"] for r in rows["ray"]] == ["error", "brake_lag", "brake_lag", "none"]
     assert rows["ray"] == rows["pool"]
+
+
+KILLABLE = """
+from fricenv.gap.pool import map_tasks
+from tests.test_gap_pool import _square_after
+map_tasks(_square_after, [(2, 120.0)] * 2, 1, "sleep", ray="auto")
+"""
+
+
+def _descendants(pid: int) -> dict[int, str]:
+    """pid -> command line of every process below ``pid``."""
+    out: dict[int, str] = {}
+    todo = [pid]
+    while todo:
+        for path in Path(f"/proc/{todo.pop()}/task").glob("*/children"):
+            for child in map(int, path.read_text().split()):
+                try:
+                    out[child] = Path(f"/proc/{child}/cmdline").read_bytes().decode(errors="replace")
+                except OSError:
+                    continue
+                todo.append(child)
+    return out
+
+
+def _running(pid: int) -> bool:
+    """Alive and not a zombie."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except (OSError, IndexError):
+        return False
+
+
+def test_sigterm_during_a_ray_run_shuts_its_instance_down():
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    root = Path(__file__).resolve().parents[1]
+    proc = subprocess.Popen([sys.executable, "-c", KILLABLE], cwd=root, stderr=subprocess.DEVNULL)
+    try:
+        deadline = time.monotonic() + 180
+        below: dict[int, str] = {}
+        while not any(c.startswith("ray::_worker") for c in below.values()):  # Ray started and runs a task
+            assert proc.poll() is None and time.monotonic() < deadline, "no Ray task started in 180 s"
+            below = _descendants(proc.pid)
+            time.sleep(0.1)
+        proc.send_signal(signal.SIGTERM)
+        proc.wait(timeout=120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == -signal.SIGTERM  # the default handler ran, after Ray was shut down
+    time.sleep(1)
+    assert any("raylet" in c for c in below.values())
+    assert [c for p, c in below.items() if _running(p)] == []  # the raylet, GCS, agents and workers all ended

@@ -81,38 +81,66 @@ def _no_check() -> None:
     """The ``check`` of a Ray session this process does not own: signals take their usual course."""
 
 
-@contextmanager
-def _deferred_signals():
-    """Hold SIGINT and SIGTERM during a Ray session; yields ``(install, check)``.
+class _HeldSignals:
+    """SIGINT and SIGTERM held during a Ray session (see :func:`_held_signals`)."""
 
-    ``ray.init`` installs handlers that abort the process, and a front end's handler may kill Ray's processes under
-    the driver (which then exits). Instead the signal is recorded, ``check()`` raises :class:`_Stopped` in the loop
-    that waits on Ray, and after Ray is shut down the old handlers are restored and the signal is delivered to them
-    (the CLI's: exit 130 / 143; the defaults: KeyboardInterrupt, or the end of the process).
-    """
-    sigs = (signal.SIGINT, signal.SIGTERM)
-    if threading.current_thread() is not threading.main_thread():
-        yield (lambda: None), _no_check
-        return
-    got: list[int] = []
-    previous = {sig: signal.getsignal(sig) for sig in sigs}
+    SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
-    def install() -> None:
-        for sig in sigs:
-            signal.signal(sig, lambda signum, frame: got.append(signum))
+    def __init__(self):
+        self.got: list[int] = []
+        self.previous = {sig: signal.getsignal(sig) for sig in self.SIGNALS}
 
-    def check() -> None:
-        if got:
-            raise _Stopped(signal.Signals(got[0]).name)
+    def install(self) -> None:
+        """Record the signals from now on (again after ``ray.init``, which installs its own handlers)."""
+        for sig in self.SIGNALS:
+            signal.signal(sig, lambda signum, frame: self.got.append(signum))
 
-    install()
-    try:
-        yield install, check
-    finally:
-        for sig, handler in previous.items():
+    def check(self) -> None:
+        """Raise :class:`_Stopped` if a signal arrived."""
+        if self.got:
+            raise _Stopped(signal.Signals(self.got[0]).name)
+
+    def release(self) -> None:
+        """Restore the previous handlers and deliver the first signal that arrived to them."""
+        for sig, handler in self.previous.items():
             signal.signal(sig, handler if handler is not None else signal.SIG_DFL)
-        if got:
-            signal.raise_signal(got[0])
+        if self.got:
+            signal.raise_signal(self.got[0])
+
+
+@contextmanager
+def _held_signals():
+    """Hold SIGINT and SIGTERM during a Ray session; yields a :class:`_HeldSignals` (None outside the main thread).
+
+    ``ray.init`` installs handlers that exit or abort the process, and a front end's handler may kill Ray's processes
+    under the driver (which then exits). Instead the signal is recorded, ``check()`` raises :class:`_Stopped` in the
+    loop that waits on Ray, and after Ray is shut down the old handlers are restored and the signal is delivered to
+    them (the CLI's: exit 130 / 143; the defaults: KeyboardInterrupt, or the end of the process).
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield None
+        return
+    held = _HeldSignals()
+    held.install()
+    try:
+        yield held
+    finally:
+        held.release()
+
+
+def _init(ray, address: str, held: _HeldSignals | None) -> None:
+    """``ray.init`` for ``address``, then the held signals' handlers installed again. A SIGTERM while Ray starts
+    meets Ray's own handler (``sys.exit(15)``, installed first thing): it is recorded as held, then stops the run."""
+    kwargs = {"include_dashboard": False, "log_to_driver": False, "configure_logging": False}
+    try:
+        ray.init(**kwargs) if address == RAY_AUTO else ray.init(address=address, **kwargs)
+    except SystemExit as exc:
+        if held is None or exc.code != signal.SIGTERM:
+            raise
+        held.got.append(signal.SIGTERM)
+        raise _Stopped("SIGTERM") from None
+    if held is not None:
+        held.install()
 
 
 @contextmanager
@@ -132,12 +160,10 @@ def ray_session(address: str):
     if ray.is_initialized():
         yield ray, _no_check
         return
-    kwargs = {"include_dashboard": False, "log_to_driver": False, "configure_logging": False}
-    with _deferred_signals() as (install, check):
+    with _held_signals() as held:
         try:
-            ray.init(**kwargs) if address == RAY_AUTO else ray.init(address=address, **kwargs)
-            install()  # ray.init replaced the handlers
-            yield ray, check  # a _Stopped from check() passes: the signal replaces it once Ray is shut down
+            _init(ray, address, held)
+            yield ray, held.check if held else _no_check  # a _Stopped passes: the signal replaces it after shutdown
         finally:
             ray.shutdown()
 
