@@ -130,6 +130,8 @@ def test_cli_fleet_options(fleet_dir, tmp_path, capsys):
     assert main(["gap", "diagnose", str(tmp_path / "missing.csv"), "--out", str(tmp_path / "d")]) == 2
     assert "missing.csv: no such file" in capsys.readouterr().err
     assert not any((tmp_path / d).exists() for d in "abcd")
+    assert main(["gap", "validate", "--plant", "payload", "--n", "1", "--ray", "auto"]) == 2
+    assert "--ray applies to --plant quarter-car" in capsys.readouterr().err
 
 
 def test_import_fricenv_does_not_import_ray():

@@ -5,7 +5,8 @@ Example: fricenv gap diagnose log.csv --plant quarter-car --out report_dir
 A fleet: fricenv gap diagnose logs/ --out fleet_dir (a folder: its *.csv logs; or a quoted glob pattern such as
 'logs/**/*.csv') diagnoses every log into fleet_dir/<log stem>/ and writes fleet_dir/fleet.json, fleet.md and plots
 (fricenv.gap.fleet). A re-run skips the logs already reported (--force redoes them); --jobs sets the parallel logs;
---ray auto (or a Ray cluster address) runs them on Ray.
+--ray auto (or a Ray cluster address) runs them on Ray. A log that fails is a row with its error, and the exit
+code is then 1.
 
 Writes DIR/report.json (DESIGN.md schema), DIR/report.md and PNG plots (atomically: temporary name, then rename)
 and prints a short summary. --params FILE.json overrides the nominal vehicle parameters (m, J, r, Fz, g); for

@@ -55,8 +55,8 @@ def fleet_markdown(rows: list[dict], images: tuple[str, ...] = (PLOT_VERDICTS, P
     gaps = _gap_pairs(rows)
     lines += ["", "## Gap before / after (held-out, noise units)", ""]
     if len(gaps):
-        lines += [f"- median gap before: {np.median(gaps[:, 0]):.3f}, after: {np.median(gaps[:, 1]):.3f} "
-                  f"({len(gaps)} logs)",
+        lines += [(f"- median gap before: {np.median(gaps[:, 0]):.3f}, after: {np.median(gaps[:, 1]):.3f} "
+                   f"({len(gaps)} logs)"),
                   f"- logs whose gap shrank: {int(np.sum(gaps[:, 1] < gaps[:, 0]))}"]
     errors = [r for r in rows if r["error"] is not None]
     lines += ["", f"## Errors ({len(errors)})", ""]
