@@ -2,6 +2,12 @@
 
 Example: fricenv gap diagnose log.csv --plant quarter-car --out report_dir
 
+A fleet: fricenv gap diagnose logs/ --out fleet_dir (a folder: its *.csv logs; or a quoted glob pattern such as
+'logs/**/*.csv') diagnoses every log into fleet_dir/<log stem>/ and writes fleet_dir/fleet.json, fleet.md and plots
+(fricenv.gap.fleet). A re-run skips the logs already reported (--force redoes them); --jobs sets the parallel logs;
+--ray auto (or a Ray cluster address) runs them on Ray. A log that fails is a row with its error, and the exit
+code is then 1.
+
 Writes DIR/report.json (DESIGN.md schema), DIR/report.md and PNG plots (atomically: temporary name, then rename)
 and prints a short summary. --params FILE.json overrides the nominal vehicle parameters (m, J, r, Fz, g); for
 --plant payload (log columns t, M, f_x, f_y, theta, X, Y) it gives the known calibration "S" (3x3 row-major) and
@@ -11,6 +17,7 @@ optionally m, I_G, rho_x, rho_y.
 from __future__ import annotations
 
 import argparse
+from collections import Counter
 
 from fricenv.errors import InvalidInputError
 from fricenv.utils import read_json_object
@@ -20,7 +27,8 @@ PLANTS = ("quarter-car", "payload")
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of ``fricenv gap diagnose``."""
-    parser.add_argument("log", help="log CSV (DESIGN.md format)")
+    parser.add_argument("source", metavar="LOG",
+                        help="log CSV (DESIGN.md format), or a folder of *.csv logs or a quoted glob pattern (a fleet)")
     parser.add_argument("--plant", default="quarter-car", help="plant of the log (default %(default)s)")
     parser.add_argument("--out", required=True, help="report directory")
     parser.add_argument("--params", metavar="FILE.json", help="nominal plant parameters (JSON object)")
@@ -29,6 +37,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
     parser.add_argument("--candidates", metavar="A,B,...", default=None,
                         help="comma-separated candidate effects to try (default: the whole library)")
+    parser.add_argument("--force", action="store_true", help="fleet: diagnose again the logs already reported")
+    parser.add_argument("--ray", metavar="auto|ADDRESS", default=None,
+                        help="fleet: run on Ray (auto: a running instance or cluster, else a local one; or an address)")
     _add_map_option(parser)
 
 
@@ -79,7 +90,12 @@ def _candidates(args: argparse.Namespace, valid: tuple[str, ...]) -> tuple[str, 
 
 
 def run(args: argparse.Namespace) -> int:
-    """Read, diagnose, report."""
+    """Read, diagnose, report (a fleet: every log of a folder or glob pattern, and the fleet summary)."""
+    from fricenv.gap.fleet import is_fleet_source
+
+    if is_fleet_source(args.source):
+        return _run_fleet(args)
+    _single_log(args)
     check_options(args)
     if args.plant == "payload":
         return _run_payload(args)
@@ -115,3 +131,42 @@ def _run_payload(args: argparse.Namespace) -> int:
     cfg = PayloadDiagnoseConfig() if names is None else PayloadDiagnoseConfig(candidates=names)
     dg = diagnose_payload_file(_mapped_log(args), args.params, cfg)
     return _report(args, dg, write_payload_report(dg, args.out, plots=not args.no_plots), summary_line(dg))
+
+
+def _single_log(args: argparse.Namespace) -> None:
+    """One log: ``args.log`` checked as the CLI checks input files; the fleet options rejected."""
+    from fricenv.utils import check_input_file
+
+    args.log = args.source
+    check_input_file(args.log, "log")
+    for option, value in (("--ray", args.ray), ("--force", args.force)):
+        if value:
+            raise InvalidInputError(f"{option} applies to a fleet (a folder or glob pattern of logs), "
+                                    f"not to the single log {args.log}")
+
+
+def _run_fleet(args: argparse.Namespace) -> int:
+    """A folder or glob pattern: every log diagnosed into OUT/<stem>/, then OUT/fleet.json, fleet.md and plots."""
+    from fricenv.gap.fleet import FleetSettings, run_fleet
+
+    check_options(args)
+    if args.json:
+        raise InvalidInputError("--json applies to a single log; a fleet's rows are in OUT/fleet.json")
+    if args.ray is not None and args.jobs is not None:
+        raise InvalidInputError("--jobs sets local processes; with --ray the cluster's CPUs set the parallelism")
+    if args.plant == "payload":
+        from fricenv.gap.payload_diagnose import PayloadDiagnoseConfig as Config
+    else:
+        from fricenv.gap.diagnose import DiagnoseConfig as Config
+    names = _candidates(args, Config().candidates)
+    settings = FleetSettings(plant=args.plant, params_file=args.params,
+                             config=Config() if names is None else Config(candidates=names),
+                             plots=not args.no_plots, force=args.force, jobs=args.jobs, ray=args.ray)
+    s = run_fleet(args.source, args.out, settings)
+    counts = Counter(r["verdict"] for r in s["rows"])
+    print(f"{len(s['rows'])} logs: " + ", ".join(f"{v} {n}" for v, n in counts.most_common()))
+    rate = s["diagnosed"] / s["wall_seconds"] * 3600 if s["diagnosed"] else 0.0
+    print(f"diagnosed {s['diagnosed']} in {s['wall_seconds']:.0f} s ({rate:.0f} logs/hour), "
+          f"skipped {s['skipped']} already reported, {s['failed']} failed")
+    print(f"fleet: {args.out}/fleet.json, fleet.md")
+    return 1 if s["failed"] else 0

@@ -1,6 +1,7 @@
 """Validate the gap diagnosis on withheld effects: random logs, blind diagnosis, confusion matrix.
 
 Example: fricenv gap validate --n 50 --seed 1 --jobs 2 --json validate.json
+(--ray auto or --ray ADDRESS: the diagnoses run on a Ray cluster instead of --jobs local processes)
 
 Draws N logs from the real stand-in (each library effect at realistic sizes, no effect, and a physically real effect
 outside the library: brake fade or pitch load transfer) on random roads and drivers, diagnoses each without telling
@@ -25,6 +26,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--required-only-share", type=float, default=0.0,
                         help="share of logs with only the required columns t, T_b, omega (default %(default)s)")
     parser.add_argument("--json", metavar="PATH", help="write the figures (and every log's result) as JSON")
+    parser.add_argument("--ray", metavar="auto|ADDRESS", default=None,
+                        help="run the diagnoses on Ray (auto: a running instance or cluster, else a local one; "
+                             "or a cluster address); quarter-car only")
     parser.add_argument("--plant", default="quarter-car",
                         help="quarter-car or payload (payload: its four effects, none, and viscous damping as the "
                              "out-of-library effect; one process; default %(default)s)")
@@ -44,6 +48,8 @@ def run(args: argparse.Namespace) -> int:
     if args.plant not in PLANTS:
         raise InvalidInputError(f"unknown plant {args.plant!r}; valid plants: {', '.join(PLANTS)}")
     if args.plant == "payload":
+        if args.ray is not None:
+            raise InvalidInputError("--ray applies to --plant quarter-car (the payload validation runs in one process)")
         from fricenv.gap.payload_validate import format_payload_summary, validate_payload
 
         summary = validate_payload(args.n, args.seed)
@@ -52,7 +58,8 @@ def run(args: argparse.Namespace) -> int:
         if args.json:
             write_json(args.json, summary)
         return 0
-    summary = validate(args.n, args.seed, jobs=args.jobs, drop_optional_share=args.required_only_share)
+    summary = validate(args.n, args.seed, jobs=args.jobs, drop_optional_share=args.required_only_share,
+                       ray=args.ray)
     print(format_summary(summary))
     print(f"wall time {summary['wall_seconds']:.0f} s")
     if args.json:

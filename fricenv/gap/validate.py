@@ -170,7 +170,7 @@ def _run_one(case: Case, cfg: DiagnoseConfig) -> dict:
 
 
 def validate(n: int, seed=None, jobs: int = 1, drop_optional_share: float = 0.0,
-             cfg: DiagnoseConfig | None = None, show_progress: bool = True) -> dict:
+             cfg: DiagnoseConfig | None = None, show_progress: bool = True, ray: str | None = None) -> dict:
     """Draw ``n`` random logs (categories in turn, shuffled), diagnose each blind, and summarise.
 
     :param n: number of logs.
@@ -178,6 +178,7 @@ def validate(n: int, seed=None, jobs: int = 1, drop_optional_share: float = 0.0,
     :param jobs: processes (each diagnosis runs its candidate fits in one process).
     :param drop_optional_share: share of logs written with the required columns only.
     :param cfg: diagnosis settings.
+    :param ray: None (``jobs`` local processes), ``"auto"`` or a Ray address (:func:`fricenv.gap.pool.map_tasks`).
     :return: the summary (see :func:`summarize`) with the per-log results under ``"logs"``.
     """
     if n < 1:
@@ -189,7 +190,7 @@ def validate(n: int, seed=None, jobs: int = 1, drop_optional_share: float = 0.0,
     cases = [draw_case(c, rng, bool(rng.random() < drop_optional_share)) for c in cats]
     t0 = time.perf_counter()
     with nullcontext() if show_progress else progress.use_sink(None):
-        results = map_tasks(_run_one, [(c, cfg) for c in cases], jobs, "validate")
+        results = map_tasks(_run_one, [(c, cfg) for c in cases], jobs, "validate", ray)
     summary = summarize(results)
     summary["wall_seconds"] = time.perf_counter() - t0
     summary["n"] = n

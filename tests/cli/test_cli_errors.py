@@ -60,7 +60,7 @@ def _bad_input_cases(tmp_path, log):
         (["gap", "diagnose", str(log), "--out", out, "--params", str(bad_json)], "not valid JSON"),
         (["gap", "diagnose", str(log), "--out", out, "--params", str(list_json)], "expected a JSON object"),
         (["gap", "diagnose", str(tmp_path / "none.csv"), "--out", out], "no such file"),
-        (["gap", "diagnose", str(tmp_path), "--out", out], "is a directory, expected a file"),
+        (["gap", "diagnose", str(tmp_path), "--out", out], "no log files found"),
         (["gap", "diagnose", str(log), "--out", out, "--plant", "bicycle"], "valid plants: quarter-car, payload"),
         (["gap", "diagnose", str(log), "--out", out, "--jobs", "0"], "--jobs must be >= 1"),
         (["gap", "diagnose", str(log), "--out", out, "--candidates", "nope"], "unknown candidate effect(s) nope"),
