@@ -26,7 +26,7 @@ from fricenv.gap.fleet import (
 from fricenv.gap.fleet_report import PLOT_GAPS, PLOT_PARAMS, PLOT_VERDICTS
 from tests.gap.fleet_helpers import FAST, TAU, simulate_fleet
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 @pytest.fixture(scope="module")

@@ -12,7 +12,7 @@ from fricenv import progress
 from fricenv.gap.fleet import FLEET_JSON, FleetSettings, run_fleet
 from fricenv.gap.pool import map_tasks
 from tests.gap.fleet_helpers import FAST, simulate_fleet
-from tests.test_gap_pool import RecordingSink, _square_after
+from tests.gap.test_gap_pool import RecordingSink, _square_after
 
 ray = pytest.importorskip("ray", reason="ray is a dependency of fricenv (pyproject.toml)")
 
@@ -67,7 +67,7 @@ def test_fleet_rows_identical_on_ray_and_in_the_process_pool(tmp_path, local_ray
 
 KILLABLE = """
 from fricenv.gap.pool import map_tasks
-from tests.test_gap_pool import _square_after
+from tests.gap.test_gap_pool import _square_after
 map_tasks(_square_after, [(2, 120.0)] * 2, 1, "sleep", ray="auto")
 """
 
@@ -101,7 +101,7 @@ def test_sigterm_during_a_ray_run_shuts_its_instance_down():
     import sys
     import time
 
-    root = Path(__file__).resolve().parents[1]
+    root = Path(__file__).resolve().parents[2]
     proc = subprocess.Popen([sys.executable, "-c", KILLABLE], cwd=root, stderr=subprocess.DEVNULL)
     try:
         deadline = time.monotonic() + 180
