@@ -55,17 +55,19 @@ from __future__ import annotations
 
 import time
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 from fricenv import progress
 from fricenv.gap.candidates import fit_candidate, nested_nominal, run_fits, test_against
 from fricenv.gap.changepoint import change_point_starts
 from fricenv.gap.config import DEFAULT_CONFIG, FIT_LOSSES, DiagnoseConfig
 from fricenv.gap.drift import drift_test, fit_time_split
+from fricenv.gap.excitation import excitation, untestable
 from fricenv.gap.fitting import distinct_starts, fit_nominal, refine_noise, score
 from fricenv.gap.localise import localise, tests_table
 from fricenv.gap.params import ROAD_NAMES, param_names, road_of
 from fricenv.gap.pool import default_jobs
+from fricenv.gap.selection import forward_select, split_params
 from fricenv.gap.stats import (
     TRIM_SHARE,
     WINDOW_MSE_CAP,
@@ -133,6 +135,14 @@ class Diagnosis:
     residuals: dict = field(default_factory=dict)  # "before"/"after": (n_windows, H) RMS normalised residual
     seconds: float = 0.0
     source: str = "<memory>"
+    effects: list = field(default_factory=list)  # [{"effect", "params"}, ...] the selected set in order
+    whole: CandidateFit | None = None  # the selected set's cross-fitted model
+
+
+# Effects a log's provenance predicts: log attribute -> (effect, why). Such an effect is tried first in the forward
+# selection, listed first in ``effects`` and reported as a calibration, not as a discovery.
+EXPECTED_EFFECTS = {"torque_from_pressure": ("brake_gain", "T_b was computed from brake pressure through a nominal "
+                                                           "factor: a brake gain is its calibration, not a discovery")}
 
 
 @dataclass
@@ -147,6 +157,7 @@ class _Selection:
     verdict: str = "none"
     chosen: CandidateFit | None = None
     drift: dict | None = None
+    residuals: dict = field(default_factory=dict)
 
 
 def _calibrate(folds: list[Data], cfg: DiagnoseConfig) -> list[CandidateFit]:
@@ -229,14 +240,47 @@ def diagnose(log: QuarterCarLog, p: qc.QuarterCarParams = qc.PAPER_PARAMS,
     d = prepare(log, p, cfg)
     folds = [fold_data(d, j) for j in range(int(cfg.folds))]
     jobs = default_jobs(cfg.jobs)
+    expected = {e: why for attr, (e, why) in EXPECTED_EFFECTS.items() if getattr(log, attr, False)}
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
-        nominal, fits = _candidates(_calibrate(folds, cfg), folds, d, cfg, jobs)
-        s = _select(nominal, fits, folds, d, p, cfg, jobs)
+        nominal_folds = _calibrate(folds, cfg)
+        not_testable = untestable(cfg.candidates, excitation(nominal_folds[0], d))
+        run_cfg = replace(cfg, candidates=tuple(c for c in cfg.candidates if c not in not_testable))
+        nominal, fits = _candidates(nominal_folds, folds, d, run_cfg, jobs)
+        s = _select(nominal, fits, folds, d, p, run_cfg, jobs)
         # each half needs training windows in every fold: at least ``folds`` windows per half
         if s.chosen is not None and cfg.drift_check and len(d.starts) >= 2 * int(cfg.folds):
             _check_drift(s, nominal, d, cfg, jobs)
-    where, residuals = localise(nominal, s.chosen, d, cfg.folds)
+        whole, steps = None, []
+        if s.chosen is not None:
+            eligible = [f for f in s.significant if not s.edges.get(f.effect)]
+            whole, steps = forward_select(s.chosen, eligible, nominal, folds, d, p, cfg, jobs, tuple(expected))
+    where = _where(nominal, s, d, cfg)
+    where["not_testable"] = not_testable
+    where["sensors"] = d.sensors
+    where["forward_selection"] = steps
+    effects = [] if whole is None else _order(split_params(whole), expected)
+    if expected:
+        where["expected_effects"] = expected
+    verdict = s.verdict
+    if effects:
+        found = [e["effect"] for e in effects if e["effect"] not in expected]
+        verdict = found[0] if found else effects[0]["effect"]
+    return Diagnosis(verdict=verdict, gap_before=nominal.gap,
+                     gap_after=nominal.gap if whole is None else whole.gap,
+                     params=next((e["params"] for e in effects if e["effect"] == verdict), {}), where=where,
+                     candidates=s.fits, nominal=nominal, joint=s.joint, data=d, residuals=s.residuals,
+                     seconds=time.perf_counter() - t_start, source=log.source, effects=effects, whole=whole)
+
+
+def _order(effects: list[dict], expected: dict) -> list[dict]:
+    """The selected effects with the expected ones (a calibration) first."""
+    return [e for e in effects if e["effect"] in expected] + [e for e in effects if e["effect"] not in expected]
+
+
+def _where(nominal: CandidateFit, s: _Selection, d: Data, cfg: DiagnoseConfig) -> dict:
+    """The report's ``where`` from the localisation and the tests (the residuals for the plots go into ``s``)."""
+    where, s.residuals = localise(nominal, s.chosen, d, cfg.folds)
     where["tests"] = tests_table(s.fits, s.significant, s.edges)
     where["robust_gap_before"] = robust_gap(nominal)
     if s.drift is not None:
@@ -244,12 +288,7 @@ def diagnose(log: QuarterCarLog, p: qc.QuarterCarParams = qc.PAPER_PARAMS,
     if s.joint is not None:
         where["joint_fit"] = {"effects": s.joint.effect.split("+"), "params": s.joint.effect_params(),
                               "gap_after": s.joint.gap, "t_stat": s.joint.t_stat}
-    chosen = s.chosen
-    return Diagnosis(verdict=s.verdict, gap_before=nominal.gap,
-                     gap_after=nominal.gap if chosen is None else chosen.gap,
-                     params={} if chosen is None else chosen.effect_params(), where=where, candidates=s.fits,
-                     nominal=nominal, joint=s.joint, data=d, residuals=residuals,
-                     seconds=time.perf_counter() - t_start, source=log.source)
+    return where
 
 
 def load_params(path) -> qc.QuarterCarParams:
