@@ -124,14 +124,17 @@ def _outliers(x: np.ndarray, noise: float) -> np.ndarray:
     return np.flatnonzero(flag)
 
 
-def condition_channel(x: np.ndarray, floor: float, quiet: int = 0) -> ChannelCondition:
+def condition_channel(x: np.ndarray, floor: float, quiet: int = 0, may_be_filtered: bool = True) \
+        -> ChannelCondition:
     """Missing samples, outliers, quantisation and filtering of one channel, and its noise estimate.
 
     :param x: the channel's samples (NaN: missing).
     :param floor: the smallest accepted noise std (SI).
     :param quiet: length of the quiet start (free rolling, where the signal barely moves): the filtering test reads
-        the second differences there when it holds ``QUIET_MIN`` samples (elsewhere the signal's own curvature
+        the differences there when it holds ``QUIET_MIN`` samples (elsewhere the signal's own curvature
         correlates them), else over the whole channel.
+    :param may_be_filtered: run the filtering test (False for a wheel-speed sensor: its pulses are counted, not
+        low-passed, and its small noise under a curved signal would read as filtered).
     """
     x = np.asarray(x, dtype=float).copy()
     missing = float(np.mean(~np.isfinite(x))) if x.size else 0.0
@@ -143,7 +146,7 @@ def condition_channel(x: np.ndarray, floor: float, quiet: int = 0) -> ChannelCon
     if out.size:
         raw = estimate_noise(_fresh(x))
         noise = max(raw if np.isfinite(raw) else floor, floor, q / np.sqrt(12.0))
-    filtered = difference_ac(x[:quiet] if quiet >= QUIET_MIN else x) > FILTERED_AC and q == 0.0
+    filtered = may_be_filtered and q == 0.0 and difference_ac(x[:quiet] if quiet >= QUIET_MIN else x) > FILTERED_AC
     return ChannelCondition(values=x, filled=fill_missing(x), noise=noise, missing=missing, outliers=out,
                             quant_step=q, filtered=filtered)
 

@@ -35,6 +35,7 @@ GN_ITERS = 2  # Gauss-Newton iterations of the wheel-speed nuisance
 FREE_ROLL_TORQUE = 0.02  # free rolling: |T_b| below this share of max |T_b| [-]
 SAVGOL = (11, 2)  # speed smoother: window [samples], polynomial order
 NOISE_FLOOR = {"omega": 1e-3, "v": 1e-3, "a_x": 1e-3}  # smallest accepted noise std per channel (SI)
+FILTERED_CHANNELS = ("v", "a_x")  # channels a logger may low-pass (IMU, speed estimate); omega is a pulse count
 MIN_HORIZON = 3  # shortest prediction window [samples] (a 0.1 s window at 25 Hz would hold 2.5)
 MIN_WINDOWS = 6  # fewest prediction windows a diagnosis needs (3 per fold for the cross-fitting) [-]
 # Transient slip at a window start: False = the slip of the window's start state (the wheel-speed nuisance fit then
@@ -98,7 +99,7 @@ def _conditioned(log: QuarterCarLog, free_end: int) -> dict:
     for c in ("omega", "v", "a_x"):
         x = getattr(log, c)
         if x is not None:
-            out[c] = condition_channel(np.asarray(x, dtype=float), NOISE_FLOOR[c], free_end)
+            out[c] = condition_channel(np.asarray(x, dtype=float), NOISE_FLOOR[c], free_end, c in FILTERED_CHANNELS)
     return out
 
 
