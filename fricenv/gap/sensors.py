@@ -155,7 +155,7 @@ def correlation_time(r: np.ndarray) -> float:
     """Integrated autocorrelation time ``1 + 2 sum_k rho_k`` of residual rows ``r`` (windows, H), NaN ignored, the
     sum stopped at the first non-positive autocorrelation; at least 1."""
     r = np.where(np.isfinite(r), r, 0.0)
-    r = r - np.mean(r, axis=-1, keepdims=True)
+    r = r - np.mean(r)  # a model's residual: centred over the log, not per window (a window mean is signal)
     den = float(np.sum(r * r))
     if den <= 0 or r.shape[-1] < 3:
         return 1.0

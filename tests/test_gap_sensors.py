@@ -1,0 +1,179 @@
+"""Issue 15 items 2-4: sensor conditioning (missing, outliers, quantisation, filtering), the soft window cap, the
+rate-adapted prediction window, short logs, the effects' testability rules and the report's ``effects``."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+from scipy.signal import butter, lfilter
+
+from fricenv.effects import registry
+from fricenv.effects.registry import Excitation
+from fricenv.gap.config import DiagnoseConfig
+from fricenv.gap.report import REPORT_KEYS, report_dict
+from fricenv.gap.selection import split_params
+from fricenv.gap.sensors import condition_channel, correlation_time, fill_missing, quantisation_step
+from fricenv.gap.stats import WINDOW_MSE_CAP, CandidateFit, soft_cap, window_mse
+from fricenv.gap.windows import LogTooShortError, horizon_samples, prepare
+from fricenv.logs import QuarterCarLog
+from fricenv.plants import quarter_car as qc
+
+RNG = np.random.default_rng(2024)
+
+
+def _smooth_signal(n: int) -> np.ndarray:
+    t = np.arange(n) * 0.01
+    return 20.0 - 3.0 * t + 0.5 * np.sin(2.0 * t)
+
+
+def test_white_noise_level_is_estimated_within_10pct():
+    x = _smooth_signal(2000) + RNG.normal(0.0, 0.2, 2000)
+    c = condition_channel(x, 1e-3)
+    assert c.noise == pytest.approx(0.2, rel=0.1)
+    assert not c.filtered
+    assert c.outliers.size == 0
+
+
+def test_isolated_outliers_are_found_and_do_not_move_the_noise_level():
+    x = _smooth_signal(2000) + RNG.normal(0.0, 0.2, 2000)
+    spikes = [150, 700, 1333]
+    x[spikes] += np.array([6.0, -8.0, 10.0])
+    c = condition_channel(x, 1e-3)
+    assert sorted(c.outliers.tolist()) == spikes
+    assert np.all(np.isnan(c.values[spikes]))
+    assert np.all(np.isfinite(c.filled))
+    assert c.noise == pytest.approx(0.2, rel=0.1)
+
+
+def test_a_step_is_not_an_outlier():
+    x = np.concatenate([np.zeros(500), np.full(500, 5.0)]) + RNG.normal(0.0, 0.05, 1000)
+    assert condition_channel(x, 1e-3).outliers.size == 0
+
+
+def test_quantisation_sets_a_floor_of_q_over_sqrt12():
+    q = 0.1
+    x = np.round((_smooth_signal(1000) + RNG.normal(0.0, 0.005, 1000)) / q) * q
+    assert quantisation_step(x) == pytest.approx(q, rel=1e-6)
+    c = condition_channel(x, 1e-3)
+    assert c.noise >= q / np.sqrt(12.0) * (1 - 1e-9)
+    assert quantisation_step(RNG.normal(size=100)) == 0.0
+
+
+def test_low_pass_filtered_channel_is_flagged_and_white_one_is_not():
+    b, a = butter(2, 0.2)  # 10 Hz at 100 Hz
+    noise = RNG.normal(0.0, 0.1, 3000)
+    filtered = condition_channel(_smooth_signal(3000) + lfilter(b, a, noise), 1e-3, quiet=200)
+    white = condition_channel(_smooth_signal(3000) + noise, 1e-3, quiet=200)
+    assert filtered.filtered and not white.filtered
+    assert not condition_channel(_smooth_signal(3000) + lfilter(b, a, noise), 1e-3, 200, False).filtered
+
+
+def test_correlation_time_is_one_for_white_and_larger_for_ar1():
+    white = RNG.normal(size=(400, 10))
+    assert correlation_time(white) == pytest.approx(1.0, abs=0.3)
+    ar = lfilter([1.0], [1.0, -0.8], RNG.normal(size=4000)).reshape(400, 10)
+    # AR(1) with pole 0.8: tau = (1 + 0.8) / (1 - 0.8) = 9 in the limit; 10-sample windows truncate it
+    assert correlation_time(ar) > 3.0
+
+
+def test_missing_samples_are_interpolated_for_states_only():
+    x = np.array([np.nan, 1.0, np.nan, 3.0, np.nan])
+    np.testing.assert_allclose(fill_missing(x), [1.0, 1.0, 2.0, 3.0, 3.0])
+    c = condition_channel(np.r_[np.arange(40.0), np.full(10, np.nan)], 1e-3)
+    assert c.missing == pytest.approx(0.2)
+
+
+def test_soft_cap_keeps_the_order_beyond_the_cap():
+    x = np.array([1.0, WINDOW_MSE_CAP, 30.0, 300.0, 3000.0])
+    y = soft_cap(x)
+    np.testing.assert_allclose(y[:2], x[:2], rtol=0, atol=1e-12)
+    assert np.all(np.diff(y) > 0)
+    assert y[-1] < 2 * WINDOW_MSE_CAP
+
+
+def test_window_mse_leaves_missing_samples_out():
+    r = np.array([[2.0, 0.0, 2.0, 0.0], [0.0, 0.0, 0.0, 0.0]])
+    np.testing.assert_allclose(window_mse(r, np.array([2, 0])), [4.0, 1.0], rtol=0, atol=1e-12)
+
+
+def test_horizon_adapts_to_the_rate():
+    cfg = DiagnoseConfig()
+    assert horizon_samples(cfg, 0.01) == 10
+    assert horizon_samples(cfg, 0.04) == 3  # 2.5 samples at 25 Hz: the minimum of 3
+    assert horizon_samples(cfg, 0.001) == 100
+    assert horizon_samples(replace(cfg, horizon=7), 0.04) == 7
+
+
+def _log(n: int, dt: float, **channels) -> QuarterCarLog:
+    t = np.arange(n) * dt
+    T = np.where(t > 0.3, 800.0, 0.0)
+    return QuarterCarLog(t=t, T_b=T, omega=np.linspace(80.0, 60.0, n) + RNG.normal(0, 0.1, n), **channels)
+
+
+def test_too_short_log_is_a_clear_error_naming_the_source():
+    log = replace(_log(12, 0.04), source="seg7.csv")
+    with pytest.raises(LogTooShortError, match=r"seg7.csv: log too short.*12 samples"):
+        prepare(log, qc.PAPER_PARAMS, DiagnoseConfig())
+
+
+def test_prepare_leaves_nan_samples_out_of_the_window_counts():
+    n = 200
+    v = np.linspace(25.0, 20.0, n) + RNG.normal(0, 0.05, n)
+    v[::3] = np.nan  # a slower channel held between its samples
+    d = prepare(_log(n, 0.01, v=v), qc.PAPER_PARAMS, DiagnoseConfig())
+    assert d.sensors["v"]["missing_share"] == pytest.approx(np.mean(np.isnan(v)))
+    assert np.all(np.isfinite(d.v))
+    rows = d.starts[:, None] + np.arange(d.horizon)[None, :]
+    expect = d.horizon + np.count_nonzero(np.isfinite(v[rows]), axis=1)
+    np.testing.assert_array_equal(d.counts, expect)
+
+
+def _excitation(**kw) -> Excitation:
+    base = dict(has_v=True, has_a_x=True, braking_windows=40, torque_transients=6, slip_transient_windows=10,
+                near_peak_early=5, near_peak_late=5, speed_range=15.0, training_windows=20)
+    return Excitation(**{**base, **kw})
+
+
+@pytest.mark.parametrize("effect, lacking", [
+    ("radius_error", dict(has_v=False, has_a_x=False)),
+    ("relaxation_length", dict(slip_transient_windows=0)),
+    ("brake_lag", dict(torque_transients=1)),
+    ("brake_delay", dict(torque_transients=0)),
+    ("mu_change", dict(near_peak_late=0)),
+    ("mu_change", dict(training_windows=2)),
+    ("drag", dict(speed_range=3.0)),
+    ("brake_gain", dict(braking_windows=0)),
+])
+def test_testability_rules_name_what_the_log_lacks(effect, lacking):
+    rule = registry.get(effect).testable
+    assert rule(_excitation()) is None
+    reason = rule(_excitation(**lacking))
+    assert isinstance(reason, str) and reason
+
+
+def _fit(effect: str, names, x) -> CandidateFit:
+    return CandidateFit(effect=effect, names=tuple(names), x=np.asarray(x, float), train_mse=1.0, test_mse=1.0,
+                        window_mse=np.ones(4))
+
+
+def test_split_params_gives_one_record_per_effect_in_order():
+    f = _fit("drag+relaxation_length", ["B", "C", "E", "theta", "c0", "c2", "sigma"],
+             [1, 2, 0.5, 1, 200.0, 0.4, 0.3])
+    assert split_params(f) == [{"effect": "drag", "params": {"c0": 200.0, "c2": 0.4}},
+                               {"effect": "relaxation_length", "params": {"sigma": 0.3}}]
+
+
+def test_report_has_effects_after_the_old_keys():
+    assert REPORT_KEYS[-1] == "effects" and REPORT_KEYS[:-1] == ("plant", "verdict", "gap_before", "gap_after",
+                                                               "params", "where", "candidates")
+    dg = SimpleNamespace(verdict="drag", gap_before=3.0, gap_after=0.5, params={"c0": 1.0, "c2": 0.1}, where={},
+                         candidates=[])
+    assert report_dict(dg)["effects"] == [{"effect": "drag", "params": {"c0": 1.0, "c2": 0.1}}]
+    assert report_dict(replace_verdict(dg, "none"))["effects"] == []
+
+
+def replace_verdict(dg, verdict):
+    return SimpleNamespace(**{**vars(dg), "verdict": verdict, "params": {}})
