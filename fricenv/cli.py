@@ -46,6 +46,7 @@ VERBS: dict[tuple[str, str | None], str] = {
     ("compare", None): "agents.commands.compare",
     ("gap", "simulate"): "fricenv.commands.gap_simulate",
     ("gap", "diagnose"): "fricenv.commands.gap_diagnose",
+    ("gap", "convert"): "fricenv.commands.gap_convert",
     ("gap", "policy"): "agents.commands.gap_policy",
     ("gap", "validate"): "fricenv.commands.gap_validate",
 }

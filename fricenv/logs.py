@@ -4,6 +4,11 @@ CSV in SI units: optional leading ``#`` lines, one header row, then rows. Quarte
 ``T_b`` [N m] (commanded torque), ``omega`` [rad/s]; optional ``v`` [m/s], ``a_x`` [m/s^2]. Payload: ``t``,
 ``M``, ``f_x``, ``f_y`` (raw sensor readings), ``theta``, ``X``, ``Y`` (vision). Unknown extra columns are ignored
 with a warning. Every error names the file, and where it can the line and the column.
+
+Real exports (docs/contracts.md, section 1): ``read_log(path, plant, column_map=MAP)`` reads any CSV whose columns a
+column map (:mod:`fricenv.logmap`) names, in the map's units. Jittered time stamps and dropped rows are resampled onto
+a uniform grid, held samples of a slower channel are marked missing (NaN), and the log records what was done
+(``resampled``, ``missing``, ``torque_from_pressure``); the rules are in :mod:`fricenv.resample`.
 """
 
 from __future__ import annotations
@@ -11,26 +16,34 @@ from __future__ import annotations
 import os
 import re
 import warnings
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
+from fricenv import resample as rs
 from fricenv.errors import InvalidInputError
+from fricenv.logmap import HEADER_UNIT as _HEADER_UNIT
+from fricenv.logmap import SI_UNITS as _SI_UNITS
+from fricenv.logmap import UNITS, ColumnMap, ColumnMapError, apply_map, load_map
+from fricenv.logmap import unit_key as _unit_key
 from fricenv.plants.sui_johansen import RADIUS
 from fricenv.utils import atomic_write
 
 __all__ = [
     "PLANTS",
+    "TORQUE_FROM_PRESSURE",
+    "ColumnMapError",
     "LogFormatError",
     "PayloadLog",
     "QuarterCarLog",
+    "log_notes",
     "read_log",
     "write_log",
 ]
 
-# Relative jitter allowed in the time step before the log counts as non-uniform.
-_DT_REL_TOL = 1e-3
+# The comment line that marks a brake torque computed from a line pressure with a nominal factor.
+TORQUE_FROM_PRESSURE = "torque_source: pressure"
 # Plausibility limits, chosen to catch a wrong unit (rpm for rad/s, km/h for m/s, degrees for rad), not noise.
 _MAX_WHEEL_SURFACE_SPEED = 100.0  # |omega| r above this [m/s] (360 km/h) means omega is not in rad/s
 _MAX_SPEED = 100.0  # [m/s]
@@ -46,18 +59,9 @@ _MAX_LINEAR_RATE = 20.0  # median |X'|, |Y'| [m/s]
 _NOMINAL_RADIUS = RADIUS  # [m], Sui & Johansen Table I; only used for the unit checks
 
 
-# SI unit of each column; a header cell may carry it as "omega [rad/s]" or "omega (rad/s)".
-_SI_UNITS = {"t": "s", "T_b": "N m", "omega": "rad/s", "v": "m/s", "a_x": "m/s^2",
-             "M": "N m", "f_x": "N", "f_y": "N", "theta": "rad", "X": "m", "Y": "m"}
-_HEADER_UNIT = re.compile(r"^(?P<name>[^\[\]()]+?)\s*(\[(?P<u1>[^\]]*)\]|\((?P<u2>[^)]*)\))$")
 # A number as a CSV holds it: ASCII decimal, optional exponent, or nan/inf (rejected later with their line). Python's
 # float() alone would also take "1_0" and non-ASCII digits.
 _NUMBER = re.compile(r"^\s*[+-]?((\d+\.?\d*|\.\d+)([eE][+-]?\d+)?|nan|inf|infinity)\s*$", re.IGNORECASE | re.ASCII)
-
-
-def _unit_key(unit: str) -> str:
-    """A unit spelling reduced for comparison: "N m", "N*m", "N.m" and "Nm" agree, so do "m/s^2" and "m/s2"."""
-    return re.sub(r"[\s*.^]", "", unit).replace("\u00b2", "2")
 
 
 class LogFormatError(InvalidInputError):
@@ -66,15 +70,20 @@ class LogFormatError(InvalidInputError):
 
 @dataclass(frozen=True)
 class QuarterCarLog:
-    """A quarter-car braking log; arrays share one length."""
+    """A quarter-car braking log; arrays share one length. A missing or held sample is NaN in ``v`` or ``a_x``,
+    never in ``t`` or ``T_b`` (``omega`` is filled, see :mod:`fricenv.resample`)."""
 
     t: np.ndarray  # time [s], uniform step
     T_b: np.ndarray  # commanded brake torque [N m]
     omega: np.ndarray  # measured wheel speed [rad/s]
     v: np.ndarray | None = None  # reference ground speed [m/s]
     a_x: np.ndarray | None = None  # longitudinal acceleration [m/s^2], negative when braking
+    # what the log records besides its channels (compare=False: logs with equal data are equal)
     comments: tuple[str, ...] = field(default=(), compare=False)  # the leading '#' lines, without '#'
     source: str = field(default="<memory>", compare=False)
+    torque_from_pressure: bool = field(default=False, compare=False)  # T_b = pressure x nominal factor: expect a gain
+    resampled: dict | None = field(default=None, compare=False)  # fricenv.resample.Grid.summary(); None: not needed
+    missing: dict[str, float] = field(default_factory=dict, compare=False)  # channel -> share of NaN samples
 
     REQUIRED = ("t", "T_b", "omega")
     OPTIONAL = ("v", "a_x")
@@ -90,7 +99,8 @@ class QuarterCarLog:
 
 @dataclass(frozen=True)
 class PayloadLog:
-    """A planar-payload log (raw force-moment sensor readings and vision pose)."""
+    """A planar-payload log (raw force-moment sensor readings and vision pose); a missing or held sample is NaN in
+    its channel, never in ``t``."""
 
     t: np.ndarray  # time [s], uniform step
     M: np.ndarray  # raw moment reading [N m]
@@ -101,6 +111,8 @@ class PayloadLog:
     Y: np.ndarray  # vision position, y [m]
     comments: tuple[str, ...] = field(default=(), compare=False)
     source: str = field(default="<memory>", compare=False)
+    resampled: dict | None = field(default=None, compare=False)
+    missing: dict[str, float] = field(default_factory=dict, compare=False)
 
     REQUIRED = ("t", "M", "f_x", "f_y", "theta", "X", "Y")
     OPTIONAL = ()
@@ -115,6 +127,10 @@ class PayloadLog:
 
 
 PLANTS: dict[str, type] = {"quarter-car": QuarterCarLog, "payload": PayloadLog}
+# Channels that must be finite in every row; the others may be missing (NaN). Filled: short NaN runs interpolated.
+_NEVER_MISSING = ("t", "T_b")
+_FILLED = ("omega",)
+_HOLD = ("T_b",)  # resampled by zero-order hold
 
 
 def _log_class(plant: str) -> type:
@@ -124,10 +140,9 @@ def _log_class(plant: str) -> type:
         raise ValueError(f"unknown plant {plant!r}; valid plants: {', '.join(PLANTS)}") from None
 
 
-def _parse(path: Path):
-    """Comments, header and a float table with the file line number of each row."""
+def _read_text(path: Path) -> str:
     try:
-        text = path.read_text(encoding="utf-8-sig")  # -sig: a leading byte-order mark is not part of the header
+        return path.read_text(encoding="utf-8-sig")  # -sig: a leading byte-order mark is not part of the header
     except FileNotFoundError:
         raise LogFormatError(f"{path}: no such file") from None
     except IsADirectoryError:
@@ -136,30 +151,43 @@ def _parse(path: Path):
         raise LogFormatError(f"{path}: not a text (CSV) file") from None
     except OSError as exc:
         raise LogFormatError(f"{path}: cannot read the file ({exc.strerror})") from None
+
+
+def _row(path: Path, lineno: int, line: str, header: list[str]) -> list[float]:
+    """The values of a data row; an empty cell is NaN (a missing sample)."""
+    cells = line.split(",")
+    if len(cells) != len(header):
+        raise LogFormatError(f"{path}:{lineno}: {len(cells)} values, the header has {len(header)} columns")
+    empty = [not cell.strip(" \t") for cell in cells]  # ASCII blanks only: a no-break space is not "empty"
+    for name, cell, blank in zip(header, cells, empty):
+        if not blank and not _NUMBER.match(cell):
+            raise LogFormatError(f"{path}:{lineno}: column {name!r}: {cell.strip()!r} is not a number")
+    return [np.nan if blank else float(cell) for cell, blank in zip(cells, empty)]
+
+
+def _parse(path: Path, raw_header: bool = False):
+    """Comments, header and a float table with the file line number of each row.
+
+    :param raw_header: keep the header cells as written (a column map names them); else reduce ``name [SI unit]``.
+    """
     comments: list[str] = []
     header: list[str] | None = None
     rows: list[list[float]] = []
     line_numbers: list[int] = []
-    for lineno, raw in enumerate(text.splitlines(), start=1):
-        line = raw.strip()
+    for lineno, raw in enumerate(_read_text(path).splitlines(), start=1):
+        line = raw.strip(" \t")  # ASCII blanks only: a no-break space at an end is a bad cell, not nothing
         if not line:
             continue
         if header is None:
             if line.startswith("#"):
                 comments.append(line[1:].strip())
                 continue
-            header = [_column_name(path, lineno, cell) for cell in line.split(",")]
+            header = [c.strip() if raw_header else _column_name(path, lineno, c) for c in line.split(",")]
             if len(set(header)) != len(header):
                 dup = sorted({h for h in header if header.count(h) > 1})
                 raise LogFormatError(f"{path}:{lineno}: duplicate column(s) {', '.join(dup)} in header")
             continue
-        cells = line.split(",")
-        if len(cells) != len(header):
-            raise LogFormatError(f"{path}:{lineno}: {len(cells)} values, the header has {len(header)} columns")
-        for name, cell in zip(header, cells):
-            if not _NUMBER.match(cell):
-                raise LogFormatError(f"{path}:{lineno}: column {name!r}: {cell.strip()!r} is not a number")
-        rows.append([float(cell) for cell in cells])
+        rows.append(_row(path, lineno, line, header))
         line_numbers.append(lineno)
     if header is None:
         raise LogFormatError(f"{path}: no header row")
@@ -177,12 +205,13 @@ def _column_name(path: Path, lineno: int, cell: str) -> str:
     name, unit = match["name"].strip(), (match["u1"] if match["u1"] is not None else match["u2"]).strip()
     if _unit_key(unit) != _unit_key(_SI_UNITS[name]):
         raise LogFormatError(f"{path}:{lineno}: column {cell!r}: unit {unit!r}, expected {_SI_UNITS[name]}; "
-                             f"convert the column to SI units")
+                             f"convert the column to SI units or give a column map (--map)")
     return name
 
 
-def _check_time(path: Path, t: np.ndarray, lines: np.ndarray) -> None:
-    with np.errstate(over="ignore"):
+def _check_time(path: Path, t: np.ndarray, lines: np.ndarray) -> rs.Grid | None:
+    """Increasing, finite steps; the resampling grid (None: already uniform)."""
+    with np.errstate(over="ignore", invalid="ignore"):
         dt = np.diff(t)
     huge = np.flatnonzero(~np.isfinite(dt))
     if huge.size:
@@ -193,18 +222,14 @@ def _check_time(path: Path, t: np.ndarray, lines: np.ndarray) -> None:
     if bad.size:
         i = bad[0] + 1
         raise LogFormatError(f"{path}:{lines[i]}: column 't' is not increasing ({t[i - 1]:.6g} then {t[i]:.6g})")
-    step = float(np.median(dt))
-    off = np.flatnonzero(np.abs(dt - step) > _DT_REL_TOL * step)
-    if off.size:
-        i = off[0] + 1
-        raise LogFormatError(
-            f"{path}:{lines[i]}: column 't' has a non-uniform step ({dt[i - 1]:.6g} s where the log's step is "
-            f"{step:.6g} s); resample the log to a uniform step"
-        )
+    try:
+        return rs.plan_grid(t)
+    except rs.StepError as exc:
+        raise LogFormatError(f"{path}:{lines[exc.row]}: column 't': {exc}") from None
 
 
 def _check_range(path: Path, name: str, x: np.ndarray, lines: np.ndarray, limit: float, hint: str) -> None:
-    bad = np.flatnonzero(np.abs(x) > limit)
+    bad = np.flatnonzero(np.abs(x) > limit)  # NaN compares False: a missing sample is not implausible
     if bad.size:
         i = bad[0]
         raise LogFormatError(
@@ -238,7 +263,12 @@ def _check_quarter_car(path: Path, cols: dict[str, np.ndarray], lines: np.ndarra
 def _check_rate(path: Path, name: str, x: np.ndarray, t: np.ndarray, lines: np.ndarray, limit: float,
                 hint: str) -> None:
     """The median rate |dx/dt| must be plausible; a median, so a free body may drift far over a long log."""
-    with np.errstate(over="ignore"):  # a jump too large for a float is an infinite rate, flagged below
+    # the fresh samples only: a missing one (NaN) or a repeated one (a held camera frame) has no rate of its own
+    keep = ~np.isnan(x) & np.concatenate([[True], x[1:] != x[:-1]])
+    if np.count_nonzero(keep) < 2:
+        return
+    x, t, lines = x[keep], t[keep], lines[keep]
+    with np.errstate(over="ignore", invalid="ignore"):  # a jump too large for a float is an infinite rate
         rates = np.abs(np.diff(x)) / np.diff(t)
     rate = float(np.median(rates))
     if rate > limit:
@@ -254,17 +284,23 @@ def _check_payload(path: Path, cols: dict[str, np.ndarray], lines: np.ndarray) -
         _check_rate(path, name, cols[name], t, lines, _MAX_LINEAR_RATE, "expected m; is it in mm?")
 
 
-def read_log(path: str | os.PathLike, plant: str = "quarter-car") -> QuarterCarLog | PayloadLog:
-    """Read and validate a log file.
+_PLANT_CHECKS = {"quarter-car": _check_quarter_car, "payload": _check_payload}
 
-    :param path: CSV file in the DESIGN.md format.
-    :param plant: ``"quarter-car"`` or ``"payload"``.
-    :return: a :class:`QuarterCarLog` or :class:`PayloadLog`.
-    :raises LogFormatError: naming the file, line and column of the first problem.
-    """
+
+def _columns(path: Path, plant: str, header: list[str], table: np.ndarray,
+             column_map: ColumnMap | str | os.PathLike | None) -> tuple[dict[str, np.ndarray], list[str]]:
+    """The contract channels of the table (through the column map if one is given) and comment lines to add."""
     cls = _log_class(plant)
-    path = Path(path)
-    comments, header, table, lines = _parse(path)
+    if column_map is not None:
+        cmap = column_map if isinstance(column_map, ColumnMap) else load_map(
+            column_map, plant, cls.REQUIRED + cls.OPTIONAL, cls.REQUIRED)
+        cols, sources = apply_map(cmap, header, table, str(path))
+        added = [f"converted from {path.name} with the column map {Path(cmap.source).name}"]
+        if "T_b" in sources and UNITS[sources["T_b"][1]].kind == "pressure":
+            factor = cmap.channels["T_b"].factor
+            added += [TORQUE_FROM_PRESSURE,
+                      f"T_b = {sources['T_b'][0]} x {factor:g} N m per Pa (a nominal factor: expect a brake_gain)"]
+        return cols, added
     missing = [name for name in cls.REQUIRED if name not in header]
     if missing:
         raise LogFormatError(
@@ -274,29 +310,98 @@ def read_log(path: str | os.PathLike, plant: str = "quarter-car") -> QuarterCarL
     known = set(cls.REQUIRED) | set(cls.OPTIONAL)
     extra = [name for name in header if name not in known]
     if extra:
-        warnings.warn(f"{path}: ignoring unknown column(s) {', '.join(extra)}", stacklevel=2)
-    cols = {name: table[:, header.index(name)] for name in header if name in known}
+        warnings.warn(f"{path}: ignoring unknown column(s) {', '.join(extra)}", stacklevel=3)
+    return {name: table[:, header.index(name)] for name in header if name in known}, []
+
+
+def _check_values(path: Path, cls: type, cols: dict[str, np.ndarray], lines: np.ndarray) -> None:
+    """No infinite value; no missing value in t or T_b; short gaps of omega filled; a channel with fewer than 3
+    values is an error if required, left out (with a warning) if optional. Changes ``cols`` in place."""
+    for name in list(cols):
+        x = cols[name]
+        inf = np.flatnonzero(np.isinf(x))
+        if inf.size:
+            raise LogFormatError(f"{path}:{lines[inf[0]]}: column {name!r} is infinite")
+        nan = np.flatnonzero(np.isnan(x))
+        if nan.size and name in _NEVER_MISSING:
+            raise LogFormatError(f"{path}:{lines[nan[0]]}: column {name!r} is NaN or empty; it may never be missing")
+        if name in _FILLED:
+            cols[name], bad = rs.fill_short_gaps(x)
+            if bad is not None:
+                raise LogFormatError(f"{path}:{lines[bad]}: column {name!r} is NaN or empty here; only interior gaps "
+                                     f"of up to {rs.MAX_FILL} rows are filled")
+        elif len(x) - nan.size < 3:
+            if name in cls.REQUIRED:
+                raise LogFormatError(f"{path}: column {name!r} has {len(x) - nan.size} values; needs at least 3")
+            warnings.warn(f"{path}: column {name!r} has fewer than 3 values; left out", stacklevel=3)
+            del cols[name]
+
+
+def _mark_held(cols: dict[str, np.ndarray], step: float) -> None:
+    """Held samples (:func:`fricenv.resample.held_mask`) become NaN, in every channel but t, T_b and omega."""
     for name, x in cols.items():
-        bad = np.flatnonzero(~np.isfinite(x))
-        if bad.size:
-            raise LogFormatError(f"{path}:{lines[bad[0]]}: column {name!r} is NaN or infinite")
-    _check_time(path, cols["t"], lines)
-    (_check_quarter_car if plant == "quarter-car" else _check_payload)(path, cols, lines)
-    return cls(**cols, comments=tuple(comments), source=str(path))
+        if name not in ("t", *_HOLD, *_FILLED):
+            cols[name] = np.where(rs.held_mask(x, step), np.nan, x)
+
+
+def read_log(path: str | os.PathLike, plant: str = "quarter-car",
+             column_map: ColumnMap | str | os.PathLike | None = None) -> QuarterCarLog | PayloadLog:
+    """Read and validate a log file; resample it onto a uniform grid if its stamps jitter or rows were dropped.
+
+    :param path: CSV file in the DESIGN.md format, or any export that ``column_map`` describes.
+    :param plant: ``"quarter-car"`` or ``"payload"``.
+    :param column_map: a column map (file or :class:`fricenv.logmap.ColumnMap`; docs/contracts.md, "Column map").
+    :return: a :class:`QuarterCarLog` or :class:`PayloadLog`; held or missing samples are NaN (see the classes).
+    :raises LogFormatError: naming the file, line and column of the first problem.
+    :raises ColumnMapError: naming the map file and key.
+    """
+    cls = _log_class(plant)
+    path = Path(path)
+    comments, header, table, lines = _parse(path, raw_header=column_map is not None)
+    cols, added = _columns(path, plant, header, table, column_map)
+    _check_values(path, cls, cols, lines)
+    grid = _check_time(path, cols["t"], lines)
+    _PLANT_CHECKS[plant](path, cols, lines)  # on the values as logged, held ones included
+    _mark_held(cols, grid.median_step if grid is not None else float(np.median(np.diff(cols["t"]))))
+    if grid is not None:
+        cols = rs.resample(cols["t"], cols, grid, hold=_HOLD)
+    notes = {"comments": tuple(comments) + tuple(c for c in added if c not in comments), "source": str(path),
+             "resampled": None if grid is None else grid.summary(),
+             "missing": {name: float(np.mean(np.isnan(x))) for name, x in cols.items() if name != "t"}}
+    if plant == "quarter-car":
+        notes["torque_from_pressure"] = TORQUE_FROM_PRESSURE in notes["comments"]
+    return cls(**cols, **notes)
 
 
 def write_log(path: str | os.PathLike, log: QuarterCarLog | PayloadLog, comments: tuple[str, ...] = ()) -> None:
-    """Write a log atomically in the DESIGN.md format; optional columns that are ``None`` are left out.
+    """Write a log atomically in the DESIGN.md format; optional columns that are ``None`` are left out, a missing
+    sample is written ``nan``, and a torque from pressure is marked by the :data:`TORQUE_FROM_PRESSURE` line.
 
     :param path: destination CSV.
     :param log: the log to write.
     :param comments: lines written first, each behind ``# `` (defaults to ``log.comments``).
     """
-    names = [f.name for f in fields(log) if f.name not in ("comments", "source")]
-    names = [name for name in names if getattr(log, name) is not None]
+    names = [name for name in (*log.REQUIRED, *log.OPTIONAL) if getattr(log, name) is not None]
     table = np.column_stack([np.asarray(getattr(log, name), dtype=float) for name in names])
+    lines = list(comments or log.comments)
+    if getattr(log, "torque_from_pressure", False) and TORQUE_FROM_PRESSURE not in lines:
+        lines.append(TORQUE_FROM_PRESSURE)
     with atomic_write(path) as fh:
-        for line in comments or log.comments:
+        for line in lines:
             fh.write(f"# {line}\n")
         fh.write(",".join(names) + "\n")
         np.savetxt(fh, table, delimiter=",", fmt="%.10g")
+
+
+def log_notes(log: QuarterCarLog | PayloadLog) -> tuple[str, ...]:
+    """What the reader did to a log, one line each (for a converted log's comments and the reports)."""
+    notes = []
+    if log.resampled is not None:
+        r = log.resampled
+        notes.append(f"resampled: {r['rows']} rows onto a uniform grid of {r['samples']} samples, step "
+                     f"{r['step']:.6g} s ({r['method']}); largest jitter {r['max_jitter']:.0%} of the step, "
+                     f"{r['filled']} dropped sample(s) filled")
+    partial = {name: share for name, share in log.missing.items() if share > 0}
+    if partial:
+        notes.append("missing (held or absent, nan): " + ", ".join(f"{n} {s:.1%}" for n, s in partial.items()))
+    return tuple(notes)

@@ -84,8 +84,8 @@ def test_valid_logs_read_back_whatever_the_column_order(tmp_path, log, bom, crlf
     assert back.comments == tuple(c.strip() for c in comments)
 
 
-BAD_CELLS = ["nan", "NaN", "inf", "-inf", "1e400", "-1e999", "abc", "", " ", "1,5", "0x10", "1e", "--1", "\u00a0",
-             "12 3", "1_0", "∞", "１２"]
+BAD_CELLS = ["inf", "-inf", "1e400", "-1e999", "abc", "1,5", "0x10", "1e", "--1", "\u00a0", "12 3", "1_0", "∞", "１２"]
+MISSING_CELLS = ["nan", "NaN", "", " "]  # a missing sample: an error in t and T_b only (omega: filled inside)
 
 
 @FUZZ
@@ -95,13 +95,26 @@ def test_a_bad_cell_is_named_by_line_and_column(tmp_path, log, data):
     required = list(PLANTS[plant].REQUIRED)
     row = data.draw(st.integers(0, len(table) - 1), label="row")
     col = header.index(data.draw(st.sampled_from(required), label="column"))
-    cell = data.draw(st.sampled_from(BAD_CELLS), label="cell")
+    cell = data.draw(st.sampled_from(BAD_CELLS + MISSING_CELLS), label="cell")
     lines = _text(header, table).splitlines()
     cells = lines[1 + row].split(",")
     cells[col] = cell
     lines[1 + row] = ",".join(cells)
     path = tmp_path / "log.csv"
     path.write_text("\n".join(lines) + "\n")
+    name = header[col]
+    if cell in MISSING_CELLS and name not in ("t", "T_b", "omega") and len(table) == 3:
+        if name in PLANTS[plant].OPTIONAL:  # too few values left to read the channel: left out, or an error
+            assert getattr(_read(path, plant), name) is None
+            return
+        with pytest.raises(LogFormatError, match=rf"^{re.escape(str(path))}: column {name!r} has 2 values; needs "):
+            _read(path, plant)
+        return
+    if cell in MISSING_CELLS and (name not in ("t", "T_b", "omega") or name == "omega" and 0 < row < len(table) - 1):
+        back = _read(path, plant)  # a missing sample where the contract allows one: NaN, or filled in omega
+        assert np.isfinite(back.omega[row]) if name == "omega" else np.isnan(getattr(back, name)[row])
+        assert back.missing[name] == (0.0 if name == "omega" else 1 / len(table))
+        return
     with pytest.raises(LogFormatError) as info:
         _read(path, plant)
     msg = _check_error(info.value, path)

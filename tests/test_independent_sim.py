@@ -252,6 +252,35 @@ def test_written_log_is_readable_with_the_right_columns(tmp_path):
         np.testing.assert_allclose(log.omega, sim["omega"], rtol=1e-8, atol=1e-8)
 
 
+def test_real_like_export_reads_back_to_the_simulated_log(tmp_path):
+    """--real: the export (tests/real_artifacts.py) read through its map is the simulated log on a coarser grid."""
+    from fricenv.logs import read_log
+
+    plain = ind.draw_cases(4, seed=3)
+    real = ind.draw_cases(4, seed=3, real=True)
+    assert [dataclasses.replace(c, real=None) for c in real] == plain  # same cases, only the export differs
+    case = dataclasses.replace(real[0], columns=("v", "a_x"))
+    csv_path, map_path, truth = ind.write_real_log(tmp_path / "export", case)
+    log = read_log(csv_path, column_map=map_path)
+    assert 25.0 <= case.real["rate_hz"] <= 100.0
+    assert log.torque_from_pressure and abs(1.0 / log.dt - case.real["rate_hz"]) < 0.02 * case.real["rate_hz"]
+    assert len(log) >= truth["samples"]  # dropped rows filled in
+    sim = simulate_case(case)
+    # wheel speed: the simulated measurement at the grid times, but for the few outliers (5-15 km/h, i.e. at least
+    # 4 rad/s) and the 0.1 km/h quantum plus interpolation over 2 steps of the noisy signal (noise std 0.45 rad/s)
+    err = np.abs(log.omega - np.interp(log.t, sim["t"], sim["omega"]))
+    assert np.count_nonzero(err > 4.0) <= 3 * 2  # an outlier spreads over at most 2 grid points
+    # torque: zero-order hold, so every value is one of the simulated commands (through kPa and the factor)
+    nearest = np.min(np.abs(log.T_b[:, None] - sim["T_b"][None, :]), axis=1)
+    assert nearest.max() <= 1e-9 * sim["T_b"].max()
+
+
+def test_combos_carry_several_effects():
+    cases = ind.draw_cases(len(ind.COMBOS), seed=4, combos=True)
+    assert sorted(tuple(e.name for e in c.effects) for c in cases) == sorted(ind.COMBOS)
+    assert all(c.category == c.effects[0].name for c in cases)
+
+
 def test_draws_cover_categories_and_stop_conditions():
     rng = np.random.default_rng(5)
     for cat in CATEGORIES:

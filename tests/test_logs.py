@@ -56,16 +56,20 @@ def test_non_uniform_time(tmp_path):
     rows = _rows()
     rows[10] = rows[10].replace("0.1000", "0.1040", 1)
     path = _write(tmp_path, [HEADER] + rows)
-    with pytest.raises(LogFormatError, match=r"log\.csv:12: column 't' has a non-uniform step"):
+    with pytest.raises(LogFormatError, match=r"log\.csv:12: column 't': step 0\.014 s is 1\.4 median steps "
+                                             r"\(0\.01 s\): time-stamp jitter above 25% of the step"):
         read_log(path)
 
 
-def test_nan_row_names_line_and_column(tmp_path):
+def test_nan_in_an_optional_channel_is_missing_in_t_or_torque_an_error(tmp_path):
     rows = _rows()
     rows[3] = rows[3].replace(",-0.5", ",nan")
-    path = _write(tmp_path, [HEADER] + rows)
-    with pytest.raises(LogFormatError, match=r"log\.csv:5: column 'a_x' is NaN"):
-        read_log(path)
+    log = read_log(_write(tmp_path, [HEADER] + rows))
+    assert np.isnan(log.a_x[3]) and np.isfinite(np.delete(log.a_x, 3)).all()
+    assert log.missing == {"T_b": 0.0, "omega": 0.0, "v": 0.0, "a_x": 1 / 20}
+    rows[3] = rows[3].replace(",300.0,", ",nan,")
+    with pytest.raises(LogFormatError, match=r"torque\.csv:5: column 'T_b' is NaN or empty; it may never be missing"):
+        read_log(_write(tmp_path, [HEADER] + rows, "torque.csv"))
 
 
 def test_non_numeric_cell(tmp_path):

@@ -29,6 +29,30 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
     parser.add_argument("--candidates", metavar="A,B,...", default=None,
                         help="comma-separated candidate effects to try (default: the whole library)")
+    _add_map_option(parser)
+
+
+def _add_map_option(parser: argparse.ArgumentParser) -> None:
+    """``--map``: read a real export through a column map (docs/contracts.md, "Column map")."""
+    parser.add_argument("--map", metavar="MAP.json", default=None,
+                        help="column map of a real export: source column, unit and factor per channel; the "
+                             "converted log is written to OUT/log.contract.csv and diagnosed")
+
+
+def _mapped_log(args: argparse.Namespace) -> str:
+    """The log to diagnose: with --map, the export converted into OUT/log.contract.csv (fricenv gap convert)."""
+    if getattr(args, "map", None) is None:
+        return args.log
+    from pathlib import Path
+
+    from fricenv.commands.gap_convert import convert
+    from fricenv.utils import check_input_file
+
+    check_input_file(args.map, "--map")
+    out = Path(args.out) / "log.contract.csv"
+    out.parent.mkdir(parents=True, exist_ok=True)
+    convert(args.log, args.map, args.plant, out)
+    return str(out)
 
 
 def check_options(args: argparse.Namespace) -> None:
@@ -64,7 +88,7 @@ def run(args: argparse.Namespace) -> int:
 
     names = _candidates(args, DiagnoseConfig().candidates)
     cfg = DiagnoseConfig(jobs=args.jobs) if names is None else DiagnoseConfig(jobs=args.jobs, candidates=names)
-    dg = diagnose_file(args.log, args.plant, args.params, cfg)  # reports its phases through fricenv.progress
+    dg = diagnose_file(_mapped_log(args), args.plant, args.params, cfg)  # reports its phases through fricenv.progress
     return _report(args, dg, write_report(dg, args.out, args.plant, plots=not args.no_plots), summary_line(dg))
 
 
@@ -89,5 +113,5 @@ def _run_payload(args: argparse.Namespace) -> int:
 
     names = _candidates(args, PayloadDiagnoseConfig().candidates)
     cfg = PayloadDiagnoseConfig() if names is None else PayloadDiagnoseConfig(candidates=names)
-    dg = diagnose_payload_file(args.log, args.params, cfg)
+    dg = diagnose_payload_file(_mapped_log(args), args.params, cfg)
     return _report(args, dg, write_payload_report(dg, args.out, plots=not args.no_plots), summary_line(dg))
