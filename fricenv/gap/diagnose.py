@@ -262,10 +262,7 @@ def diagnose(log: QuarterCarLog, p: qc.QuarterCarParams = qc.PAPER_PARAMS,
     effects = [] if whole is None else _order(split_params(whole), expected)
     if expected:
         where["expected_effects"] = expected
-    verdict = s.verdict
-    if effects:
-        found = [e["effect"] for e in effects if e["effect"] not in expected]
-        verdict = found[0] if found else effects[0]["effect"]
+    verdict = effects[0]["effect"] if effects else s.verdict  # an expected calibration is listed (and named) first
     return Diagnosis(verdict=verdict, gap_before=nominal.gap,
                      gap_after=nominal.gap if whole is None else whole.gap,
                      params=next((e["params"] for e in effects if e["effect"] == verdict), {}), where=where,
