@@ -251,10 +251,7 @@ def diagnose(log: QuarterCarLog, p: qc.QuarterCarParams = qc.PAPER_PARAMS,
         # each half needs training windows in every fold: at least ``folds`` windows per half
         if s.chosen is not None and cfg.drift_check and len(d.starts) >= 2 * int(cfg.folds):
             _check_drift(s, nominal, d, cfg, jobs)
-        whole, steps = None, []
-        if s.chosen is not None:
-            eligible = [f for f in s.significant if not s.edges.get(f.effect)]
-            whole, steps = forward_select(s.chosen, eligible, nominal, folds, d, p, cfg, jobs, tuple(expected))
+        whole, steps = _forward(s, nominal, folds, d, p, cfg, jobs, tuple(expected))
     where = _where(nominal, s, d, cfg)
     where["not_testable"] = not_testable
     where["sensors"] = d.sensors
@@ -268,6 +265,24 @@ def diagnose(log: QuarterCarLog, p: qc.QuarterCarParams = qc.PAPER_PARAMS,
                      params=next((e["params"] for e in effects if e["effect"] == verdict), {}), where=where,
                      candidates=s.fits, nominal=nominal, joint=s.joint, data=d, residuals=s.residuals,
                      seconds=time.perf_counter() - t_start, source=log.source, effects=effects, whole=whole)
+
+
+def _forward(s: _Selection, nominal: CandidateFit, folds: list[Data], d: Data, p: qc.QuarterCarParams,
+             cfg: DiagnoseConfig, jobs: int, expected: tuple[str, ...]):
+    """Forward selection from the verdict's effect; on an ``unexplained`` verdict with significant candidates (and
+    no drift), from the best of them, and the set becomes the verdict if it closes the gap (:func:`explains`) where
+    no single effect did. Returns (the whole set's model or None, the steps tried)."""
+    eligible = [f for f in s.significant if not s.edges.get(f.effect)]
+    drifted = s.drift is not None and s.drift["drifts"]  # the nearest effect imitates a drift: no set rescues it
+    first = s.chosen if s.chosen is not None else \
+        (eligible[0] if s.verdict == "unexplained" and eligible and not drifted else None)
+    if first is None:
+        return None, []
+    known = {frozenset(s.joint.effect.split("+")): s.joint} if s.joint is not None else {}
+    whole, steps = forward_select(first, eligible, nominal, folds, d, p, cfg, jobs, expected, known)
+    if s.chosen is None and (whole is first or not explains(whole, nominal, cfg)):
+        return None, steps
+    return whole, steps
 
 
 def _order(effects: list[dict], expected: dict) -> list[dict]:

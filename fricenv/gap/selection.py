@@ -40,40 +40,43 @@ def split_params(f: CandidateFit) -> list[dict]:
 
 
 def _extend(current: CandidateFit, extra: Sequence[CandidateFit], folds: list[Data], d: Data, cfg: DiagnoseConfig,
-            jobs: int, nominal: CandidateFit) -> list[CandidateFit]:
-    """The current set plus each of ``extra``, fitted per fold (seeded from the fits so far) and cross-fitted."""
+            jobs: int, nominal: CandidateFit, known: dict) -> list[CandidateFit]:
+    """The current set plus each of ``extra``, fitted per fold (seeded from the fits so far) and cross-fitted; a set
+    in ``known`` (frozenset of effect names -> cross-fitted model) is not refitted."""
     base = effects_of(current)
     seeds = {e["effect"]: e["params"] for e in split_params(current)}
+    todo = [c for c in extra if frozenset(base + [c.effect]) not in known]
     tasks = []
-    for c in extra:
+    for c in todo:
         s = dict(seeds, **{c.effect: c.effect_params()})
-        tasks += [(base + [c.effect], road_of(x), f, cfg, s) for f, x in zip(folds, current.x_folds or (current.x,) * len(folds))]
-    fits = run_fits(tasks, jobs, "forward selection")
+        roads = current.x_folds or (current.x,) * len(folds)
+        tasks += [(base + [c.effect], road_of(x), f, cfg, s) for f, x in zip(folds, roads)]
+    fits = run_fits(tasks, jobs, "forward selection") if tasks else []
     k = len(folds)
-    out = []
-    for i in range(len(extra)):
+    for i, c in enumerate(todo):
         joint = cross_fitted(fits[i * k:(i + 1) * k], d)
         test_against(nominal, joint, d)
-        out.append(joint)
-    return out
+        known[frozenset(base + [c.effect])] = joint
+    return [known[frozenset(base + [c.effect])] for c in extra]
 
 
 def forward_select(first: CandidateFit, significant: Sequence[CandidateFit], nominal: CandidateFit,
                    folds: list[Data], d: Data, p: qc.QuarterCarParams, cfg: DiagnoseConfig, jobs: int,
-                   expected: Sequence[str] = ()) -> tuple[CandidateFit, list[dict]]:
+                   expected: Sequence[str] = (), known: dict | None = None) -> tuple[CandidateFit, list[dict]]:
     """The selected set, grown from ``first``.
 
     :param significant: the significant single candidates, best first.
     :param expected: effects always tried first (a calibration the log's provenance predicts).
+    :param known: sets already fitted (frozenset of effect names -> cross-fitted model), not refitted.
     :return: (the whole set's cross-fitted model, one record per step tried: the effect, its paired z over the
         set before it, and whether it was added).
     """
-    current, steps = first, []
+    current, steps, known = first, [], dict(known or {})
     pool = [f for f in significant if f.effect != first.effect]
     while pool and len(effects_of(current)) < MAX_EFFECTS:
         pool.sort(key=lambda f: (f.effect not in expected, f.adjusted_mse))
         tried = pool[:TRIED_PER_STEP]
-        joints = _extend(current, tried, folds, d, cfg, jobs, nominal)
+        joints = _extend(current, tried, folds, d, cfg, jobs, nominal, known)
         z = [paired_z(current, j, d) for j in joints]
         ok = [i for i, j in enumerate(joints) if z[i] > cfg.sig_z and j.adjusted_mse < current.adjusted_mse
               and not at_range_edge(j, p)]
