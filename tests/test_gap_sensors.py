@@ -177,3 +177,63 @@ def test_report_has_effects_after_the_old_keys():
 
 def replace_verdict(dg, verdict):
     return SimpleNamespace(**{**vars(dg), "verdict": verdict, "params": {}})
+
+
+# ------------------------------------------------------------------------------------------- forward selection
+def _stub_selection(monkeypatch, gains: dict):
+    """Stub the joint fits: a set's held-out error is 2 minus the gains of its effects; z over the set before is
+    100 times the error drop."""
+    from fricenv.gap import selection
+
+    def fake_extend(current, extra, folds, d, cfg, jobs, nominal, known):
+        out = []
+        for c in extra:
+            names = selection.effects_of(current) + [c.effect]
+            mse = 2.0 - sum(gains[e] for e in names)
+            out.append(CandidateFit(effect="+".join(names), names=("B", "C", "E", "theta"), x=np.ones(4),
+                                    train_mse=mse, test_mse=mse, window_mse=np.full(4, mse)))
+        return out
+
+    monkeypatch.setattr(selection, "_extend", fake_extend)
+    monkeypatch.setattr(selection, "paired_z", lambda a, b, d: 100.0 * (a.test_mse - b.test_mse))
+    monkeypatch.setattr(selection, "at_range_edge", lambda f, p: [])
+    singles = [CandidateFit(effect=e, names=("B", "C", "E", "theta"), x=np.ones(4), train_mse=2 - g,
+                            test_mse=2 - g, window_mse=np.full(4, 2 - g)) for e, g in gains.items()]
+    return selection, sorted(singles, key=lambda f: f.test_mse)
+
+
+def test_forward_selection_adds_significant_effects_and_stops(monkeypatch):
+    # drag and relaxation matter (z 50 and 30 when added), brake_lag adds 0.01 (z 1 < sig_z 4): not added
+    selection, singles = _stub_selection(monkeypatch, {"drag": 0.5, "relaxation_length": 0.3, "brake_lag": 0.01})
+    whole, steps = selection.forward_select(singles[0], singles, singles[0], [None, None], None, None,
+                                            DiagnoseConfig(), 1)
+    assert selection.effects_of(whole) == ["drag", "relaxation_length"]
+    assert [s["effect"] for s in steps if s["added"]] == ["relaxation_length"]
+    assert whole.test_mse == pytest.approx(2.0 - 0.8, abs=1e-12)
+
+
+def test_forward_selection_stops_at_three_and_tries_expected_first(monkeypatch):
+    gains = {"drag": 0.5, "relaxation_length": 0.3, "radius_error": 0.2, "brake_gain": 0.1, "brake_lag": 0.09}
+    selection, singles = _stub_selection(monkeypatch, gains)
+    whole, steps = selection.forward_select(singles[0], singles, singles[0], [None, None], None, None,
+                                            DiagnoseConfig(), 1, expected=("brake_gain",))
+    assert len(selection.effects_of(whole)) == selection.MAX_EFFECTS
+    assert steps[0]["effect"] == "brake_gain"  # tried first although it gains least
+    assert selection.effects_of(whole)[0] == "drag"
+
+
+def test_a_short_25hz_log_gives_a_result_with_what_it_cannot_test():
+    """The 1.4 s, 35-row segment of issue 15 used to crash ("argmin of an empty sequence")."""
+    from fricenv.gap.diagnose import diagnose
+    from fricenv.gap.simulate import simulate_log
+    from fricenv.plants.tire import ROADS
+
+    log, _ = simulate_log([], ROADS["dry_asphalt"] if "dry_asphalt" in ROADS else next(iter(ROADS.values())),
+                          seed=1, duration=1.4, dt=0.04)
+    assert len(log) == 35
+    dg = diagnose(log, cfg=DiagnoseConfig(jobs=1))
+    report = report_dict(dg)
+    assert report["verdict"] in ("none", "unexplained") or report["effects"][0]["effect"] == report["verdict"]
+    assert dg.data.horizon == 3
+    assert "mu_change" in report["where"]["not_testable"]  # 11 windows: too few on either side of a change
+    assert set(report["where"]["sensors"]) == {"omega", "v", "a_x"}
