@@ -113,7 +113,7 @@ class PayloadExcitation:
 
 
 MIN_WRENCH_SNR = 5.0  # a calibration is read from wrench readings varying this far above their noise [-]
-MIN_DRIFT_DURATION = 10.0  # a calibration drift needs this long a log [s]
+MIN_DRIFT_DURATION = 4.0  # a calibration drift needs this long a log [s]
 MIN_POSE_RATE = 20.0  # a vision delay needs fresh poses at this rate at least [Hz]
 
 

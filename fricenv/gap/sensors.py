@@ -141,7 +141,8 @@ def condition_channel(x: np.ndarray, floor: float, quiet: int = 0, may_be_filter
     q = quantisation_step(x)
     raw = estimate_noise(_fresh(x))
     noise = max(raw if np.isfinite(raw) else floor, floor, q / np.sqrt(12.0))
-    out = _outliers(x, noise)
+    fresh = np.flatnonzero(np.isfinite(x))
+    out = fresh[_outliers(x[fresh], noise)]  # on the fresh samples only: a held channel's frames are its samples
     x[out] = np.nan
     if out.size:
         raw = estimate_noise(_fresh(x))
