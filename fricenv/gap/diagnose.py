@@ -4,8 +4,11 @@ Method (every error measure is computed on data not used for fitting):
 
 1. **Noise level.** Estimated from the log itself, per channel, by the median absolute second difference
    (white noise of std s gives second differences of std s sqrt(6); the median ignores the sparse kinks of the
-   signal). No assumption on the log writer's noise values.
-2. **States from data.** The log is cut into prediction windows of ``horizon`` samples (0.1 s: beyond the
+   signal). No assumption on the log writer's noise values. Missing or held samples (NaN) and isolated outliers are
+   left out of every residual, a quantised channel's noise is at least step / sqrt(12), and a low-passed ``v`` or
+   ``a_x`` takes its noise from the calibrated model's residual times its autocorrelation time
+   (:mod:`fricenv.gap.sensors`, reported in ``where["sensors"]``).
+2. **States from data.** The log is cut into prediction windows of 0.1 s at its rate (``horizon_s``; beyond the
    friction peak the wheel dynamics are unstable, so longer open-loop predictions measure the timing of a lock-up
    rather than the model); the windows are dealt in turn into ``folds`` folds for cross-fitting: every model is fitted
    once per fold on the other folds' windows, so every window is predicted by a fit that did not see it (all error
@@ -22,7 +25,7 @@ Method (every error measure is computed on data not used for fitting):
    the road away from the rest of the data. The road is always treated as unknown.
 4. **Gap.** Held-out residuals over all logged channels, each divided by its noise level (the smaller of the
    difference-based estimate and the calibrated nominal model's training residual: both over-estimate). A window's
-   mean squared normalised residual counts at most ``WINDOW_MSE_CAP``. ``gap`` is the model part of the held-out
+   mean squared normalised residual grows only logarithmically beyond ``WINDOW_MSE_CAP`` (:func:`soft_cap`). ``gap`` is the model part of the held-out
    error in noise units, ``sqrt(max(MSE - 1, 0))`` (0 for a model that fits within the noise). ``gap_before`` is
    the calibrated nominal model's.
 5. **Localise.** Nominal residuals by window (worst time segments), by regime (slip below/above the fitted road's
@@ -49,6 +52,10 @@ Method (every error measure is computed on data not used for fitting):
    above the noise), the effect only imitates the cause (brake fade looks like a brake gain that drifts down) and
    the verdict is ``unexplained``. The constant model is refitted from the split fits first, so that a better
    optimum is not mistaken for a drift (``where["drift_test"]``).
+9. **Testability and several effects.** Candidates the log cannot show (each effect's registry rule, e.g. a
+   relaxation length without slip transients) are not fitted and are listed in ``where["not_testable"]``. After the
+   verdict, a forward selection (:mod:`fricenv.gap.selection`) adds the next significant candidate while the joint
+   model beats the set so far on held-out data, up to three (``effects``; ``gap_after`` is the whole set's).
 """
 
 from __future__ import annotations
