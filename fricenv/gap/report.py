@@ -56,8 +56,12 @@ def summary_line(dg: Diagnosis) -> str:
     verdict = dg.verdict + (f" ({params})" if params else "")
     seg = dg.where["segments"][0] if dg.where.get("segments") else None
     worst = f"; worst segment {seg['t_start']:.2f}-{seg['t_end']:.2f} s" if seg else ""
-    return (f"verdict: {verdict}; gap_before {dg.gap_before:.3g} -> gap_after {dg.gap_after:.3g} "
-            f"(noise units, held-out){worst}")
+    more = [e["effect"] for e in _effects(dg)[1:]]
+    also = f"; with {', '.join(more)}" if more else ""
+    untested = sorted(dg.where.get("not_testable", {}))
+    untested = f"; not testable on this log: {', '.join(untested)}" if untested else ""
+    return (f"verdict: {verdict}{also}; gap_before {dg.gap_before:.3g} -> gap_after {dg.gap_after:.3g} "
+            f"(noise units, held-out){worst}{untested}")
 
 
 def image_links(images: Sequence[str]) -> list[str]:
