@@ -237,3 +237,14 @@ def test_a_short_25hz_log_gives_a_result_with_what_it_cannot_test():
     assert dg.data.horizon == 3
     assert "mu_change" in report["where"]["not_testable"]  # 11 windows: too few on either side of a change
     assert set(report["where"]["sensors"]) == {"omega", "v", "a_x"}
+
+
+def test_summary_line_names_the_other_effects_and_the_untestable_ones():
+    from fricenv.gap.report import summary_line
+
+    dg = SimpleNamespace(verdict="drag", params={"c0": 200.0}, gap_before=3.0, gap_after=0.2,
+                         where={"not_testable": {"mu_change": "too short"}}, whole=object(),
+                         effects=[{"effect": "drag", "params": {}}, {"effect": "relaxation_length", "params": {}}])
+    line = summary_line(dg)
+    assert "verdict: drag (c0=200); with relaxation_length;" in line
+    assert line.endswith("not testable on this log: mu_change")
