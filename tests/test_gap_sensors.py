@@ -144,7 +144,7 @@ def _excitation(**kw) -> Excitation:
     ("brake_delay", dict(torque_transients=0)),
     ("mu_change", dict(near_peak_late=0)),
     ("mu_change", dict(training_windows=2)),
-    ("drag", dict(speed_range=3.0)),
+    ("drag", dict(speed_range=3.0, has_v=False, has_a_x=False)),
     ("brake_gain", dict(braking_windows=0)),
 ])
 def test_testability_rules_name_what_the_log_lacks(effect, lacking):

@@ -260,8 +260,11 @@ def _testable_mu_change(x: Excitation) -> str | None:
 
 
 def _testable_drag(x: Excitation) -> str | None:
-    if x.speed_range < MIN_SPEED_RANGE:
-        return f"braking speed range {x.speed_range:.1f} m/s; drag needs {MIN_SPEED_RANGE:g} m/s"
+    """The constant part ``c0`` shows in the deceleration level when ``v`` or ``a_x`` is logged; from the wheel speed
+    alone the force must change with speed to stand apart from the road's friction level."""
+    if not (x.has_v or x.has_a_x) and x.speed_range < MIN_SPEED_RANGE:
+        return (f"neither v nor a_x logged and a braking speed range of {x.speed_range:.1f} m/s; drag needs one of "
+                f"them or {MIN_SPEED_RANGE:g} m/s")
     return always_testable(x)
 
 for _entry in (
