@@ -23,7 +23,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from fricenv.effects.registry import FitContext, Param, QuarterCarEffect, register
+from fricenv.effects.registry import Excitation, FitContext, Param, QuarterCarEffect, always_testable, register
 
 __all__ = ["BrakeDelay", "BrakeFade", "BrakeGain", "BrakeLag", "Drag", "LoadTransfer", "MuChange", "RadiusError",
            "RelaxationLength", "SlidingSpeedFriction"]
@@ -225,32 +225,77 @@ def _radius_starts(ctx: FitContext) -> list[dict]:
 
 
 _ACTUATOR = "brake torque that changes (apply and release) while the wheel responds"
+MIN_TRANSIENTS = 2  # brake apply/release events an actuator effect needs [-]
+MIN_SLIP_TRANSIENTS = 3  # windows with a fast slip change a relaxation length needs [-]
+MIN_NEAR_PEAK = 2  # windows near the friction peak before and after a friction change [-]
+MIN_CHANGE_TRAINING = 4  # training windows per fold a change-point search needs (one on either side and more) [-]
+MIN_SPEED_RANGE = 8.0  # braking speed range drag needs [m/s]
+
+
+def _testable_actuator(x: Excitation) -> str | None:
+    if x.torque_transients < MIN_TRANSIENTS:
+        return f"{x.torque_transients} brake apply/release event(s); needs {MIN_TRANSIENTS}"
+    return always_testable(x)
+
+
+def _testable_relaxation(x: Excitation) -> str | None:
+    if x.slip_transient_windows < MIN_SLIP_TRANSIENTS:
+        return f"{x.slip_transient_windows} window(s) with a slip transient; needs {MIN_SLIP_TRANSIENTS}"
+    return None
+
+
+def _testable_radius(x: Excitation) -> str | None:
+    if not (x.has_v or x.has_a_x):
+        return "neither v nor a_x logged: a rolling radius is read from the speed, which omega alone cannot give"
+    return always_testable(x)
+
+
+def _testable_mu_change(x: Excitation) -> str | None:
+    if x.training_windows < MIN_CHANGE_TRAINING:
+        return f"{x.training_windows} training windows per fold; a change-point search needs {MIN_CHANGE_TRAINING}"
+    if min(x.near_peak_early, x.near_peak_late) < MIN_NEAR_PEAK:
+        return (f"slip near the friction peak in {x.near_peak_early} early and {x.near_peak_late} late window(s); "
+                f"needs {MIN_NEAR_PEAK} on either side of a change")
+    return None
+
+
+def _testable_drag(x: Excitation) -> str | None:
+    """The constant part ``c0`` shows in the deceleration level when ``v`` or ``a_x`` is logged; from the wheel speed
+    alone the force must change with speed to stand apart from the road's friction level."""
+    if not (x.has_v or x.has_a_x) and x.speed_range < MIN_SPEED_RANGE:
+        return (f"neither v nor a_x logged and a braking speed range of {x.speed_range:.1f} m/s; drag needs one of "
+                f"them or {MIN_SPEED_RANGE:g} m/s")
+    return always_testable(x)
+
 for _entry in (
     QuarterCarEffect(BrakeLag, (Param("tau", "s", (1e-3, 0.4), 0.0, 1e-3, 0.01),), _ACTUATOR,
-                     _starts("tau", 0.01, 0.03, 0.07, 0.15), draw=_uniform(BrakeLag, "tau", 0.02, 0.08)),
+                     _starts("tau", 0.01, 0.03, 0.07, 0.15), draw=_uniform(BrakeLag, "tau", 0.02, 0.08),
+                     testable=_testable_actuator),
     QuarterCarEffect(BrakeDelay, (Param("delay", "s", (0.0, 0.25), 0.0, 1e-3, 0.01),), _ACTUATOR,
-                     _starts("delay", 0.01, 0.025, 0.045, 0.08), draw=_uniform(BrakeDelay, "delay", 0.015, 0.06)),
+                     _starts("delay", 0.01, 0.025, 0.045, 0.08), draw=_uniform(BrakeDelay, "delay", 0.015, 0.06),
+                     testable=_testable_actuator),
     QuarterCarEffect(BrakeGain, (Param("gain", "-", (0.3, 3.0), 1.0, 2e-3, 0.05),),
                      "braking below the friction peak (the torque sets the deceleration there)",
                      _starts("gain", 0.8, 0.9, 1.1, 1.25), draw=_draw_brake_gain),
     QuarterCarEffect(RelaxationLength, (Param("sigma", "m", (0.01, 3.0), 0.0, 5e-3, 0.1),),
                      "fast slip transients (brake steps, ABS cycles)", _starts("sigma", 0.1, 0.3, 0.6, 1.2),
-                     window_states=1, draw=_uniform(RelaxationLength, "sigma", 0.2, 0.6)),
+                     window_states=1, draw=_uniform(RelaxationLength, "sigma", 0.2, 0.6), testable=_testable_relaxation),
     QuarterCarEffect(RadiusError, (Param("r_eff", "m", (0.25, 0.45), lambda road, p: p.r, 2e-4, 0.005),),
                      "v logged, or a free-rolling start and braking to read the speed from", _radius_starts,
-                     draw=_draw_radius_error),
+                     draw=_draw_radius_error, testable=_testable_radius),
     QuarterCarEffect(MuChange, (Param("t_change", "s", (-np.inf, np.inf), np.inf, 0.01, 0.1, log_time=True),
                                 Param("theta_after", "-", (0.03, 1.6), lambda road, p: np.array(road)[..., 3].copy(),
                                       0.002, 0.05)),
                      "braking near the friction peak before and after the change", fit="change_point",
-                     searched=("t_change",), draw=_draw_mu_change, main_error=_mu_change_error),
+                     searched=("t_change",), draw=_draw_mu_change, main_error=_mu_change_error,
+                     testable=_testable_mu_change),
     QuarterCarEffect(Drag, (Param("c0", "N", (0.0, 3000.0), 0.0, 2.0, 50.0),
                             Param("c2", "N s^2/m^2", (0.0, 10.0), 0.0, 0.01, 0.1)),
                      "a wide speed range, best with v or a_x logged",
                      lambda ctx: [{"c0": a, "c2": b} for a, b in ((50.0, 0.0), (200.0, 0.0), (0.0, 0.3),
                                                                   (100.0, 0.2), (400.0, 0.5))],
                      draw=lambda road, rng, p: _make(Drag, c0=rng.uniform(100.0, 300.0), c2=rng.uniform(0.2, 0.6)),
-                     main_error=_drag_error),
+                     main_error=_drag_error, testable=_testable_drag),
     QuarterCarEffect(BrakeFade, (Param("k", "1/J", (0.0, np.inf), field="fade"),), "long or hard braking",
                      draw=_uniform(BrakeFade, "k", 3e-6, 6e-6), in_library=False),
     QuarterCarEffect(LoadTransfer, (Param("k", "-", (-np.inf, np.inf), field="load"),), "deceleration changes",

@@ -26,6 +26,8 @@ from fricenv.plants import payload as pl
 __all__ = [
     "PAYLOAD_EFFECTS",
     "PAYLOAD_EFFECT_PARAMS",
+    "PAYLOAD_TESTABLE",
+    "PayloadExcitation",
     "CalibrationDrift",
     "CalibrationError",
     "VisionDelay",
@@ -94,6 +96,52 @@ PAYLOAD_EFFECTS: dict[str, type] = {c.name: c for c in (WrenchOffset, Calibratio
                                                          VisionDelay)}
 PAYLOAD_EFFECT_PARAMS: dict[str, tuple[str, ...]] = {n: tuple(f.name for f in fields(c))
                                                       for n, c in PAYLOAD_EFFECTS.items()}
+
+
+@dataclass(frozen=True)
+class PayloadExcitation:
+    """What a payload log shows, for the effects' testability rules (issue 15 item 3).
+
+    :param duration: log length [s].
+    :param wrench_snr: the smallest, over the three wrench readings, of their spread over their noise std [-].
+    :param pose_rate: rate of fresh (not held) pose samples [Hz].
+    """
+
+    duration: float
+    wrench_snr: float
+    pose_rate: float
+
+
+MIN_WRENCH_SNR = 5.0  # a calibration is read from wrench readings varying this far above their noise [-]
+MIN_DRIFT_DURATION = 4.0  # a calibration drift needs this long a log [s]
+MIN_POSE_RATE = 20.0  # a vision delay needs fresh poses at this rate at least [Hz]
+
+
+def _needs_wrench(x: PayloadExcitation) -> str | None:
+    if x.wrench_snr < MIN_WRENCH_SNR:
+        return f"the wrench readings vary {x.wrench_snr:.1f} noise std; a calibration needs {MIN_WRENCH_SNR:g}"
+    return None
+
+
+def _needs_duration(x: PayloadExcitation) -> str | None:
+    if x.duration < MIN_DRIFT_DURATION:
+        return f"log of {x.duration:.1f} s; a drift needs {MIN_DRIFT_DURATION:g} s"
+    return _needs_wrench(x)
+
+
+def _needs_pose_rate(x: PayloadExcitation) -> str | None:
+    if x.pose_rate < MIN_POSE_RATE:
+        return f"fresh poses at {x.pose_rate:.0f} Hz; a vision delay needs {MIN_POSE_RATE:g} Hz"
+    return None
+
+
+# The payload effects' testability rules: name -> (excitation -> None, or why the log cannot show the effect).
+PAYLOAD_TESTABLE: dict[str, Callable[[PayloadExcitation], str | None]] = {
+    "wrench_offset": lambda x: None,
+    "calibration_error": _needs_wrench,
+    "calibration_drift": _needs_duration,
+    "vision_delay": _needs_pose_rate,
+}
 
 
 def make_payload_effect(name: str, **params):

@@ -27,6 +27,7 @@ import numpy as np
 
 __all__ = [
     "REGISTRY",
+    "Excitation",
     "FitContext",
     "Param",
     "QuarterCarEffect",
@@ -85,6 +86,37 @@ class FitContext:
 
 
 @dataclass(frozen=True)
+class Excitation:
+    """What a log shows, for the effects' testability rules (issue 15 item 3).
+
+    :param has_v: the reference speed is logged.
+    :param has_a_x: the longitudinal acceleration is logged.
+    :param braking_windows: prediction windows with braking torque.
+    :param torque_transients: brake apply/release events (torque changing fast while braking).
+    :param slip_transient_windows: windows whose slip changes by more than a few percent.
+    :param near_peak_early: windows near the friction peak in the first half of the braking.
+    :param near_peak_late: the same in the second half.
+    :param speed_range: braking speed range [m/s].
+    :param training_windows: the fewest training windows of a cross-fitting fold.
+    """
+
+    has_v: bool
+    has_a_x: bool
+    braking_windows: int
+    torque_transients: int
+    slip_transient_windows: int
+    near_peak_early: int
+    near_peak_late: int
+    speed_range: float
+    training_windows: int
+
+
+def always_testable(x: Excitation) -> str | None:
+    """Testability rule of an effect any braking log shows."""
+    return None if x.braking_windows >= 2 else "no braking in the log"
+
+
+@dataclass(frozen=True)
 class QuarterCarEffect:
     """A quarter-car effect: its spec, parameters, fit recipe, validation draw and (plug-ins) physics hooks.
 
@@ -101,6 +133,8 @@ class QuarterCarEffect:
         ``errors`` (default: the first parameter's relative error).
     :param in_library: the gap tool fits it (False: a validation-only effect outside the library).
     :param builtin: the simulator builds it in (False: a plug-in acting through ``torque``/``theta``).
+    :param testable: ``Excitation -> None`` when the log can show the effect, else the reason it cannot (``needs``
+        in the log's terms); a diagnosis lists the effects it could not test in ``where["not_testable"]``.
     :param torque: plug-in hook on the applied torque (see the module docstring).
     :param theta: plug-in hook on the road's peak factor.
     """
@@ -118,6 +152,7 @@ class QuarterCarEffect:
     builtin: bool = True
     torque: Callable | None = None
     theta: Callable | None = None
+    testable: Callable[[Excitation], str | None] = always_testable
 
     @property
     def name(self) -> str:

@@ -15,7 +15,11 @@ FIT_LOSSES = ("linear", "soft_l1", "cauchy")  # losses of the least-squares fits
 class DiagnoseConfig:
     """Settings of the diagnosis."""
 
-    horizon: int = 10  # prediction window [samples]
+    # Prediction window: ``horizon`` samples when set, else ``horizon_s`` at the log's rate (at least 3 samples).
+    # 0.1 s: beyond the friction peak the wheel dynamics are unstable, so a longer open-loop prediction measures the
+    # timing of a lock-up rather than the model.
+    horizon: int | None = None  # [samples]
+    horizon_s: float = 0.1  # [s]
     folds: int = 2  # cross-fitting folds: window i belongs to fold i % folds; each fold is held out once [-]
     max_nfev: int = 30  # least-squares iterations per start [-]
     # Least-squares runs per candidate fit, from the best starts with distinct roads: a run started in the nominal

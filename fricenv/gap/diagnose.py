@@ -4,8 +4,11 @@ Method (every error measure is computed on data not used for fitting):
 
 1. **Noise level.** Estimated from the log itself, per channel, by the median absolute second difference
    (white noise of std s gives second differences of std s sqrt(6); the median ignores the sparse kinks of the
-   signal). No assumption on the log writer's noise values.
-2. **States from data.** The log is cut into prediction windows of ``horizon`` samples (0.1 s: beyond the
+   signal). No assumption on the log writer's noise values. Missing or held samples (NaN) and isolated outliers are
+   left out of every residual, a quantised channel's noise is at least step / sqrt(12), and a low-passed ``v`` or
+   ``a_x`` takes its noise from the calibrated model's residual times its autocorrelation time
+   (:mod:`fricenv.gap.sensors`, reported in ``where["sensors"]``).
+2. **States from data.** The log is cut into prediction windows of 0.1 s at its rate (``horizon_s``; beyond the
    friction peak the wheel dynamics are unstable, so longer open-loop predictions measure the timing of a lock-up
    rather than the model); the windows are dealt in turn into ``folds`` folds for cross-fitting: every model is fitted
    once per fold on the other folds' windows, so every window is predicted by a fit that did not see it (all error
@@ -22,7 +25,7 @@ Method (every error measure is computed on data not used for fitting):
    the road away from the rest of the data. The road is always treated as unknown.
 4. **Gap.** Held-out residuals over all logged channels, each divided by its noise level (the smaller of the
    difference-based estimate and the calibrated nominal model's training residual: both over-estimate). A window's
-   mean squared normalised residual counts at most ``WINDOW_MSE_CAP``. ``gap`` is the model part of the held-out
+   mean squared normalised residual grows only logarithmically beyond ``WINDOW_MSE_CAP`` (:func:`soft_cap`). ``gap`` is the model part of the held-out
    error in noise units, ``sqrt(max(MSE - 1, 0))`` (0 for a model that fits within the noise). ``gap_before`` is
    the calibrated nominal model's.
 5. **Localise.** Nominal residuals by window (worst time segments), by regime (slip below/above the fitted road's
@@ -49,23 +52,29 @@ Method (every error measure is computed on data not used for fitting):
    above the noise), the effect only imitates the cause (brake fade looks like a brake gain that drifts down) and
    the verdict is ``unexplained``. The constant model is refitted from the split fits first, so that a better
    optimum is not mistaken for a drift (``where["drift_test"]``).
+9. **Testability and several effects.** Candidates the log cannot show (each effect's registry rule, e.g. a
+   relaxation length without slip transients) are not fitted and are listed in ``where["not_testable"]``. After the
+   verdict, a forward selection (:mod:`fricenv.gap.selection`) adds the next significant candidate while the joint
+   model beats the set so far on held-out data, up to three (``effects``; ``gap_after`` is the whole set's).
 """
 
 from __future__ import annotations
 
 import time
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 from fricenv import progress
 from fricenv.gap.candidates import fit_candidate, nested_nominal, run_fits, test_against
 from fricenv.gap.changepoint import change_point_starts
 from fricenv.gap.config import DEFAULT_CONFIG, FIT_LOSSES, DiagnoseConfig
 from fricenv.gap.drift import drift_test, fit_time_split
+from fricenv.gap.excitation import excitation, untestable
 from fricenv.gap.fitting import distinct_starts, fit_nominal, refine_noise, score
 from fricenv.gap.localise import localise, tests_table
 from fricenv.gap.params import ROAD_NAMES, param_names, road_of
 from fricenv.gap.pool import default_jobs
+from fricenv.gap.selection import forward_select, split_params
 from fricenv.gap.stats import (
     TRIM_SHARE,
     WINDOW_MSE_CAP,
@@ -133,6 +142,14 @@ class Diagnosis:
     residuals: dict = field(default_factory=dict)  # "before"/"after": (n_windows, H) RMS normalised residual
     seconds: float = 0.0
     source: str = "<memory>"
+    effects: list = field(default_factory=list)  # [{"effect", "params"}, ...] the selected set in order
+    whole: CandidateFit | None = None  # the selected set's cross-fitted model
+
+
+# Effects a log's provenance predicts: log attribute -> (effect, why). Such an effect is tried first in the forward
+# selection, listed first in ``effects`` and reported as a calibration, not as a discovery.
+EXPECTED_EFFECTS = {"torque_from_pressure": ("brake_gain", "T_b was computed from brake pressure through a nominal "
+                                                           "factor: a brake gain is its calibration, not a discovery")}
 
 
 @dataclass
@@ -147,6 +164,7 @@ class _Selection:
     verdict: str = "none"
     chosen: CandidateFit | None = None
     drift: dict | None = None
+    residuals: dict = field(default_factory=dict)
 
 
 def _calibrate(folds: list[Data], cfg: DiagnoseConfig) -> list[CandidateFit]:
@@ -229,14 +247,59 @@ def diagnose(log: QuarterCarLog, p: qc.QuarterCarParams = qc.PAPER_PARAMS,
     d = prepare(log, p, cfg)
     folds = [fold_data(d, j) for j in range(int(cfg.folds))]
     jobs = default_jobs(cfg.jobs)
+    expected = {e: why for attr, (e, why) in EXPECTED_EFFECTS.items() if getattr(log, attr, False)}
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
-        nominal, fits = _candidates(_calibrate(folds, cfg), folds, d, cfg, jobs)
-        s = _select(nominal, fits, folds, d, p, cfg, jobs)
+        nominal_folds = _calibrate(folds, cfg)
+        not_testable = untestable(cfg.candidates, excitation(nominal_folds[0], d))
+        run_cfg = replace(cfg, candidates=tuple(c for c in cfg.candidates if c not in not_testable))
+        nominal, fits = _candidates(nominal_folds, folds, d, run_cfg, jobs)
+        s = _select(nominal, fits, folds, d, p, run_cfg, jobs)
         # each half needs training windows in every fold: at least ``folds`` windows per half
         if s.chosen is not None and cfg.drift_check and len(d.starts) >= 2 * int(cfg.folds):
             _check_drift(s, nominal, d, cfg, jobs)
-    where, residuals = localise(nominal, s.chosen, d, cfg.folds)
+        whole, steps = _forward(s, nominal, folds, d, p, cfg, jobs, tuple(expected))
+    where = _where(nominal, s, d, cfg)
+    where["not_testable"] = not_testable
+    where["sensors"] = d.sensors
+    where["forward_selection"] = steps
+    effects = [] if whole is None else _order(split_params(whole), expected)
+    if expected:
+        where["expected_effects"] = expected
+    verdict = effects[0]["effect"] if effects else s.verdict  # an expected calibration is listed (and named) first
+    return Diagnosis(verdict=verdict, gap_before=nominal.gap,
+                     gap_after=nominal.gap if whole is None else whole.gap,
+                     params=next((e["params"] for e in effects if e["effect"] == verdict), {}), where=where,
+                     candidates=s.fits, nominal=nominal, joint=s.joint, data=d, residuals=s.residuals,
+                     seconds=time.perf_counter() - t_start, source=log.source, effects=effects, whole=whole)
+
+
+def _forward(s: _Selection, nominal: CandidateFit, folds: list[Data], d: Data, p: qc.QuarterCarParams,
+             cfg: DiagnoseConfig, jobs: int, expected: tuple[str, ...]):
+    """Forward selection from the verdict's effect; on an ``unexplained`` verdict with significant candidates (and
+    no drift), from the best of them, and the set becomes the verdict if it closes the gap (:func:`explains`) where
+    no single effect did. Returns (the whole set's model or None, the steps tried)."""
+    eligible = [f for f in s.significant if not s.edges.get(f.effect)]
+    drifted = s.drift is not None and s.drift["drifts"]  # the nearest effect imitates a drift: no set rescues it
+    first = s.chosen if s.chosen is not None else \
+        (eligible[0] if s.verdict == "unexplained" and eligible and not drifted else None)
+    if first is None:
+        return None, []
+    known = {frozenset(s.joint.effect.split("+")): s.joint} if s.joint is not None else {}
+    whole, steps = forward_select(first, eligible, nominal, folds, d, p, cfg, jobs, expected, known)
+    if s.chosen is None and (whole is first or not explains(whole, nominal, cfg)):
+        return None, steps
+    return whole, steps
+
+
+def _order(effects: list[dict], expected: dict) -> list[dict]:
+    """The selected effects with the expected ones (a calibration) first."""
+    return [e for e in effects if e["effect"] in expected] + [e for e in effects if e["effect"] not in expected]
+
+
+def _where(nominal: CandidateFit, s: _Selection, d: Data, cfg: DiagnoseConfig) -> dict:
+    """The report's ``where`` from the localisation and the tests (the residuals for the plots go into ``s``)."""
+    where, s.residuals = localise(nominal, s.chosen, d, cfg.folds)
     where["tests"] = tests_table(s.fits, s.significant, s.edges)
     where["robust_gap_before"] = robust_gap(nominal)
     if s.drift is not None:
@@ -244,12 +307,7 @@ def diagnose(log: QuarterCarLog, p: qc.QuarterCarParams = qc.PAPER_PARAMS,
     if s.joint is not None:
         where["joint_fit"] = {"effects": s.joint.effect.split("+"), "params": s.joint.effect_params(),
                               "gap_after": s.joint.gap, "t_stat": s.joint.t_stat}
-    chosen = s.chosen
-    return Diagnosis(verdict=s.verdict, gap_before=nominal.gap,
-                     gap_after=nominal.gap if chosen is None else chosen.gap,
-                     params={} if chosen is None else chosen.effect_params(), where=where, candidates=s.fits,
-                     nominal=nominal, joint=s.joint, data=d, residuals=residuals,
-                     seconds=time.perf_counter() - t_start, source=log.source)
+    return where
 
 
 def load_params(path) -> qc.QuarterCarParams:

@@ -15,13 +15,14 @@ from fricenv.gap.fitting import fit, score
 from fricenv.gap.params import ROAD_NAMES
 from fricenv.gap.pool import map_tasks
 from fricenv.gap.stats import (
-    WINDOW_MSE_CAP,
     CandidateFit,
     cross_fitted,
     fold_data,
     gap_of,
     paired_z,
     robust_gap,
+    window_counts,
+    window_mse,
 )
 from fricenv.gap.windows import Data, window_residuals
 
@@ -64,7 +65,7 @@ def fit_time_split(model: CandidateFit, d: Data, cfg: DiagnoseConfig, jobs: int 
     for x, (half, j) in zip(xs, halves):  # every window is held out in exactly one (half, fold)
         held = half & (d.fold == j)
         resid[held] = window_residuals(effects, model.names, x, d, np.flatnonzero(held))[0]
-    wm = np.minimum(np.mean(resid**2, axis=-1), WINDOW_MSE_CAP)
+    wm = window_mse(resid, window_counts(d))
     return CandidateFit(effect=f"{model.effect} (early/late)", names=model.names, x=np.mean(xs, axis=0),
                         train_mse=float("nan"), test_mse=float(np.mean(wm)), window_mse=wm,
                         gap=gap_of(float(np.mean(wm))), seconds=time.perf_counter() - t, resid=resid,

@@ -14,7 +14,8 @@ from fricenv.effects import registry
 from fricenv.effects.registry import FitContext
 from fricenv.gap.config import FIT_LOSSES, DiagnoseConfig
 from fricenv.gap.params import fd_steps, param_bounds, param_names, road_of, x_scales
-from fricenv.gap.stats import WINDOW_MSE_CAP, CandidateFit
+from fricenv.gap.sensors import correlation_time
+from fricenv.gap.stats import CandidateFit, window_counts, window_mse
 from fricenv.gap.windows import NOISE_FLOOR, Data, window_nuisances, window_residuals
 from fricenv.plants.tire import ROADS
 
@@ -119,11 +120,12 @@ def least_squares_run(effects: Sequence[str], names: Sequence[str], x0: np.ndarr
 
 def score(effect: str, effects: Sequence[str], names, x, d: Data, seconds: float) -> CandidateFit:
     r = window_residuals(effects, names, x, d)[0]
-    wm = np.minimum(np.mean(r**2, axis=-1), WINDOW_MSE_CAP)
+    counts = window_counts(d)
+    wm = window_mse(r, counts)
     return CandidateFit(effect=effect, names=tuple(names), x=np.asarray(x, dtype=float),
                         train_mse=float(np.mean(wm[~d.test])), test_mse=float(np.mean(wm[d.test])), window_mse=wm,
                         seconds=seconds, resid=r, nuisances=window_nuisances(effects, d),
-                        samples=d.horizon * len(d.channels))
+                        samples=float(np.mean(counts)))
 
 
 
@@ -166,13 +168,27 @@ def fit_context(d: Data) -> FitContext:
 def refine_noise(nominal: CandidateFit, d: Data) -> None:
     """Noise level per channel: the smaller of the difference-based estimate and the calibrated nominal model's
     training residual (corrected for the fitted wheel-speed nuisance). Both over-estimate (the first by the signal's
-    own curvature, the second by any model error), so the smaller is the better estimate."""
+    own curvature, the second by any model error), so the smaller is the better estimate.
+
+    A channel that looks low-pass filtered (:mod:`fricenv.gap.sensors`) has a difference-based estimate far below
+    its real noise: it takes the residual's level, times the square root of the residual's integrated
+    autocorrelation time (its windows hold that many times fewer independent samples). No channel goes below its
+    quantisation floor ``q / sqrt(12)`` or ``NOISE_FLOOR``."""
     train = np.flatnonzero(~d.test)
     _, r_ch = window_residuals([], nominal.names, nominal.x, d, train, per_channel=True)
+    sensors = d.sensors or {}
     for c in d.channels:
-        rms = float(np.sqrt(np.mean(r_ch[c][0] ** 2))) * d.sigma[c]
+        r = r_ch[c][0]
+        rms = float(np.sqrt(np.nanmean(r ** 2))) * d.sigma[c]
         if c == "omega" or c == "v":  # one fitted nuisance state per window in this channel
             rms *= np.sqrt(d.horizon / (d.horizon - 1.0))
-        d.sigma[c] = max(min(d.sigma[c], rms), NOISE_FLOOR[c])
-
-
+        info = sensors.get(c, {})
+        floor = max(NOISE_FLOOR[c], info.get("quantisation_step", 0.0) / np.sqrt(12.0))
+        if info.get("filtered") and np.isfinite(rms):
+            tau = correlation_time(r)
+            info["correlation_time"] = tau
+            d.sigma[c] = max(rms * np.sqrt(tau), floor)
+        else:
+            d.sigma[c] = max(min(d.sigma[c], rms), floor)
+        if c in sensors:
+            info["noise_std"] = d.sigma[c]

@@ -7,9 +7,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.interpolate import CubicSpline
 from scipy.signal import butter, sosfilt, sosfiltfilt
 
 from fricenv.effects.payload import PAYLOAD_EFFECTS
+from fricenv.gap.sensors import condition_channel
 from fricenv.gap.stats import estimate_noise
 from fricenv.logs import PayloadLog
 from fricenv.plants import payload as pl
@@ -73,6 +75,7 @@ class PayloadData:
     block_test: np.ndarray  # (n_blocks,) held out
     S_known: np.ndarray
     p: pl.PayloadParams
+    sensors: dict | None = None  # column -> missing share, outliers (:mod:`fricenv.gap.sensors`)
 
     @property
     def n(self) -> int:
@@ -133,6 +136,33 @@ def _zero_filtfilt(sos: np.ndarray, x: np.ndarray) -> np.ndarray:
     return sosfilt(sos, y[::-1], axis=0)[::-1]
 
 
+def _conditioned_columns(log: PayloadLog) -> tuple[dict, dict, dict]:
+    """Every column with its missing (held) samples and outliers filled by a cubic spline through the fresh ones
+    (:mod:`fricenv.gap.sensors`), its raw noise std and its sensor summary. An orientation logged wrapped into
+    (-pi, pi] is unwrapped first (the rotation per sample is far below pi). A channel with fresh samples only at a
+    share ``s`` of the rows (a slower camera) carries, per row of the uniform grid, white noise of ``1 / sqrt(s)``
+    times its own: the same noise power spread over the log's faster rate (what the low-pass sees)."""
+    cols, raw, sensors = {}, {}, {}
+    for c in CHANNELS + WRENCH:
+        x = np.asarray(getattr(log, c), dtype=float)
+        if c == "theta":
+            ok = np.isfinite(x)
+            x = x.copy()
+            x[ok] = np.unwrap(x[ok])
+        cond = condition_channel(x, NOISE_FLOOR, may_be_filtered=False)
+        fresh = np.isfinite(cond.values)
+        idx = np.arange(x.size)
+        if np.count_nonzero(fresh) >= 4 and not fresh.all():
+            cols[c] = CubicSpline(idx[fresh], cond.values[fresh])(idx)
+        else:
+            cols[c] = cond.filled
+        share = max(float(np.mean(fresh)), 1e-3)
+        noise = estimate_noise(cond.values[fresh], order=NOISE_DIFF_ORDER) if fresh.any() else float("nan")
+        raw[c] = max(noise if np.isfinite(noise) else NOISE_FLOOR, NOISE_FLOOR) / np.sqrt(share)
+        sensors[c] = cond.summary()
+    return cols, raw, sensors
+
+
 def prepare_payload(log: PayloadLog, S_known: np.ndarray, p: pl.PayloadParams, cfg: PayloadDiagnoseConfig) -> PayloadData:
     t = np.asarray(log.t, dtype=float)
     dt = log.dt
@@ -142,10 +172,9 @@ def prepare_payload(log: PayloadLog, S_known: np.ndarray, p: pl.PayloadParams, c
         raise ValueError(f"{log.source}: sample time {dt:g} s too coarse for the {cfg.cutoff_hz:g} Hz filter "
                          f"(need a sample rate above {cfg.cutoff_hz / 0.4:g} Hz)")
     sos = butter(cfg.filter_order, cfg.cutoff_hz, fs=fs, output="sos")
-    w_hat = np.column_stack([log.M, log.f_x, log.f_y]).astype(float)
-    # an orientation logged wrapped into (-pi, pi] is unwrapped (the rotation per sample is far below pi)
-    pose = np.column_stack([np.unwrap(np.asarray(log.theta, dtype=float)), log.X, log.Y]).astype(float)
-    raw = {c: max(estimate_noise(getattr(log, c), order=NOISE_DIFF_ORDER), NOISE_FLOOR) for c in CHANNELS + WRENCH}
+    cols, raw, sensors = _conditioned_columns(log)
+    w_hat = np.column_stack([cols[c] for c in WRENCH])
+    pose = np.column_stack([cols[c] for c in CHANNELS])
     pose_f = sosfiltfilt(sos, pose, axis=0)
     # second difference first, then the filter: the filter (with its edge padding) is one linear operator applied
     # to both sides, so its edge transients cancel instead of acting on the large drift of the pose
@@ -180,4 +209,5 @@ def prepare_payload(log: PayloadLog, S_known: np.ndarray, p: pl.PayloadParams, c
         block[s0 + guard:s0 + blen - guard] = b
     block_test = (np.arange(nb) % cfg.test_every) == (cfg.test_every - 1)
     return PayloadData(t=t, dt=dt, w_hat=w_hat, theta_f=pose_f[:, 0], y=y, sos=sos, sigma=sigma, raw_noise=raw,
-                       rho2=rho2, block=block, block_test=block_test, S_known=np.asarray(S_known, dtype=float), p=p)
+                       rho2=rho2, block=block, block_test=block_test, S_known=np.asarray(S_known, dtype=float), p=p,
+                       sensors=sensors)

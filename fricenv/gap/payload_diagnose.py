@@ -42,9 +42,11 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import minimize_scalar
 
+from fricenv.effects.payload import PAYLOAD_TESTABLE, PayloadExcitation
 from fricenv.gap.payload_data import (
     CHANNELS,
     DEFAULT_PAYLOAD_CONFIG,
+    WRENCH,
     PayloadData,
     PayloadDiagnoseConfig,
     generalised_force_map,
@@ -325,6 +327,14 @@ def _where(d: PayloadData, nominal: PayloadCandidate, chosen: PayloadCandidate |
 
 
 # --------------------------------------------------------------------------------------------- diagnosis
+def payload_untestable(d: PayloadData) -> dict[str, str]:
+    """The payload effects the log cannot show, each with the reason (:data:`PAYLOAD_TESTABLE`)."""
+    snr = min(float(np.std(d.w_hat[:, i])) / max(d.raw_noise[c], 1e-12) for i, c in enumerate(WRENCH))
+    fresh = (d.sensors or {}).get("theta", {}).get("missing_share", 0.0)
+    x = PayloadExcitation(duration=d.n * d.dt, wrench_snr=snr, pose_rate=(1.0 - fresh) / d.dt)
+    return {e: r for e, rule in PAYLOAD_TESTABLE.items() if (r := rule(x)) is not None}
+
+
 def diagnose_payload(log: PayloadLog, S_known=pl.PAPER_S, p: pl.PayloadParams = pl.PAPER_PARAMS,
                      cfg: PayloadDiagnoseConfig = DEFAULT_PAYLOAD_CONFIG) -> PayloadDiagnosis:
     """Diagnose the sim-to-real gap of a payload log (see the module docstring).
@@ -378,6 +388,8 @@ def diagnose_payload(log: PayloadLog, S_known=pl.PAPER_S, p: pl.PayloadParams = 
         "tests": {f.effect: {"z": f.z, "penalised_test_mse": f.penalised, "n_params": f.n_params,
                              "significant": bool(significant(f))} for f in fits},
     }
+    where["sensors"] = d.sensors
+    where["not_testable"] = payload_untestable(d)
     if joint is not None:
         where["joint_fit"] = {"effects": joint.effect.split("+"), "params": joint.effect_params(),
                               "gap_after": joint.gap, "z": joint.z}

@@ -21,7 +21,7 @@ from fricenv.utils import atomic_write, to_jsonable, write_json
 
 __all__ = ["CANDIDATE_KEYS", "REPORT_KEYS", "report_dict", "report_markdown", "summary_line", "write_report"]
 
-REPORT_KEYS = ("plant", "verdict", "gap_before", "gap_after", "params", "where", "candidates")
+REPORT_KEYS = ("plant", "verdict", "gap_before", "gap_after", "params", "where", "candidates", "effects")
 CANDIDATE_KEYS = ("effect", "params", "gap_after", "score")
 PLOT_TIME = "residual_time.png"
 PLOT_REGIMES = "residual_regimes.png"
@@ -34,12 +34,20 @@ def _score(c: CandidateFit, gap_before: float) -> float:
     return float(1.0 - c.gap**2 / gap_before**2)
 
 
+def _effects(dg) -> list[dict]:
+    """The selected set (a diagnosis without forward selection: its verdict's effect, if any)."""
+    if getattr(dg, "effects", None) is not None and hasattr(dg, "whole"):
+        return list(dg.effects)
+    return [] if dg.verdict in ("none", "unexplained") else [{"effect": dg.verdict, "params": dict(dg.params)}]
+
+
 def report_dict(dg: Diagnosis, plant: str = "quarter-car") -> dict:
     """The report.json object, exactly the DESIGN.md schema (extra detail lives inside ``where``)."""
     cands = [{"effect": c.effect, "params": c.effect_params(), "gap_after": c.gap, "score": _score(c, dg.gap_before)}
              for c in dg.candidates]
     return to_jsonable({"plant": plant, "verdict": dg.verdict, "gap_before": dg.gap_before,
-                        "gap_after": dg.gap_after, "params": dg.params, "where": dg.where, "candidates": cands})
+                        "gap_after": dg.gap_after, "params": dg.params, "where": dg.where, "candidates": cands,
+                        "effects": _effects(dg)})
 
 
 def summary_line(dg: Diagnosis) -> str:
@@ -48,8 +56,12 @@ def summary_line(dg: Diagnosis) -> str:
     verdict = dg.verdict + (f" ({params})" if params else "")
     seg = dg.where["segments"][0] if dg.where.get("segments") else None
     worst = f"; worst segment {seg['t_start']:.2f}-{seg['t_end']:.2f} s" if seg else ""
-    return (f"verdict: {verdict}; gap_before {dg.gap_before:.3g} -> gap_after {dg.gap_after:.3g} "
-            f"(noise units, held-out){worst}")
+    more = [e["effect"] for e in _effects(dg)[1:]]
+    also = f"; with {', '.join(more)}" if more else ""
+    untested = sorted(dg.where.get("not_testable", {}))
+    untested = f"; not testable on this log: {', '.join(untested)}" if untested else ""
+    return (f"verdict: {verdict}{also}; gap_before {dg.gap_before:.3g} -> gap_after {dg.gap_after:.3g} "
+            f"(noise units, held-out){worst}{untested}")
 
 
 def image_links(images: Sequence[str]) -> list[str]:

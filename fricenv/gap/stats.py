@@ -14,11 +14,12 @@ from fricenv.gap.params import ROAD_NAMES
 if TYPE_CHECKING:  # the windows module imports this one
     from fricenv.gap.windows import Data
 
-__all__ = ["TRIM_SHARE", "WINDOW_MSE_CAP", "CandidateFit", "cross_fitted", "estimate_noise", "fold_data", "gap_of",
+__all__ = ["TRIM_SHARE", "WINDOW_MSE_CAP", "CandidateFit", "soft_cap", "window_counts", "window_mse", "cross_fitted", "estimate_noise", "fold_data", "gap_of",
            "improvement_z", "paired_t", "paired_z", "robust_gap"]
 
-# A window's mean squared normalised error counts at most this much in the scores (RMS 5 noise std): a wheel lock-up
-# predicted a few milliseconds early or late is wrong whatever the size of its error, and must not decide alone.
+# Beyond this mean squared normalised error (RMS 5 noise std) a window's error counts only logarithmically
+# (:func:`soft_cap`): a wheel lock-up predicted a few milliseconds early or late is wrong whatever the size of its
+# error and must not decide alone, yet the windows still rank (a hard cap tied every bad window at one value).
 WINDOW_MSE_CAP = 25.0
 # Share of the held-out windows (the worst) left out when judging how much of the gap a candidate closes.
 TRIM_SHARE = 0.05
@@ -42,7 +43,7 @@ class CandidateFit:
     resid: np.ndarray | None = None  # (windows, samples) normalised residuals of all windows
     x_folds: tuple = ()  # the per-fold fits of a cross-fitted candidate (x is their mean)
     nuisances: int = 1  # states fitted per window on the window's own samples (window_nuisances)
-    samples: int = 1  # normalised residuals per window (horizon times channels)
+    samples: float = 1.0  # fresh normalised residuals per window, mean over the windows
 
     @property
     def adjusted_mse(self) -> float:
@@ -82,6 +83,27 @@ def estimate_noise(x: np.ndarray, order: int = 2) -> float:
 
 
 
+def soft_cap(x: np.ndarray, cap: float = WINDOW_MSE_CAP) -> np.ndarray:
+    """``x`` below ``cap``, ``cap + log(1 + x - cap)`` above: bounded growth that keeps the order."""
+    x = np.asarray(x, dtype=float)
+    return np.where(x <= cap, x, cap + np.log1p(np.maximum(x - cap, 0.0)))
+
+
+def window_counts(d: Data) -> np.ndarray | int:
+    """Residual samples per window that carry a fresh measurement ((windows,) array, or horizon times channels for
+    data without missing-sample bookkeeping)."""
+    counts = getattr(d, "counts", None)
+    return d.horizon * len(d.channels) if counts is None else counts
+
+
+def window_mse(r: np.ndarray, counts) -> np.ndarray:
+    """Per-window mean squared normalised residual over the fresh samples (``r`` is 0 where none exists), soft-capped;
+    a window without any fresh sample counts as pure noise (1)."""
+    c = np.asarray(counts, dtype=float)
+    mse = np.sum(r**2, axis=-1) / np.maximum(c, 1.0)
+    return soft_cap(np.where(c > 0, mse, 1.0))
+
+
 def gap_of(mse: float) -> float:
     """Model part of a mean squared normalised residual, in noise units: sqrt(max(mse - 1, 0))."""
     return float(np.sqrt(max(mse - 1.0, 0.0)))
@@ -104,7 +126,7 @@ def paired_t(base: CandidateFit, cand: CandidateFit, d: Data) -> float:
 
 
 
-def _window_gain(base: CandidateFit, cand: CandidateFit, m: int) -> np.ndarray:
+def _window_gain(base: CandidateFit, cand: CandidateFit, m) -> np.ndarray:
     """Per-window held-out gain of the sum of squared normalised residuals (``m`` samples per window), less what
     ``cand``'s extra per-window nuisance states win on pure noise (one noise variance each)."""
     return (base.window_mse - cand.window_mse) * m - (cand.nuisances - base.nuisances)
@@ -114,12 +136,12 @@ def improvement_z(base: CandidateFit, cand: CandidateFit, d: Data) -> float:
     """Held-out improvement of the sum of squared normalised residuals (less the nuisance discount of
     :func:`_window_gain`), without its single largest window, in units of that sum's standard deviation under pure
     noise (sqrt(2 n)); one lucky window cannot make it large."""
-    m = d.horizon * len(d.channels)
+    m = window_counts(d)
     gain = _window_gain(base, cand, m)
     if gain.size == 0:
         return 0.0
     robust = float(np.sum(gain) - max(float(np.max(gain)), 0.0))
-    return robust / np.sqrt(2.0 * gain.size * m)
+    return robust / np.sqrt(2.0 * float(np.sum(np.broadcast_to(m, gain.shape))))
 
 
 def paired_z(base: CandidateFit, cand: CandidateFit, d: Data) -> float:
@@ -130,15 +152,16 @@ def paired_z(base: CandidateFit, cand: CandidateFit, d: Data) -> float:
     ``a - b = r_b - r_c`` is the difference of the two predictions, known exactly. The statistic is the held-out gain
     over ``2 ||r_b - r_c||``: a z score that is large when the data prefer the candidate however few windows carry the
     difference, and about ``-||a - b|| / 2 + N(0, 1)`` when the base model is right. Per window the gain and the
-    squared difference are capped (``WINDOW_MSE_CAP``), the window of largest gain is left out, as in
+    squared difference are soft-capped (:func:`soft_cap`), the window of largest gain is left out, as in
     :func:`improvement_z`, and the gain is less what ``cand``'s extra per-window nuisance states win on pure noise
     (:func:`_window_gain`).
     """
     if base.resid is None or cand.resid is None:
         return 0.0
-    m = d.horizon * len(d.channels)
+    m = window_counts(d)
     gain = _window_gain(base, cand, m)
-    diff2 = np.minimum(np.sum((base.resid - cand.resid) ** 2, axis=-1), m * WINDOW_MSE_CAP)
+    mm = np.maximum(m, 1)
+    diff2 = mm * soft_cap(np.sum((base.resid - cand.resid) ** 2, axis=-1) / mm)
     if gain.size < 2:
         return 0.0
     drop = int(np.argmax(gain))

@@ -18,13 +18,13 @@ from fricenv.effects.quarter_car import EffectSimulator, ModelBatch
 from fricenv.gap.config import DiagnoseConfig
 from fricenv.gap.params import ROAD_NAMES
 from fricenv.gap.speed import filtered_transient_slip, reconstruct_speed
-from fricenv.gap.stats import estimate_noise
+from fricenv.gap.sensors import condition_channel
 from fricenv.logs import QuarterCarLog
 from fricenv.plants import quarter_car as qc
 from fricenv.plants.tire import longitudinal_slip
 
-__all__ = ["NOISE_FLOOR", "Data", "model_batch", "prepare", "speed_states", "window_nuisances",
-           "window_residuals"]
+__all__ = ["MIN_HORIZON", "MIN_WINDOWS", "NOISE_FLOOR", "Data", "LogTooShortError", "horizon_samples", "model_batch",
+           "prepare", "speed_states", "window_nuisances", "window_residuals"]
 
 V0_STEP = 0.02  # finite-difference step of the per-window speed nuisance (v logged) [m/s]
 LAMT_STEP = 0.005  # finite-difference step of the transient-slip nuisance [-]
@@ -35,6 +35,9 @@ GN_ITERS = 2  # Gauss-Newton iterations of the wheel-speed nuisance
 FREE_ROLL_TORQUE = 0.02  # free rolling: |T_b| below this share of max |T_b| [-]
 SAVGOL = (11, 2)  # speed smoother: window [samples], polynomial order
 NOISE_FLOOR = {"omega": 1e-3, "v": 1e-3, "a_x": 1e-3}  # smallest accepted noise std per channel (SI)
+FILTERED_CHANNELS = ("v", "a_x")  # channels a logger may low-pass (IMU, speed estimate); omega is a pulse count
+MIN_HORIZON = 3  # shortest prediction window [samples] (a 0.1 s window at 25 Hz would hold 2.5)
+MIN_WINDOWS = 6  # fewest prediction windows a diagnosis needs (3 per fold for the cross-fitting) [-]
 # Transient slip at a window start: False = the slip of the window's start state (the wheel-speed nuisance fit then
 # absorbs the difference); True = the measured slip filtered through the relaxation equation.
 RELAX_STATE_FROM_FILTER = True
@@ -64,6 +67,9 @@ class Data:
     free_end: int  # first sample after the free-rolling stretch
     p: qc.QuarterCarParams
     substeps: int
+    meas: dict | None = None  # channel -> measured samples, NaN where missing, held or an outlier
+    counts: np.ndarray | None = None  # (windows,) residual samples with a fresh measurement per window
+    sensors: dict | None = None  # channel -> ChannelCondition.summary() (missing, outliers, filtered, quantised)
 
     @property
     def n(self) -> int:
@@ -75,38 +81,66 @@ class Data:
 
 
 
-def prepare(log: QuarterCarLog, p: qc.QuarterCarParams, cfg: DiagnoseConfig) -> Data:
-    """The log cut into prediction windows, dealt into cross-fitting folds (fold 0 held out), with its noise levels.
+class LogTooShortError(ValueError):
+    """A log with too few samples for the diagnosis' prediction windows."""
 
-    :raises ValueError: a log shorter than three windows, or fewer than two folds.
+
+def horizon_samples(cfg: DiagnoseConfig, dt: float) -> int:
+    """Prediction-window length in samples: ``cfg.horizon`` when set, else ``cfg.horizon_s`` at the log's rate (at
+    least ``MIN_HORIZON``)."""
+    if cfg.horizon is not None:
+        return int(cfg.horizon)
+    return max(MIN_HORIZON, int(round(cfg.horizon_s / dt)))
+
+
+def _conditioned(log: QuarterCarLog, free_end: int) -> dict:
+    """Every logged channel's :class:`fricenv.gap.sensors.ChannelCondition` (``free_end``: the quiet start)."""
+    out = {}
+    for c in ("omega", "v", "a_x"):
+        x = getattr(log, c)
+        if x is not None:
+            out[c] = condition_channel(np.asarray(x, dtype=float), NOISE_FLOOR[c], free_end, c in FILTERED_CHANNELS)
+    return out
+
+
+def _window_counts(meas: dict, starts: np.ndarray, H: int) -> np.ndarray:
+    rows = starts[:, None] + np.arange(H)[None, :]
+    return sum(np.count_nonzero(np.isfinite(m[rows]), axis=1) for m in meas.values())
+
+
+def prepare(log: QuarterCarLog, p: qc.QuarterCarParams, cfg: DiagnoseConfig) -> Data:
+    """The log cut into prediction windows, dealt into cross-fitting folds (fold 0 held out), with its noise levels,
+    outliers and missing samples (:mod:`fricenv.gap.sensors`).
+
+    :raises LogTooShortError: a log shorter than ``MIN_WINDOWS`` prediction windows.
+    :raises ValueError: fewer than two folds.
     """
+    if int(cfg.folds) != cfg.folds or cfg.folds < 2:
+        raise ValueError(f"DiagnoseConfig.folds must be an integer >= 2, got {cfg.folds!r}")
     n = len(log)
-    H = cfg.horizon
-    if n < 3 * H:
-        raise ValueError(f"{log.source}: log too short for diagnosis: {n} samples, need at least {3 * H} "
-                         f"(3 prediction windows of {H} samples)")
-    sigma = {"omega": max(estimate_noise(log.omega), NOISE_FLOOR["omega"])}
-    if log.v is not None:
-        sigma["v"] = max(estimate_noise(log.v), NOISE_FLOOR["v"])
-    if log.a_x is not None:
-        sigma["a_x"] = max(estimate_noise(log.a_x), NOISE_FLOOR["a_x"])
-    v_smooth = None
-    if log.v is not None:
-        win = min(SAVGOL[0], n - (1 - n % 2))
-        v_smooth = savgol_filter(log.v, win, SAVGOL[1])
+    H = horizon_samples(cfg, log.dt) if n >= 2 else MIN_HORIZON
+    need = max(MIN_WINDOWS, 3 * int(cfg.folds)) * H
+    if n < need:
+        raise LogTooShortError(f"{log.source}: log too short for diagnosis: {n} samples, need at least {need} "
+                               f"({need // H} prediction windows of {H} samples); log a longer braking segment")
     T = np.asarray(log.T_b, dtype=float)
     tmax = max(float(np.max(np.abs(T))), 1e-9)
     braking = np.flatnonzero(np.abs(T) > FREE_ROLL_TORQUE * tmax)
     free_end = int(braking[0]) if braking.size else n
+    cond = _conditioned(log, free_end)
+    sigma = {c: k.noise for c, k in cond.items()}
+    v_smooth = None
+    if "v" in cond:
+        win = min(SAVGOL[0], n - (1 - n % 2))
+        v_smooth = savgol_filter(cond["v"].filled, win, SAVGOL[1])
     starts = np.arange(0, n - H + 1, H)
-    if int(cfg.folds) != cfg.folds or cfg.folds < 2:
-        raise ValueError(f"DiagnoseConfig.folds must be an integer >= 2, got {cfg.folds!r}")
     fold = np.arange(len(starts)) % int(cfg.folds)
-    test = fold == 0
-    return Data(t0=float(log.t[0]), dt=log.dt, Tb=T, omega=np.asarray(log.omega, dtype=float),
-                v=None if log.v is None else np.asarray(log.v, dtype=float),
-                a_x=None if log.a_x is None else np.asarray(log.a_x, dtype=float), sigma=sigma, v_smooth=v_smooth,
-                starts=starts, fold=fold, test=test, horizon=H, free_end=free_end, p=p, substeps=cfg.substeps)
+    meas = {c: k.values for c, k in cond.items()}
+    return Data(t0=float(log.t[0]), dt=log.dt, Tb=T, omega=cond["omega"].filled,
+                v=cond["v"].filled if "v" in cond else None, a_x=cond["a_x"].filled if "a_x" in cond else None,
+                sigma=sigma, v_smooth=v_smooth, starts=starts, fold=fold, test=fold == 0, horizon=H,
+                free_end=free_end, p=p, substeps=cfg.substeps, meas=meas, counts=_window_counts(meas, starts, H),
+                sensors={c: k.summary() for c, k in cond.items()})
 
 
 def model_batch(effects: Sequence[str], names: Sequence[str], X: np.ndarray, p: qc.QuarterCarParams) -> ModelBatch:
@@ -168,17 +202,14 @@ def _simulate_windows(batch: ModelBatch, d: Data, widx: np.ndarray, v0, w0, Ta0,
 
 def _measured(d: Data, widx: np.ndarray) -> dict:
     rows = d.starts[widx][:, None] + np.arange(d.horizon)[None, :]
-    out = {"omega": d.omega[rows]}
-    if d.v is not None:
-        out["v"] = d.v[rows]
-    if d.a_x is not None:
-        out["a_x"] = d.a_x[rows]
-    return out
+    src = d.meas if d.meas is not None else {"omega": d.omega, "v": d.v, "a_x": d.a_x}
+    return {c: src[c][rows] for c in d.channels}
 
 
 def _normalised(pred: dict, meas: dict, d: Data) -> np.ndarray:
-    """Residuals (..., M): all channels concatenated, each divided by its noise std."""
-    parts = [(pred[c] - meas[c]) / d.sigma[c] for c in d.channels]
+    """Residuals (..., M): all channels concatenated, each divided by its noise std; 0 where no fresh measurement
+    exists (a missing, held or outlier sample is left out)."""
+    parts = [np.where(np.isfinite(meas[c]), (pred[c] - meas[c]) / d.sigma[c], 0.0) for c in d.channels]
     return np.concatenate(parts, axis=-1)
 
 
@@ -247,6 +278,6 @@ def window_residuals(effects: Sequence[str], names: Sequence[str], X: np.ndarray
     pred = {c: x[:, :, 0] for c, x in pred.items()}
     r = _normalised(pred, {c: m[None] for c, m in meas.items()}, d)
     if per_channel:
-        return r, {c: (pred[c] - meas[c][None]) / d.sigma[c] for c in d.channels}
+        return r, {c: (pred[c] - meas[c][None]) / d.sigma[c] for c in d.channels}  # NaN where missing
     return r
 

@@ -17,7 +17,7 @@ from fricenv.gap import report as report_mod
 from fricenv.gap.diagnose import DiagnoseConfig, diagnose, diagnose_file, estimate_noise, load_params
 from fricenv.gap.report import CANDIDATE_KEYS, REPORT_KEYS, write_report
 from fricenv.gap.simulate import simulate_log, write_simulated_log
-from fricenv.logs import LogFormatError, write_log
+from fricenv.logs import LogFormatError, read_log, write_log
 from fricenv.plants.tire import DRY, SNOW, WET, MagicFormula
 
 CFG = DiagnoseConfig(jobs=2)
@@ -216,16 +216,21 @@ def test_non_increasing_time_names_line_and_column(good_csv, tmp_path):
     assert f":{header_line + 11}:" in msg
 
 
-def test_nan_row_names_line_and_column(good_csv, tmp_path):
-    def nan(lines, h):
-        cells = lines[h + 5].split(",")
-        cells[2] = "nan"
-        lines[h + 5] = ",".join(cells)
+def test_nan_torque_names_line_and_column_and_nan_omega_is_a_missing_sample(good_csv, tmp_path):
+    """Issue 15: a NaN in a measured channel is a missing sample; in ``t`` or ``T_b`` it is an error naming the line."""
+    def nan_in(col):
+        def edit(lines, h):
+            cells = lines[h + 5].split(",")
+            cells[col] = "nan"
+            lines[h + 5] = ",".join(cells)
+        return edit
 
-    bad = _corrupt(good_csv, tmp_path, nan)
+    bad = _corrupt(good_csv, tmp_path, nan_in(1))
     header_line = 1 + next(i for i, line in enumerate(bad.read_text().splitlines()) if not line.startswith("#"))
-    with pytest.raises(LogFormatError, match=rf"bad\.csv:{header_line + 5}: column 'omega' is NaN"):
-        diagnose_file(bad)
+    with pytest.raises(LogFormatError, match=rf"bad\.csv:{header_line + 5}.*T_b"):
+        read_log(bad)
+    log = read_log(_corrupt(good_csv, tmp_path, nan_in(2)))
+    assert np.all(np.isfinite(log.t)) and np.all(np.isfinite(log.T_b))
 
 
 def test_omega_in_rpm_is_rejected(good_csv, tmp_path):

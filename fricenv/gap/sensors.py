@@ -1,0 +1,169 @@
+"""What a real sensor does to a channel, seen from the log itself (issue 15 item 2): missing or held samples (NaN),
+isolated outliers, quantisation and low-pass filtering, and the honest noise level that follows.
+
+- **Missing samples.** NaN in a channel (a held camera pose, a dropped sample) is left out of every residual; the
+  states that start a prediction window use the channel linearly interpolated over the gaps.
+- **Outliers.** An isolated spike, further than ``OUTLIER_Z`` robust noise std from the running median of its
+  neighbours (``OUTLIER_SPAN`` samples) and from its two neighbours' mean while they agree, is an outlier: it is
+  set missing (weight 0), so a single glitch cannot decide a verdict.
+- **Quantisation.** When every value lies on a grid of step ``q``, the noise std is at least ``q / sqrt(12)``
+  (uniform rounding error).
+- **Filtering.** White noise gives first differences whose lag-1 autocorrelation is -1/2; a low-passed channel
+  gives a larger one (above ``FILTERED_AC``; read on the quiet free-rolling start, where the signal barely moves). Its difference-based noise estimate is then far too small, so the
+  diagnosis takes that channel's noise from the calibrated model's residual instead and inflates it by the
+  residual's integrated autocorrelation time (:func:`correlation_time`): a window of ``H`` correlated samples holds
+  only ``H / tau`` independent ones, the effective sample size that the significance tests assume.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.ndimage import median_filter
+
+from fricenv.gap.stats import estimate_noise
+
+__all__ = ["FILTERED_AC", "OUTLIER_Z", "ChannelCondition", "condition_channel", "correlation_time", "fill_missing"]
+
+OUTLIER_Z = 8.0  # distance from the running median beyond which an isolated sample is an outlier [noise std]
+OUTLIER_SPAN = 7  # running-median span [samples]
+OUTLIER_MAX_SHARE = 0.02  # largest share of flagged samples still read as glitches [-]
+QUIET_MIN = 20  # samples of a quiet stretch (free rolling) that the filtering test needs [-]
+FILTERED_AC = -0.35  # lag-1 autocorrelation of the first differences above which a channel looks filtered [-]
+QUANT_MIN_LEVELS = 3  # a grid needs at least this many distinct levels [-]
+MAX_CORRELATION_TIME = 50.0  # upper bound of the integrated autocorrelation time [samples]
+
+
+@dataclass
+class ChannelCondition:
+    """One channel as the diagnosis uses it.
+
+    :param values: the samples, outliers and missing samples as NaN.
+    :param filled: the samples with every NaN interpolated (for the window start states).
+    :param noise: the noise std estimate (difference-based, at least the quantisation floor).
+    :param missing: share of samples missing in the log (NaN on input).
+    :param outliers: indices of the samples set missing as outliers.
+    :param quant_step: the quantisation step (0: not quantised).
+    :param filtered: whether the channel looks low-pass filtered.
+    """
+
+    values: np.ndarray
+    filled: np.ndarray
+    noise: float
+    missing: float
+    outliers: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
+    quant_step: float = 0.0
+    filtered: bool = False
+
+    def summary(self) -> dict:
+        """The report's per-channel line (``where["sensors"]``)."""
+        return {"missing_share": self.missing, "outliers": int(self.outliers.size), "filtered": self.filtered,
+                "quantisation_step": self.quant_step, "noise_std": self.noise}
+
+
+def fill_missing(x: np.ndarray) -> np.ndarray:
+    """``x`` with NaN samples linearly interpolated (held at the ends); all NaN gives zeros."""
+    x = np.asarray(x, dtype=float)
+    ok = np.isfinite(x)
+    if ok.all():
+        return x.copy()
+    if not ok.any():
+        return np.zeros_like(x)
+    idx = np.arange(x.size)
+    return np.interp(idx, idx[ok], x[ok])
+
+
+def _fresh(x: np.ndarray) -> np.ndarray:
+    """The finite samples of ``x`` in order (a NaN gap joins its neighbours: good enough for difference statistics)."""
+    return x[np.isfinite(x)]
+
+
+def quantisation_step(x: np.ndarray) -> float:
+    """The grid step of the values when they all lie on one (0 otherwise)."""
+    u = np.unique(_fresh(x))
+    if u.size < QUANT_MIN_LEVELS:
+        return 0.0
+    steps = np.diff(u)
+    q = float(np.min(steps))
+    if q <= 0 or u.size > 0.5 * np.count_nonzero(np.isfinite(x)):
+        return 0.0
+    k = (u - u[0]) / q
+    return q if np.all(np.abs(k - np.round(k)) < 1e-3 * np.maximum(1.0, k)) else 0.0
+
+
+def difference_ac(x: np.ndarray) -> float:
+    """Lag-1 autocorrelation of the first differences (robust: median-centred, winsorised at 5 MAD)."""
+    d2 = np.diff(_fresh(x))
+    if d2.size < 10:
+        return -0.5
+    med = np.median(d2)
+    mad = 1.4826 * np.median(np.abs(d2 - med)) + 1e-300
+    d2 = np.clip(d2 - med, -5 * mad, 5 * mad)
+    den = float(np.dot(d2, d2))
+    return float(np.dot(d2[1:], d2[:-1]) / den) if den > 0 else -0.5
+
+
+def _outliers(x: np.ndarray, noise: float) -> np.ndarray:
+    """Indices of isolated spikes: far from the running median of their neighbours and from the mean of the two
+    adjacent samples, while those two agree (a step or a lock-up moves its neighbours too). When more than
+    ``OUTLIER_MAX_SHARE`` of the samples qualify, the channel is spiky by nature and nothing is flagged."""
+    ok = np.isfinite(x)
+    if np.count_nonzero(ok) < OUTLIER_SPAN or not noise > 0:
+        return np.zeros(0, dtype=int)
+    f = fill_missing(x)
+    dev = np.abs(f - median_filter(f, size=OUTLIER_SPAN, mode="nearest"))
+    spread = max(noise, 1.4826 * float(np.median(dev[ok])))
+    mid = np.zeros_like(f)
+    mid[1:-1] = np.abs(f[1:-1] - 0.5 * (f[:-2] + f[2:]))
+    agree = np.zeros(f.size, dtype=bool)
+    agree[1:-1] = np.abs(f[2:] - f[:-2]) < 0.5 * mid[1:-1]
+    flag = ok & (dev > OUTLIER_Z * spread) & (mid > OUTLIER_Z * spread) & agree
+    if np.count_nonzero(flag) > OUTLIER_MAX_SHARE * f.size:
+        return np.zeros(0, dtype=int)
+    return np.flatnonzero(flag)
+
+
+def condition_channel(x: np.ndarray, floor: float, quiet: int = 0, may_be_filtered: bool = True) \
+        -> ChannelCondition:
+    """Missing samples, outliers, quantisation and filtering of one channel, and its noise estimate.
+
+    :param x: the channel's samples (NaN: missing).
+    :param floor: the smallest accepted noise std (SI).
+    :param quiet: length of the quiet start (free rolling, where the signal barely moves): the filtering test reads
+        the differences there when it holds ``QUIET_MIN`` samples (elsewhere the signal's own curvature
+        correlates them), else over the whole channel.
+    :param may_be_filtered: run the filtering test (False for a wheel-speed sensor: its pulses are counted, not
+        low-passed, and its small noise under a curved signal would read as filtered).
+    """
+    x = np.asarray(x, dtype=float).copy()
+    missing = float(np.mean(~np.isfinite(x))) if x.size else 0.0
+    q = quantisation_step(x)
+    raw = estimate_noise(_fresh(x))
+    noise = max(raw if np.isfinite(raw) else floor, floor, q / np.sqrt(12.0))
+    fresh = np.flatnonzero(np.isfinite(x))
+    out = fresh[_outliers(x[fresh], noise)]  # on the fresh samples only: a held channel's frames are its samples
+    x[out] = np.nan
+    if out.size:
+        raw = estimate_noise(_fresh(x))
+        noise = max(raw if np.isfinite(raw) else floor, floor, q / np.sqrt(12.0))
+    filtered = may_be_filtered and q == 0.0 and difference_ac(x[:quiet] if quiet >= QUIET_MIN else x) > FILTERED_AC
+    return ChannelCondition(values=x, filled=fill_missing(x), noise=noise, missing=missing, outliers=out,
+                            quant_step=q, filtered=filtered)
+
+
+def correlation_time(r: np.ndarray) -> float:
+    """Integrated autocorrelation time ``1 + 2 sum_k rho_k`` of residual rows ``r`` (windows, H), NaN ignored, the
+    sum stopped at the first non-positive autocorrelation; at least 1."""
+    r = np.where(np.isfinite(r), r, 0.0)
+    r = r - np.mean(r)  # a model's residual: centred over the log, not per window (a window mean is signal)
+    den = float(np.sum(r * r))
+    if den <= 0 or r.shape[-1] < 3:
+        return 1.0
+    tau = 1.0
+    for k in range(1, r.shape[-1] - 1):
+        rho = float(np.sum(r[:, k:] * r[:, :-k])) / den * r.shape[-1] / (r.shape[-1] - k)
+        if rho <= 0:
+            break
+        tau += 2.0 * rho
+    return float(min(tau, MAX_CORRELATION_TIME))
