@@ -1,0 +1,60 @@
+"""The native vector env with a batched estimator equals single envs wrapped in EstimatorObservation (issue 17)."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import fricenv  # noqa: F401  (registers the envs)
+from fricenv.envs.braking_vector import BrakingVectorEnv
+from fricenv.envs.estimator_observation import BatchedEstimatorObservation, EstimatorObservation
+from fricenv.envs.factory import make_braking
+from tests.test_braking_vector import OBS_TOL, ROADS_PER_ENV, SHORT_V0, _compare_with_single_envs
+
+
+@pytest.mark.parametrize("same_step", [False, True])
+def test_batched_estimator_vector_env_equals_wrapped_single_envs(same_step):
+    kw = {"v0": SHORT_V0, "change_distance": (0.5, 2.0)}
+    mode = "SameStep" if same_step else "NextStep"
+    venv = BatchedEstimatorObservation(BrakingVectorEnv(4, road=ROADS_PER_ENV, autoreset_mode=mode, **kw),
+                                       "ekf-rls")
+    singles = [make_braking("ekf-rls", road=r, **kw) for r in ROADS_PER_ENV]
+    assert venv.observation_fields == singles[0].observation_fields
+    assert venv.single_observation_space == singles[0].observation_space
+    ended, _ = _compare_with_single_envs(venv, singles, seed=5, steps=300, same_step=same_step)
+    assert ended >= 8
+
+
+def test_make_vec_uses_the_batched_estimator_and_sb3_adapter_matches_dummy_vec_env():
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    from fricenv.envs.sb3_vec import BrakingSB3VecEnv
+
+    envs = gym.make_vec("fricenv/Braking-v0", num_envs=3, vectorization_mode="vector_entry_point",
+                        estimator="ekf-rls", road="wet")
+    assert isinstance(envs, BatchedEstimatorObservation)
+    kw = {"v0": SHORT_V0, "road": "ice->dry", "change_distance": 1.0}
+    ours = BrakingSB3VecEnv(3, estimator="ekf-rls", **kw)
+    ref = DummyVecEnv([lambda: make_braking("ekf-rls", **kw) for _ in range(3)])
+    ours.seed(4)
+    ref.seed(4)
+    np.testing.assert_allclose(ours.reset(), ref.reset(), atol=OBS_TOL)
+    rng = np.random.default_rng(1)
+    episodes = 0
+    for _ in range(200):
+        act = rng.uniform(-1.0, 0.4, (3, 1)).astype(np.float32)
+        o1, _, d1, i1 = ours.step(act)
+        o2, _, d2, i2 = ref.step(act)
+        np.testing.assert_allclose(o1, o2, atol=OBS_TOL)
+        np.testing.assert_array_equal(d1, d2)
+        for i in np.flatnonzero(d1):
+            np.testing.assert_allclose(i1[i]["terminal_observation"], i2[i]["terminal_observation"], atol=OBS_TOL)
+            episodes += 1
+    assert episodes >= 6
+
+
+def test_batched_wrapper_refuses_an_estimator_without_batched_form():
+    with pytest.raises(ValueError, match="no batched form"):
+        BatchedEstimatorObservation(BrakingVectorEnv(2), "mhe")
+    assert isinstance(make_braking("mhe"), EstimatorObservation)
