@@ -38,7 +38,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from fricenv.envs.braking_core import SCENARIO_SEPARATOR
+from agents.scenario_mix import CHANGE_PROBABILITY, CHANGE_RANGE, V0_RANGE, ScenarioMix, ScenarioSampler  # noqa: F401
 from fricenv.utils import write_json
 
 __all__ = [
@@ -57,14 +57,12 @@ __all__ = [
 
 ALGOS = ("ppo", "sac")
 ENVS = ("braking", "payload")
-V0_RANGE = (15.0, 32.0)  # initial speeds drawn for training [m/s] (evaluation uses 20 and 30 m/s)
-CHANGE_PROBABILITY = 0.4  # share of training episodes with a friction change during the stop
-CHANGE_RANGE = (5.0, 30.0)  # distance of a training friction change [m]
 CHECKPOINT_EVERY = 50_000  # env steps between checkpoints
 SEED_STRIDE = 1000  # env i of a run with seed s is seeded s * SEED_STRIDE + i
 MODEL_FILE = "model.zip"
 VECNORM_FILE = "vecnormalize.pkl"
 META_FILE = "train.json"
+VEC_KINDS = ("auto", "native", "dummy", "subproc")
 
 
 @dataclass(frozen=True)
@@ -122,56 +120,11 @@ DEFAULT_CONFIGS: dict[tuple[str, str], PPOConfig | SACConfig] = {
 }
 
 
-class ScenarioMix(gym.Wrapper):
-    """Draw a training scenario per episode: a preset road, or a friction change between two presets.
+def native_vec_available(env: str, estimator: str) -> bool:
+    """Whether ``vec="native"`` can run this env and estimator (braking, with none or a batched estimator)."""
+    from estimators.batched import BATCHED
 
-    A stop lasts about ``1 / mu_max`` as long on one road as on another (ice: 10 times dry), so drawing roads
-    uniformly would fill the rollouts with ice. With ``step_balanced`` (default) a preset road is drawn with
-    probability proportional to its peak friction, which gives every road about the same share of *steps*. A
-    friction change is uniform over the ordered pairs of different presets (a first version weighted its first
-    road too, and then almost never showed ice->dry: that policy braked ice->dry at 1.5-1.6 times the limit),
-    at a distance uniform on :data:`CHANGE_RANGE`. Reset options given explicitly win. Draws come from a
-    generator seeded by the first ``reset(seed=...)``.
-
-    :param env: a ``Braking-v0`` env (possibly wrapped).
-    :param change_probability: share of episodes with a friction change [-].
-    :param v0_range: initial speed range [m/s].
-    :param step_balanced: weight roads by their peak friction (else uniform per episode).
-    """
-
-    def __init__(self, env: gym.Env, change_probability: float = CHANGE_PROBABILITY,
-                 v0_range: tuple[float, float] = V0_RANGE, step_balanced: bool = True):
-        super().__init__(env)
-        from fricenv.plants.tire import ROADS
-
-        if not 0.0 <= change_probability <= 1.0:
-            raise ValueError(f"change_probability must be in [0, 1], got {change_probability!r}")
-        self.change_probability = float(change_probability)
-        self.v0_range = (float(v0_range[0]), float(v0_range[1]))
-        self.roads = tuple(ROADS)
-        weights = np.array([ROADS[r].mu_max if step_balanced else 1.0 for r in self.roads])
-        self.road_probabilities = weights / weights.sum()
-        self._rng = np.random.default_rng()
-
-    def draw(self) -> dict[str, Any]:
-        """Reset options of the next scenario."""
-        rng = self._rng
-        drawn: dict[str, Any] = {"v0": self.v0_range}
-        if rng.random() < self.change_probability:
-            # uniform over ordered pairs: ice->dry must be seen as often as dry->ice
-            i = int(rng.integers(len(self.roads)))
-            j = int(rng.integers(len(self.roads) - 1))
-            j = j + 1 if j >= i else j
-            drawn["road"] = f"{self.roads[i]}{SCENARIO_SEPARATOR}{self.roads[j]}"
-            drawn["change_distance"] = float(rng.uniform(*CHANGE_RANGE))
-        else:
-            drawn["road"] = self.roads[int(rng.choice(len(self.roads), p=self.road_probabilities))]
-        return drawn
-
-    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
-        if seed is not None:
-            self._rng = np.random.default_rng(seed)
-        return self.env.reset(seed=seed, options={**self.draw(), **(options or {})})
+    return env == "braking" and (estimator == "none" or estimator in BATCHED)
 
 
 def _check_choice(value: str, valid: tuple[str, ...], what: str) -> str:
@@ -239,7 +192,10 @@ def _checked_config(env: str, estimator: str, algo: str, steps: int, vec: str,
     """Validate the arguments of :func:`train`; the hyperparameters to use."""
     _check_choice(env, ENVS, "env")
     _check_choice(algo, ALGOS, "algo")
-    _check_choice(vec, ("dummy", "subproc"), "vec")
+    _check_choice(vec, VEC_KINDS, "vec")
+    if vec == "native" and not native_vec_available(env, estimator):
+        raise ValueError(f"vec 'native' runs the braking env with estimator none or one with a batched form "
+                         f"(estimators.batched.BATCHED), got env {env!r}, estimator {estimator!r}; use vec 'dummy'")
     if env == "braking":
         from fricenv.envs.estimator_observation import check_estimator_name
 
@@ -276,7 +232,7 @@ def _make_model(algo: str, cfg: PPOConfig | SACConfig, venv, tb: str | None, see
 
 
 def train(out: str | Path, env: str = "braking", estimator: str = "none", algo: str = "ppo", steps: int = 200_000,
-          seed: int = 0, config: PPOConfig | SACConfig | None = None, vec: str = "dummy",
+          seed: int = 0, config: PPOConfig | SACConfig | None = None, vec: str = "auto",
           progress_bar: bool = True, checkpoint_every: int = CHECKPOINT_EVERY,
           env_kwargs: dict | None = None, verbose: int = 0) -> TrainResult:
     """Train a policy and save model, normalisation statistics, checkpoints and metadata in ``out``.
@@ -288,7 +244,9 @@ def train(out: str | Path, env: str = "braking", estimator: str = "none", algo: 
     :param steps: env steps to train.
     :param seed: seed of the run (networks, envs).
     :param config: hyperparameters; default :data:`DEFAULT_CONFIGS` for (env, algo).
-    :param vec: ``dummy`` (all envs in this process) or ``subproc`` (one process per env).
+    :param vec: ``auto`` (``native`` where available, else ``dummy``), ``native`` (the braking vector env, all cars
+        and a batched estimator in one numpy call: :mod:`fricenv.envs.sb3_vec`), ``dummy`` (single envs in this
+        process) or ``subproc`` (one process per env). ``native`` and ``dummy`` draw the same scenarios.
     :param progress_bar: show a progress bar (tqdm + rich).
     :param checkpoint_every: env steps between checkpoints (0: none).
     :param env_kwargs: extra env arguments.
@@ -303,9 +261,18 @@ def train(out: str | Path, env: str = "braking", estimator: str = "none", algo: 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
 
-    fns = [make_env_fn(env, estimator, rank=i, training=True, env_kwargs=env_kwargs) for i in range(cfg.n_envs)]
-    venv = SubprocVecEnv(fns) if vec == "subproc" else DummyVecEnv(fns)
-    venv.seed(seed * SEED_STRIDE)
+    if vec == "auto":
+        vec = "native" if native_vec_available(env, estimator) else "dummy"
+    if vec == "native":
+        from fricenv.envs.sb3_vec import make_sb3_vec_env
+
+        venv = make_sb3_vec_env(cfg.n_envs, seed=seed * SEED_STRIDE, estimator=estimator,
+                                scenarios=ScenarioSampler(), **(env_kwargs or {}))
+    else:
+        fns = [make_env_fn(env, estimator, rank=i, training=True, env_kwargs=env_kwargs)
+               for i in range(cfg.n_envs)]
+        venv = SubprocVecEnv(fns) if vec == "subproc" else DummyVecEnv(fns)
+        venv.seed(seed * SEED_STRIDE)
     venv = VecNormalize(venv, norm_obs=cfg.norm_obs, norm_reward=cfg.norm_reward, gamma=cfg.gamma)
     tb = _tensorboard_dir(out)
     model = _make_model(algo, cfg, venv, tb, seed, verbose)

@@ -58,3 +58,28 @@ def test_batched_wrapper_refuses_an_estimator_without_batched_form():
     with pytest.raises(ValueError, match="no batched form"):
         BatchedEstimatorObservation(BrakingVectorEnv(2), "mhe")
     assert isinstance(make_braking("mhe"), EstimatorObservation)
+
+
+def test_native_training_env_draws_the_scenarios_of_scenario_mix():
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    from agents.training import SEED_STRIDE, ScenarioSampler, make_env_fn
+    from fricenv.envs.sb3_vec import make_sb3_vec_env
+
+    ours = make_sb3_vec_env(3, monitor=False, seed=2 * SEED_STRIDE, estimator="ekf-rls",
+                            scenarios=ScenarioSampler(change_probability=0.5, v0_range=SHORT_V0))
+    ref = DummyVecEnv([make_env_fn("braking", "ekf-rls", i) for i in range(3)])
+    for e in ref.envs:  # the same short stops as ours (ScenarioMix is the Monitor's inner env)
+        e.env.sampler = ScenarioSampler(change_probability=0.5, v0_range=SHORT_V0)
+    ref.seed(2 * SEED_STRIDE)
+    np.testing.assert_allclose(ours.reset(), ref.reset(), atol=OBS_TOL)
+    rng = np.random.default_rng(2)
+    roads = set()
+    for _ in range(300):
+        act = rng.uniform(-1.0, 0.4, (3, 1)).astype(np.float32)
+        o1, _, d1, i1 = ours.step(act)
+        o2, _, d2, i2 = ref.step(act)
+        np.testing.assert_allclose(o1, o2, atol=OBS_TOL)
+        np.testing.assert_array_equal(d1, d2)
+        roads.update(i1[i]["road"] for i in np.flatnonzero(d1))
+    assert any("->" in r for r in roads) and any("->" not in r for r in roads)

@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 
 ENV_CHOICES = ("braking", "payload")
+VEC_CHOICES = ("auto", "native", "dummy", "subproc")  # agents.training.VEC_KINDS (not imported: CLI start-up)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -24,8 +25,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--steps", type=int, default=500_000, help="env steps (default %(default)s)")
     parser.add_argument("--seed", type=int, default=0, help="seed (default %(default)s)")
     parser.add_argument("--out", required=True, metavar="DIR", help="run directory")
-    parser.add_argument("--vec", choices=("dummy", "subproc"), default="dummy",
-                        help="vector env: all envs in one process, or one process each (default %(default)s)")
+    parser.add_argument("--vec", choices=VEC_CHOICES, default="auto",
+                        help="vector env: native (all cars and a batched estimator in one numpy call), dummy (single "
+                             "envs in one process), subproc (one process each); auto: native where the estimator "
+                             "has a batched form (default %(default)s)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     parser.add_argument("--json", metavar="PATH", help="write the run summary (wall time, steps/s) as JSON")
 
