@@ -38,6 +38,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from agents.hyperparams import BRAKING_FILE, load_hyperparams
 from agents.scenario_mix import CHANGE_PROBABILITY, CHANGE_RANGE, V0_RANGE, ScenarioMix, ScenarioSampler  # noqa: F401
 from fricenv.utils import write_json
 
@@ -55,7 +56,7 @@ __all__ = [
     "train",
 ]
 
-ALGOS = ("ppo", "sac")
+ALGOS = ("ppo", "sac", "recurrent-ppo")  # recurrent-ppo: sb3-contrib's RecurrentPPO (LSTM), PPO hyperparameters
 ENVS = ("braking", "payload")
 CHECKPOINT_EVERY = 50_000  # env steps between checkpoints
 SEED_STRIDE = 1000  # env i of a run with seed s is seeded s * SEED_STRIDE + i
@@ -67,7 +68,8 @@ VEC_KINDS = ("auto", "native", "dummy", "subproc")
 
 @dataclass(frozen=True)
 class PPOConfig:
-    """PPO defaults for the ABS task (tuned on Braking-v0 with randomised roads, 8 envs).
+    """PPO hyperparameters (the ABS task's are in ``agents/hyperparams/braking.json``; these field defaults are the
+    ones tuned on Braking-v0 with randomised roads, 8 envs, before issue 17).
 
     The reward is dense (braking efficiency per step) and the slip dynamics are fast (tens of ms), so a short
     horizon (gamma 0.95, i.e. ~0.2 s) is enough and learns faster than the usual 0.99; rewards are normalised by
@@ -112,9 +114,10 @@ class SACConfig:
 
 # Payload excitation: longer horizon (the calibration reward comes from accumulated information).
 PAYLOAD_PPO = PPOConfig(n_envs=4, n_steps=512, gamma=0.99, gae_lambda=0.95, log_std_init=-0.5, ent_coef=0.0)
+BRAKING_CONFIGS = load_hyperparams(BRAKING_FILE, {"ppo": PPOConfig, "sac": SACConfig})  # the committed file
 DEFAULT_CONFIGS: dict[tuple[str, str], PPOConfig | SACConfig] = {
-    ("braking", "ppo"): PPOConfig(),
-    ("braking", "sac"): SACConfig(),
+    ("braking", "ppo"): BRAKING_CONFIGS["ppo"],
+    ("braking", "sac"): BRAKING_CONFIGS["sac"],
     ("payload", "ppo"): PAYLOAD_PPO,
     ("payload", "sac"): SACConfig(gamma=0.99),
 }
@@ -207,20 +210,25 @@ def _checked_config(env: str, estimator: str, algo: str, steps: int, vec: str,
     if not isinstance(steps, int) or steps < 1:
         raise ValueError(f"steps must be a positive int, got {steps!r}")
     cfg = config if config is not None else DEFAULT_CONFIGS[(env, algo)]
-    expected = PPOConfig if algo == "ppo" else SACConfig
+    expected = SACConfig if algo == "sac" else PPOConfig
     if not isinstance(cfg, expected):
         raise TypeError(f"config for {algo} must be a {expected.__name__}, got {type(cfg).__name__}")
     return cfg
 
 
 def _make_model(algo: str, cfg: PPOConfig | SACConfig, venv, tb: str | None, seed: int, verbose: int):
-    """The SB3 model (PPO or SAC, CPU) with the hyperparameters ``cfg`` on ``venv``."""
+    """The SB3 model (PPO, RecurrentPPO or SAC, CPU) with the hyperparameters ``cfg`` on ``venv``."""
     from stable_baselines3 import PPO, SAC
 
     policy_kwargs: dict[str, Any] = {"net_arch": list(cfg.net_arch)}
-    if algo == "ppo":
+    if algo != "sac":
         policy_kwargs["log_std_init"] = cfg.log_std_init
-        return PPO("MlpPolicy", venv, n_steps=cfg.n_steps, batch_size=cfg.batch_size, n_epochs=cfg.n_epochs,
+        policy = "MlpPolicy"
+        if algo == "recurrent-ppo":
+            from sb3_contrib import RecurrentPPO as PPO  # noqa: N814 - the same constructor arguments
+
+            policy = "MlpLstmPolicy"
+        return PPO(policy, venv, n_steps=cfg.n_steps, batch_size=cfg.batch_size, n_epochs=cfg.n_epochs,
                    learning_rate=cfg.learning_rate, gamma=cfg.gamma, gae_lambda=cfg.gae_lambda,
                    clip_range=cfg.clip_range, ent_coef=cfg.ent_coef, vf_coef=cfg.vf_coef,
                    max_grad_norm=cfg.max_grad_norm, policy_kwargs=policy_kwargs, tensorboard_log=tb,
@@ -234,7 +242,7 @@ def _make_model(algo: str, cfg: PPOConfig | SACConfig, venv, tb: str | None, see
 def train(out: str | Path, env: str = "braking", estimator: str = "none", algo: str = "ppo", steps: int = 200_000,
           seed: int = 0, config: PPOConfig | SACConfig | None = None, vec: str = "auto",
           progress_bar: bool = True, checkpoint_every: int = CHECKPOINT_EVERY,
-          env_kwargs: dict | None = None, verbose: int = 0) -> TrainResult:
+          env_kwargs: dict | None = None, verbose: int = 0, frame_stack: int = 0) -> TrainResult:
     """Train a policy and save model, normalisation statistics, checkpoints and metadata in ``out``.
 
     :param out: run directory (created).
@@ -251,6 +259,8 @@ def train(out: str | Path, env: str = "braking", estimator: str = "none", algo: 
     :param checkpoint_every: env steps between checkpoints (0: none).
     :param env_kwargs: extra env arguments.
     :param verbose: SB3 verbosity.
+    :param frame_stack: k > 0: the policy sees the last k observations (SB3's ``VecFrameStack``), the memory
+        baseline of issue 17; 0: the observation alone.
     """
     import torch
     from stable_baselines3.common.callbacks import CheckpointCallback
@@ -273,6 +283,12 @@ def train(out: str | Path, env: str = "braking", estimator: str = "none", algo: 
                for i in range(cfg.n_envs)]
         venv = SubprocVecEnv(fns) if vec == "subproc" else DummyVecEnv(fns)
         venv.seed(seed * SEED_STRIDE)
+    if not isinstance(frame_stack, int) or frame_stack < 0:
+        raise ValueError(f"frame_stack must be an int >= 0 (0: none), got {frame_stack!r}")
+    if frame_stack:
+        from stable_baselines3.common.vec_env import VecFrameStack
+
+        venv = VecFrameStack(venv, frame_stack)
     venv = VecNormalize(venv, norm_obs=cfg.norm_obs, norm_reward=cfg.norm_reward, gamma=cfg.gamma)
     tb = _tensorboard_dir(out)
     model = _make_model(algo, cfg, venv, tb, seed, verbose)
@@ -293,7 +309,7 @@ def train(out: str | Path, env: str = "braking", estimator: str = "none", algo: 
     meta = {"env": env, "estimator": estimator, "algo": algo, "seed": seed, "steps": trained,
             "wall_time_s": wall, "steps_per_second": trained / wall, "config": dataclasses.asdict(cfg),
             "vec": vec, "env_kwargs": env_kwargs or {}, "tensorboard": tb is not None,
-            "torch_threads": torch.get_num_threads()}
+            "torch_threads": torch.get_num_threads(), "frame_stack": frame_stack}
     write_json(out / META_FILE, meta)
     return TrainResult(out=out, model_path=model_path, vecnormalize_path=vn_path, steps=trained, wall_time=wall,
                        steps_per_second=trained / wall, meta=meta)
@@ -313,17 +329,34 @@ class TrainedPolicy:
         self.meta = meta
         self.estimator = meta.get("estimator", "none")
         self.algo = meta.get("algo", "ppo")
+        self.frame_stack = int(meta.get("frame_stack", 0))
         self.name = f"{self.algo}[{self.estimator}]"
+        self.reset()
 
     def reset(self, seed: int | None = None) -> None:
-        """Start of an episode (the policy is memoryless; ``seed`` is accepted for the excitation interface)."""
+        """Start of an episode: empty frame stack, fresh LSTM state (``seed`` is accepted for the excitation
+        interface)."""
+        self._stack: np.ndarray | None = None
+        self._state = None
+        self._episode_start = True
 
     def act(self, obs) -> np.ndarray:
-        """Deterministic action for one observation (shape (act_dim,))."""
-        obs = np.asarray(obs, dtype=np.float32)
+        """Deterministic action for one observation (shape (act_dim,)); a frame-stack policy sees the last
+        ``frame_stack`` observations (zeros before the first, as SB3's VecFrameStack), a recurrent one its state."""
+        obs = np.asarray(obs, dtype=np.float32).ravel()
+        if self.frame_stack:
+            if self._stack is None:
+                self._stack = np.zeros(self.frame_stack * obs.size, dtype=np.float32)
+            self._stack = np.concatenate([self._stack[obs.size:], obs])
+            obs = self._stack
         if self.vecnormalize is not None:
             obs = self.vecnormalize.normalize_obs(obs)
-        action, _ = self.model.predict(obs, deterministic=True)
+        if self.algo == "recurrent-ppo":
+            action, self._state = self.model.predict(obs, state=self._state, deterministic=True,
+                                                     episode_start=np.array([self._episode_start]))
+            self._episode_start = False
+        else:
+            action, _ = self.model.predict(obs, deterministic=True)
         return np.asarray(action, dtype=np.float32)
 
 
@@ -351,7 +384,9 @@ def load_policy(run_dir: str | Path, model_file: str | None = None,
     path = run_dir / (model_file or MODEL_FILE)
     if not path.is_file():
         raise ValueError(f"model file {path} does not exist")
-    model = (PPO if algo == "ppo" else SAC).load(str(path), device="cpu")
+    if algo == "recurrent-ppo":
+        from sb3_contrib import RecurrentPPO as PPO  # noqa: N814
+    model = (SAC if algo == "sac" else PPO).load(str(path), device="cpu")
     vn = None
     vn_path = run_dir / (vecnormalize_file or VECNORM_FILE)
     if vn_path.is_file():

@@ -57,6 +57,8 @@ class BatchedGate:
         self.rejected[mask] = 0
 
     def _start(self, rows: np.ndarray, omega: np.ndarray) -> None:
+        if not rows.any():
+            return
         self.x[rows] = np.stack([omega[rows], np.zeros(rows.sum())], axis=1)
         self.P[rows] = np.diag([self.t.R, self.t.b_std0[0] ** 2])
 
