@@ -359,7 +359,7 @@ def compare_abs(out: str | Path, estimators: Sequence[str] = ("none", "ekf-rls",
     todo = [key for key, meta in metas.items() if meta is None]
     metas.update(zip(todo, _run_trainings([jobs[k] for k in todo], workers)))
     specs = []
-    for key, job in jobs.items():
+    for job in jobs.values():
         spec = parse_policy(str(job["out"]))
         specs.append(dataclasses.replace(spec, label=f"{spec.label}#s{job['seed']}"))
     t0 = time.perf_counter()

@@ -225,7 +225,7 @@ def _make_model(algo: str, cfg: PPOConfig | SACConfig, venv, tb: str | None, see
         policy_kwargs["log_std_init"] = cfg.log_std_init
         policy = "MlpPolicy"
         if algo == "recurrent-ppo":
-            from sb3_contrib import RecurrentPPO as PPO  # noqa: N814 - the same constructor arguments
+            from sb3_contrib import RecurrentPPO as PPO
 
             policy = "MlpLstmPolicy"
         return PPO(policy, venv, n_steps=cfg.n_steps, batch_size=cfg.batch_size, n_epochs=cfg.n_epochs,
@@ -385,7 +385,7 @@ def load_policy(run_dir: str | Path, model_file: str | None = None,
     if not path.is_file():
         raise ValueError(f"model file {path} does not exist")
     if algo == "recurrent-ppo":
-        from sb3_contrib import RecurrentPPO as PPO  # noqa: N814
+        from sb3_contrib import RecurrentPPO as PPO
     model = (SAC if algo == "sac" else PPO).load(str(path), device="cpu")
     vn = None
     vn_path = run_dir / (vecnormalize_file or VECNORM_FILE)

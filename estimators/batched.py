@@ -146,7 +146,7 @@ class BatchedEkfRls:
         cfg, db = self.cfg, self.cfg.deadband
         fresh = np.isnan(self.y)
         c_new = self.c + self.core.corr_factor * (np.abs(a_x) - self.R_g - self.c)
-        dead = lambda c: np.sign(c) * np.maximum(np.abs(c) - db, 0.0)  # noqa: E731
+        dead = lambda c: np.sign(c) * np.maximum(np.abs(c) - db, 0.0)
         rate = np.maximum(self.R_g + 0.5 * (dead(self.c) + dead(c_new)), 0.0)
         sat = np.clip((self.y - x_ref) / cfg.d, -1.0, 1.0)  # eq. (6)
         y = np.maximum(self.y - self.dt * rate * sat, 0.0)

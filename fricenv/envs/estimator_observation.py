@@ -63,10 +63,10 @@ from fricenv.envs.braking_core import ObsField
 from fricenv.plants.quarter_car import QuarterCarParams
 
 __all__ = [
-    "BatchedEstimatorObservation",
     "ESTIMATE_FIELDS",
     "ESTIMATOR_NAMES",
     "PAYLOAD_ORACLE_FIELDS",
+    "BatchedEstimatorObservation",
     "EstimatorObservation",
     "PayloadEstimatorObservation",
     "check_estimator_name",

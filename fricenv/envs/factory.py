@@ -63,9 +63,8 @@ def make_braking_vector(num_envs: int = 1, estimator: str = "none", render_mode:
     :param max_episode_steps: truncation in control steps (``make_vec`` passes the registration's).
     :param env_kwargs: the single env's keyword arguments.
     """
-    from fricenv.envs.braking_vector import BrakingVectorEnv
-
     from estimators.batched import BATCHED
+    from fricenv.envs.braking_vector import BrakingVectorEnv
 
     check_estimator_name(estimator, ESTIMATOR_NAMES)
     if (estimator == "none" or estimator in BATCHED) and render_mode is None:
