@@ -48,3 +48,9 @@ def test_memory_baselines_train_and_act_with_memory(tmp_path, algo, frame_stack)
 def test_bad_frame_stack_is_rejected(tmp_path):
     with pytest.raises(ValueError, match="frame_stack"):
         train(tmp_path, steps=64, config=TINY, frame_stack=-1, progress_bar=False)
+
+
+def test_recurrent_ppo_has_default_hyperparameters():
+    from agents.training import DEFAULT_CONFIGS
+
+    assert DEFAULT_CONFIGS[("braking", "recurrent-ppo")] == DEFAULT_CONFIGS[("braking", "ppo")]
