@@ -265,11 +265,12 @@ def _bar_chart(rows, path: Path, title: str) -> Path:
 
 # ---------------------------------------------------------------------------------------------- headline comparison
 def summarize_policies(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
-    """Per policy over all scenarios: mean and worst ratio, total lock events, and the scenarios covered."""
+    """Per policy (and training seed, rows that carry one) over all scenarios: mean and worst ratio, total lock
+    events, and the scenarios covered."""
     out = []
-    for p in dict.fromkeys(r["policy"] for r in rows):
-        mine = [r for r in rows if r["policy"] == p]
-        out.append({"policy": p, "estimator": mine[0]["estimator"],
+    for p, seed in dict.fromkeys((r["policy"], r.get("train_seed")) for r in rows):
+        mine = [r for r in rows if r["policy"] == p and r.get("train_seed") == seed]
+        out.append({"policy": p, "train_seed": seed, "estimator": mine[0]["estimator"],
                     "ratio_mean": float(np.mean([r["ratio_mean"] for r in mine])),
                     "ratio_worst": float(np.max([r["ratio_mean"] for r in mine])),
                     "locks": int(sum(r["locks"] for r in mine)),
@@ -278,6 +279,9 @@ def summarize_policies(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
 
 
 def _train_job(kwargs: dict) -> dict:
+    import torch
+
+    torch.set_num_threads(1)
     from agents.training import train
 
     result = train(**kwargs)
@@ -299,21 +303,46 @@ def _finished_run(run_dir: Path) -> dict | None:
     return json.loads(meta.read_text()) if meta.is_file() and model.is_file() else None
 
 
-def compare_abs(out: str | Path, estimators: Sequence[str] = ("none", "ekf-rls", "mhe", "oracle"),
-                algo: str = "ppo", steps: int = 300_000, pipeline: str = "ekf-rls", seed: int = 0,
-                seeds: int = DEFAULT_SEEDS, workers: int = 2, reuse: bool = False) -> dict[str, Any]:
-    """Train one policy per observation estimator, then evaluate them with the rule ABS and the pipeline.
+# Memory baselines of the headline comparison (issue 17): no estimate, but memory of the raw ECU observations.
+MEMORY_BASELINES: dict[str, dict[str, Any]] = {
+    "ppo-stack4": {"algo": "ppo", "frame_stack": 4},  # PPO on the last 4 observations
+    "recurrent-ppo": {"algo": "recurrent-ppo"},  # sb3-contrib's RecurrentPPO (LSTM)
+}
+COMPARE_KEYS = ("policy", "estimator", "train_seed", "scenario", "ratio_mean", "ratio_std", "locks")
+TRAINING_KEYS = ("policy", "estimator", "train_seed", "steps", "wall_time_s", "steps_per_second")
 
-    :param out: directory; runs go to ``out/<algo>-<estimator>``.
+
+def _training_jobs(out: Path, estimators: Sequence[str], baselines: Sequence[str], algo: str, steps: int,
+                   train_seeds: Sequence[int]) -> dict[str, dict]:
+    """Row label with seed -> :func:`agents.training.train` arguments, one per (row, training seed)."""
+    rows: dict[str, dict] = {f"{algo}-{est}": {"estimator": est, "algo": algo} for est in estimators}
+    for name in baselines:
+        if name not in MEMORY_BASELINES:
+            raise ValueError(f"unknown memory baseline {name!r}; valid: {', '.join(MEMORY_BASELINES)}")
+        rows[name] = {"estimator": "none", **MEMORY_BASELINES[name]}
+    return {f"{name}#s{seed}": {"out": out / f"{name}-s{seed}", "env": "braking", "steps": steps, "seed": seed,
+                                "progress_bar": False, **kw}
+            for name, kw in rows.items() for seed in train_seeds}
+
+
+def compare_abs(out: str | Path, estimators: Sequence[str] = ("none", "ekf-rls", "oracle"),
+                algo: str = "ppo", steps: int = 300_000, pipeline: str = "ekf-rls", train_seeds: Sequence[int] = (0,),
+                seeds: int = DEFAULT_SEEDS, workers: int = 2, reuse: bool = False,
+                baselines: Sequence[str] = tuple(MEMORY_BASELINES)) -> dict[str, Any]:
+    """Train every row on every training seed, then evaluate them with the rule ABS and the pipeline.
+
+    :param out: directory; runs go to ``out/<row>-s<seed>`` (rows ``<algo>-<estimator>`` and the baselines).
     :param estimators: observation estimators of the trained rows.
-    :param algo: ``ppo`` or ``sac``.
+    :param algo: ``ppo`` or ``sac`` (the estimator rows).
     :param steps: training steps per policy.
     :param pipeline: estimator of the estimator + slip controller row.
-    :param seed: training seed.
-    :param seeds: evaluation seeds.
+    :param train_seeds: training seeds; every trained row is trained once per seed.
+    :param seeds: evaluation seeds (0..seeds-1; the training scenarios are drawn from other generators).
     :param workers: parallel processes (trainings, then evaluation jobs).
     :param reuse: reuse finished runs in ``out``.
-    :return: ``rows`` (evaluation), ``training`` (metadata per run), ``evaluation_time_s``.
+    :param baselines: memory baselines (:data:`MEMORY_BASELINES`) trained without estimates.
+    :return: ``rows`` (:data:`COMPARE_KEYS` and more), ``training`` (:data:`TRAINING_KEYS` per run),
+        ``evaluation_time_s``.
     """
     import time
 
@@ -323,22 +352,26 @@ def compare_abs(out: str | Path, estimators: Sequence[str] = ("none", "ekf-rls",
     for est in estimators:
         check_estimator_name(est)
     parse_policy(f"{PIPELINE_PREFIX}{pipeline}")
-    run_dirs = {est: out / f"{algo}-{est}" for est in estimators}
-    metas: dict[str, dict] = {}
-    jobs = []
-    for est, d in run_dirs.items():
-        done = _finished_run(d) if reuse else None
-        if done is not None:
-            metas[est] = done
-        else:
-            jobs.append({"out": d, "env": "braking", "estimator": est, "algo": algo, "steps": steps, "seed": seed,
-                         "progress_bar": False})
-    for job, meta in zip(jobs, _run_trainings(jobs, workers)):
-        metas[job["estimator"]] = meta
-    policies = [str(run_dirs[e]) for e in estimators] + ["rule-abs", f"{PIPELINE_PREFIX}{pipeline}"]
+    if not train_seeds:
+        raise ValueError("train_seeds must name at least one training seed")
+    jobs = _training_jobs(out, estimators, baselines, algo, steps, train_seeds)
+    metas = {key: _finished_run(job["out"]) if reuse else None for key, job in jobs.items()}
+    todo = [key for key, meta in metas.items() if meta is None]
+    metas.update(zip(todo, _run_trainings([jobs[k] for k in todo], workers)))
+    specs = []
+    for job in jobs.values():
+        spec = parse_policy(str(job["out"]))
+        specs.append(dataclasses.replace(spec, label=f"{spec.label}#s{job['seed']}"))
     t0 = time.perf_counter()
-    rows = evaluate(policies, seeds=seeds, workers=workers)
-    return {"rows": rows, "training": [metas[e] for e in estimators], "evaluation_time_s": time.perf_counter() - t0}
+    rows = evaluate(specs + ["rule-abs", f"{PIPELINE_PREFIX}{pipeline}"], seeds=seeds, workers=workers)
+    for row in rows:
+        label, _, seed = row["policy"].partition("#s")
+        row["policy"], row["train_seed"] = label, int(seed) if seed else None
+    training = [{"policy": spec.label.partition("#s")[0], "estimator": metas[key]["estimator"],
+                 "train_seed": jobs[key]["seed"], "steps": metas[key]["steps"],
+                 "wall_time_s": metas[key]["wall_time_s"], "steps_per_second": metas[key]["steps_per_second"]}
+                for key, spec in zip(jobs, specs)]
+    return {"rows": rows, "training": training, "evaluation_time_s": time.perf_counter() - t0}
 
 
 def compare_excitation(out: str | Path, steps: int = 100_000, seed: int = 0, episodes: int = 3, workers: int = 2,

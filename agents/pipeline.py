@@ -13,8 +13,14 @@
   0.088, ice at 0.39), and why the ``*-full`` estimators (theta, B, C, E) exist;
 * feedforward and PI: :class:`agents.controllers.SlipController` (Johansen et al. 2003), unchanged.
 
-After a failed or skipped update (health ``SOLVER_FAILED`` / ``INVALID_INPUT``) the reference is held at its last
-value (initially the peak of the nominal curve).
+After a failed or skipped update (health ``SOLVER_FAILED`` / ``INVALID_INPUT`` / ``OUTLIER``) the reference is held
+at its last value (initially the peak of the nominal curve). Safe fallback (issue 17): when the estimate is stale
+(no usable update for ``STALE_STEPS`` control steps in a row) or implausible (a non-finite or negative ``v_hat``, or
+one more than ``V_MARGIN`` below the measured wheel's surface speed ``omega_m r`` for ``BELOW_STEPS`` steps in a row,
+which braking never gives), the
+source falls back to ``SAFE_SLIP_REF``, a slip below the peak of every preset road (wet, the earliest, peaks at
+0.088), where the wheel is stable whatever the road, and to the speed ``max(v_hat, omega_m r)`` (finite); its
+``fallback`` attribute (and :attr:`EstimatorSlipPipeline.health`) says so until the estimate is usable again.
 """
 
 from __future__ import annotations
@@ -44,6 +50,11 @@ FIELD_V_HAT = "v_hat"
 SHAPE_NAMES = ("B", "C", "E", "theta")
 USABLE = (Health.OK, Health.NOT_EXCITED)  # estimates a reference may come from (NOT_EXCITED: held near the prior)
 SHAPE_DECIMALS = 3  # estimated (B, C, E) are rounded to this many decimals to cache the peak search
+STALE_STEPS = 20  # control steps (0.2 s) without a usable estimate before the safe fallback [-]
+SAFE_SLIP_REF = 0.07  # slip reference of the fallback: below every preset road's peak (wet: 0.088) [-]
+V_MARGIN = 0.5  # v_hat this far below the wheel's surface speed is implausible while braking [m/s]
+BELOW_STEPS = 3  # ... for this many control steps in a row (a single wheel-speed spike is not) [-]
+FIELD_WHEEL_SPEED = "wheel_speed"
 
 
 def find_estimator_wrapper(env) -> EstimatorObservation:
@@ -80,16 +91,22 @@ class EstimatedPeakSource:
     :param estimate_fn: callable returning the last estimate's values (a mapping with ``B``, ``C``, ``E`` if
         estimated) and its health, or None before the first estimate.
     :param shape: the curve shape assumed for what the estimator does not estimate (default eq. (18)).
+    :param wheel_radius: r of the wheel [m], for the plausibility test of ``v_hat`` (module docstring).
     """
 
-    def __init__(self, estimate_fn: Callable[[], tuple[dict, int] | None], shape: dict | None = None):
+    def __init__(self, estimate_fn: Callable[[], tuple[dict, int] | None], shape: dict | None = None,
+                 wheel_radius: float | None = None):
         self.estimate_fn = estimate_fn
         self.shape = dict(shape or NOMINAL_SHAPE)
+        self.wheel_radius = wheel_radius
         self._cache: dict[tuple[float, float, float], float] = {}
         self.reset()
 
     def reset(self) -> None:
         self.lambda_ref = self._peak(self.shape)
+        self.stale = 0  # control steps in a row without a usable estimate
+        self.below = 0  # control steps in a row with v_hat below the wheel's surface speed
+        self.fallback = False  # the safe reference is in use (module docstring)
 
     def _peak(self, values) -> float:
         key = tuple(round(float(values.get(n, self.shape[n])), SHAPE_DECIMALS) for n in SHAPE_NAMES[:3])
@@ -102,11 +119,21 @@ class EstimatedPeakSource:
         if FIELD_V_HAT not in values:
             raise ValueError("EstimatedPeakSource needs the observation entry 'v_hat' (an estimator wrapper)")
         last = self.estimate_fn()
-        if last is not None:
-            est, health = last
-            if health in USABLE:
-                self.lambda_ref = self._peak(est)
-        v_hat = values[FIELD_V_HAT]
+        usable = last is not None and last[1] in USABLE
+        if usable:
+            self.lambda_ref = self._peak(last[0])
+        self.stale = 0 if usable else self.stale + 1
+        v_hat = np.asarray(values[FIELD_V_HAT], dtype=float)
+        wheel = np.zeros_like(v_hat)
+        if self.wheel_radius is not None and FIELD_WHEEL_SPEED in values:
+            wheel = np.asarray(values[FIELD_WHEEL_SPEED], dtype=float) * self.wheel_radius
+        below = bool(np.any(v_hat < wheel - V_MARGIN))
+        self.below = self.below + 1 if below else 0  # one spike of the wheel speed is not evidence
+        implausible = ~np.isfinite(v_hat) | (v_hat < 0.0) | (self.below >= BELOW_STEPS)
+        self.fallback = bool(np.any(implausible)) or self.stale >= STALE_STEPS
+        if self.fallback:
+            v = np.where(np.isfinite(v_hat), np.maximum(v_hat, wheel), wheel)
+            return v, np.full_like(v, SAFE_SLIP_REF)
         return v_hat, np.full_like(v_hat, self.lambda_ref)
 
 
@@ -146,5 +173,11 @@ class EstimatorSlipPipeline(SlipController):
             est = wrapper.last_estimate
             return None if est is None else (dict(est.values), int(est.health))
 
-        super().__init__(spec, EstimatedPeakSource(estimate_fn, assumed_shape(wrapper.estimator_name)), gains)
+        source = EstimatedPeakSource(estimate_fn, assumed_shape(wrapper.estimator_name), spec.params.r)
+        super().__init__(spec, source, gains)
         self.estimator_name = wrapper.estimator_name
+
+    @property
+    def health(self) -> str:
+        """``fallback`` while the safe reference is in use (stale or implausible estimate), else ``ok``."""
+        return "fallback" if self.source.fallback else "ok"

@@ -88,7 +88,9 @@ def _trained(spec: str, meta_path: Path) -> PolicySpec:
         raise PolicySpecError(f"{spec} is a {env} policy; only {TRAINED_ENV} policies run here")
     algo, estimator = meta.get("algo", "ppo"), meta.get("estimator", NO_ESTIMATOR)
     kwargs = dict(meta.get("env_kwargs") or {})
-    return PolicySpec(f"{algo}[{estimator}]", "trained", spec, estimator=estimator,
+    stack = int(meta.get("frame_stack", 0) or 0)
+    name = f"{algo}-stack{stack}" if stack else algo
+    return PolicySpec(f"{name}[{estimator}]", "trained", spec, estimator=estimator,
                       observation=str(kwargs.get("observation", "default")), algo=algo, env_kwargs=kwargs)
 
 

@@ -38,7 +38,8 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from fricenv.envs.braking_core import SCENARIO_SEPARATOR
+from agents.hyperparams import BRAKING_FILE, load_hyperparams
+from agents.scenario_mix import CHANGE_PROBABILITY, CHANGE_RANGE, V0_RANGE, ScenarioMix, ScenarioSampler  # noqa: F401
 from fricenv.utils import write_json
 
 __all__ = [
@@ -55,21 +56,20 @@ __all__ = [
     "train",
 ]
 
-ALGOS = ("ppo", "sac")
+ALGOS = ("ppo", "sac", "recurrent-ppo")  # recurrent-ppo: sb3-contrib's RecurrentPPO (LSTM), PPO hyperparameters
 ENVS = ("braking", "payload")
-V0_RANGE = (15.0, 32.0)  # initial speeds drawn for training [m/s] (evaluation uses 20 and 30 m/s)
-CHANGE_PROBABILITY = 0.4  # share of training episodes with a friction change during the stop
-CHANGE_RANGE = (5.0, 30.0)  # distance of a training friction change [m]
 CHECKPOINT_EVERY = 50_000  # env steps between checkpoints
 SEED_STRIDE = 1000  # env i of a run with seed s is seeded s * SEED_STRIDE + i
 MODEL_FILE = "model.zip"
 VECNORM_FILE = "vecnormalize.pkl"
 META_FILE = "train.json"
+VEC_KINDS = ("auto", "native", "dummy", "subproc")
 
 
 @dataclass(frozen=True)
 class PPOConfig:
-    """PPO defaults for the ABS task (tuned on Braking-v0 with randomised roads, 8 envs).
+    """PPO hyperparameters (the ABS task's are in ``agents/hyperparams/braking.json``; these field defaults are the
+    ones tuned on Braking-v0 with randomised roads, 8 envs, before issue 17).
 
     The reward is dense (braking efficiency per step) and the slip dynamics are fast (tens of ms), so a short
     horizon (gamma 0.95, i.e. ~0.2 s) is enough and learns faster than the usual 0.99; rewards are normalised by
@@ -114,64 +114,21 @@ class SACConfig:
 
 # Payload excitation: longer horizon (the calibration reward comes from accumulated information).
 PAYLOAD_PPO = PPOConfig(n_envs=4, n_steps=512, gamma=0.99, gae_lambda=0.95, log_std_init=-0.5, ent_coef=0.0)
+BRAKING_CONFIGS = load_hyperparams(BRAKING_FILE, {"ppo": PPOConfig, "sac": SACConfig})  # the committed file
 DEFAULT_CONFIGS: dict[tuple[str, str], PPOConfig | SACConfig] = {
-    ("braking", "ppo"): PPOConfig(),
-    ("braking", "sac"): SACConfig(),
+    ("braking", "ppo"): BRAKING_CONFIGS["ppo"],
+    ("braking", "sac"): BRAKING_CONFIGS["sac"],
+    ("braking", "recurrent-ppo"): BRAKING_CONFIGS.get("recurrent-ppo", BRAKING_CONFIGS["ppo"]),  # PPO's by default
     ("payload", "ppo"): PAYLOAD_PPO,
     ("payload", "sac"): SACConfig(gamma=0.99),
 }
 
 
-class ScenarioMix(gym.Wrapper):
-    """Draw a training scenario per episode: a preset road, or a friction change between two presets.
+def native_vec_available(env: str, estimator: str) -> bool:
+    """Whether ``vec="native"`` can run this env and estimator (braking, with none or a batched estimator)."""
+    from estimators.batched import BATCHED
 
-    A stop lasts about ``1 / mu_max`` as long on one road as on another (ice: 10 times dry), so drawing roads
-    uniformly would fill the rollouts with ice. With ``step_balanced`` (default) a preset road is drawn with
-    probability proportional to its peak friction, which gives every road about the same share of *steps*. A
-    friction change is uniform over the ordered pairs of different presets (a first version weighted its first
-    road too, and then almost never showed ice->dry: that policy braked ice->dry at 1.5-1.6 times the limit),
-    at a distance uniform on :data:`CHANGE_RANGE`. Reset options given explicitly win. Draws come from a
-    generator seeded by the first ``reset(seed=...)``.
-
-    :param env: a ``Braking-v0`` env (possibly wrapped).
-    :param change_probability: share of episodes with a friction change [-].
-    :param v0_range: initial speed range [m/s].
-    :param step_balanced: weight roads by their peak friction (else uniform per episode).
-    """
-
-    def __init__(self, env: gym.Env, change_probability: float = CHANGE_PROBABILITY,
-                 v0_range: tuple[float, float] = V0_RANGE, step_balanced: bool = True):
-        super().__init__(env)
-        from fricenv.plants.tire import ROADS
-
-        if not 0.0 <= change_probability <= 1.0:
-            raise ValueError(f"change_probability must be in [0, 1], got {change_probability!r}")
-        self.change_probability = float(change_probability)
-        self.v0_range = (float(v0_range[0]), float(v0_range[1]))
-        self.roads = tuple(ROADS)
-        weights = np.array([ROADS[r].mu_max if step_balanced else 1.0 for r in self.roads])
-        self.road_probabilities = weights / weights.sum()
-        self._rng = np.random.default_rng()
-
-    def draw(self) -> dict[str, Any]:
-        """Reset options of the next scenario."""
-        rng = self._rng
-        drawn: dict[str, Any] = {"v0": self.v0_range}
-        if rng.random() < self.change_probability:
-            # uniform over ordered pairs: ice->dry must be seen as often as dry->ice
-            i = int(rng.integers(len(self.roads)))
-            j = int(rng.integers(len(self.roads) - 1))
-            j = j + 1 if j >= i else j
-            drawn["road"] = f"{self.roads[i]}{SCENARIO_SEPARATOR}{self.roads[j]}"
-            drawn["change_distance"] = float(rng.uniform(*CHANGE_RANGE))
-        else:
-            drawn["road"] = self.roads[int(rng.choice(len(self.roads), p=self.road_probabilities))]
-        return drawn
-
-    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
-        if seed is not None:
-            self._rng = np.random.default_rng(seed)
-        return self.env.reset(seed=seed, options={**self.draw(), **(options or {})})
+    return env == "braking" and (estimator == "none" or estimator in BATCHED)
 
 
 def _check_choice(value: str, valid: tuple[str, ...], what: str) -> str:
@@ -239,7 +196,10 @@ def _checked_config(env: str, estimator: str, algo: str, steps: int, vec: str,
     """Validate the arguments of :func:`train`; the hyperparameters to use."""
     _check_choice(env, ENVS, "env")
     _check_choice(algo, ALGOS, "algo")
-    _check_choice(vec, ("dummy", "subproc"), "vec")
+    _check_choice(vec, VEC_KINDS, "vec")
+    if vec == "native" and not native_vec_available(env, estimator):
+        raise ValueError(f"vec 'native' runs the braking env with estimator none or one with a batched form "
+                         f"(estimators.batched.BATCHED), got env {env!r}, estimator {estimator!r}; use vec 'dummy'")
     if env == "braking":
         from fricenv.envs.estimator_observation import check_estimator_name
 
@@ -251,20 +211,25 @@ def _checked_config(env: str, estimator: str, algo: str, steps: int, vec: str,
     if not isinstance(steps, int) or steps < 1:
         raise ValueError(f"steps must be a positive int, got {steps!r}")
     cfg = config if config is not None else DEFAULT_CONFIGS[(env, algo)]
-    expected = PPOConfig if algo == "ppo" else SACConfig
+    expected = SACConfig if algo == "sac" else PPOConfig
     if not isinstance(cfg, expected):
         raise TypeError(f"config for {algo} must be a {expected.__name__}, got {type(cfg).__name__}")
     return cfg
 
 
 def _make_model(algo: str, cfg: PPOConfig | SACConfig, venv, tb: str | None, seed: int, verbose: int):
-    """The SB3 model (PPO or SAC, CPU) with the hyperparameters ``cfg`` on ``venv``."""
+    """The SB3 model (PPO, RecurrentPPO or SAC, CPU) with the hyperparameters ``cfg`` on ``venv``."""
     from stable_baselines3 import PPO, SAC
 
     policy_kwargs: dict[str, Any] = {"net_arch": list(cfg.net_arch)}
-    if algo == "ppo":
+    if algo != "sac":
         policy_kwargs["log_std_init"] = cfg.log_std_init
-        return PPO("MlpPolicy", venv, n_steps=cfg.n_steps, batch_size=cfg.batch_size, n_epochs=cfg.n_epochs,
+        policy = "MlpPolicy"
+        if algo == "recurrent-ppo":
+            from sb3_contrib import RecurrentPPO as PPO
+
+            policy = "MlpLstmPolicy"
+        return PPO(policy, venv, n_steps=cfg.n_steps, batch_size=cfg.batch_size, n_epochs=cfg.n_epochs,
                    learning_rate=cfg.learning_rate, gamma=cfg.gamma, gae_lambda=cfg.gae_lambda,
                    clip_range=cfg.clip_range, ent_coef=cfg.ent_coef, vf_coef=cfg.vf_coef,
                    max_grad_norm=cfg.max_grad_norm, policy_kwargs=policy_kwargs, tensorboard_log=tb,
@@ -276,9 +241,9 @@ def _make_model(algo: str, cfg: PPOConfig | SACConfig, venv, tb: str | None, see
 
 
 def train(out: str | Path, env: str = "braking", estimator: str = "none", algo: str = "ppo", steps: int = 200_000,
-          seed: int = 0, config: PPOConfig | SACConfig | None = None, vec: str = "dummy",
+          seed: int = 0, config: PPOConfig | SACConfig | None = None, vec: str = "auto",
           progress_bar: bool = True, checkpoint_every: int = CHECKPOINT_EVERY,
-          env_kwargs: dict | None = None, verbose: int = 0) -> TrainResult:
+          env_kwargs: dict | None = None, verbose: int = 0, frame_stack: int = 0) -> TrainResult:
     """Train a policy and save model, normalisation statistics, checkpoints and metadata in ``out``.
 
     :param out: run directory (created).
@@ -288,11 +253,15 @@ def train(out: str | Path, env: str = "braking", estimator: str = "none", algo: 
     :param steps: env steps to train.
     :param seed: seed of the run (networks, envs).
     :param config: hyperparameters; default :data:`DEFAULT_CONFIGS` for (env, algo).
-    :param vec: ``dummy`` (all envs in this process) or ``subproc`` (one process per env).
+    :param vec: ``auto`` (``native`` where available, else ``dummy``), ``native`` (the braking vector env, all cars
+        and a batched estimator in one numpy call: :mod:`fricenv.envs.sb3_vec`), ``dummy`` (single envs in this
+        process) or ``subproc`` (one process per env). ``native`` and ``dummy`` draw the same scenarios.
     :param progress_bar: show a progress bar (tqdm + rich).
     :param checkpoint_every: env steps between checkpoints (0: none).
     :param env_kwargs: extra env arguments.
     :param verbose: SB3 verbosity.
+    :param frame_stack: k > 0: the policy sees the last k observations (SB3's ``VecFrameStack``), the memory
+        baseline of issue 17; 0: the observation alone.
     """
     import torch
     from stable_baselines3.common.callbacks import CheckpointCallback
@@ -303,9 +272,24 @@ def train(out: str | Path, env: str = "braking", estimator: str = "none", algo: 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
 
-    fns = [make_env_fn(env, estimator, rank=i, training=True, env_kwargs=env_kwargs) for i in range(cfg.n_envs)]
-    venv = SubprocVecEnv(fns) if vec == "subproc" else DummyVecEnv(fns)
-    venv.seed(seed * SEED_STRIDE)
+    if vec == "auto":
+        vec = "native" if native_vec_available(env, estimator) else "dummy"
+    if vec == "native":
+        from fricenv.envs.sb3_vec import make_sb3_vec_env
+
+        venv = make_sb3_vec_env(cfg.n_envs, seed=seed * SEED_STRIDE, estimator=estimator,
+                                scenarios=ScenarioSampler(), **(env_kwargs or {}))
+    else:
+        fns = [make_env_fn(env, estimator, rank=i, training=True, env_kwargs=env_kwargs)
+               for i in range(cfg.n_envs)]
+        venv = SubprocVecEnv(fns) if vec == "subproc" else DummyVecEnv(fns)
+        venv.seed(seed * SEED_STRIDE)
+    if not isinstance(frame_stack, int) or frame_stack < 0:
+        raise ValueError(f"frame_stack must be an int >= 0 (0: none), got {frame_stack!r}")
+    if frame_stack:
+        from stable_baselines3.common.vec_env import VecFrameStack
+
+        venv = VecFrameStack(venv, frame_stack)
     venv = VecNormalize(venv, norm_obs=cfg.norm_obs, norm_reward=cfg.norm_reward, gamma=cfg.gamma)
     tb = _tensorboard_dir(out)
     model = _make_model(algo, cfg, venv, tb, seed, verbose)
@@ -326,7 +310,7 @@ def train(out: str | Path, env: str = "braking", estimator: str = "none", algo: 
     meta = {"env": env, "estimator": estimator, "algo": algo, "seed": seed, "steps": trained,
             "wall_time_s": wall, "steps_per_second": trained / wall, "config": dataclasses.asdict(cfg),
             "vec": vec, "env_kwargs": env_kwargs or {}, "tensorboard": tb is not None,
-            "torch_threads": torch.get_num_threads()}
+            "torch_threads": torch.get_num_threads(), "frame_stack": frame_stack}
     write_json(out / META_FILE, meta)
     return TrainResult(out=out, model_path=model_path, vecnormalize_path=vn_path, steps=trained, wall_time=wall,
                        steps_per_second=trained / wall, meta=meta)
@@ -346,17 +330,34 @@ class TrainedPolicy:
         self.meta = meta
         self.estimator = meta.get("estimator", "none")
         self.algo = meta.get("algo", "ppo")
+        self.frame_stack = int(meta.get("frame_stack", 0))
         self.name = f"{self.algo}[{self.estimator}]"
+        self.reset()
 
     def reset(self, seed: int | None = None) -> None:
-        """Start of an episode (the policy is memoryless; ``seed`` is accepted for the excitation interface)."""
+        """Start of an episode: empty frame stack, fresh LSTM state (``seed`` is accepted for the excitation
+        interface)."""
+        self._stack: np.ndarray | None = None
+        self._state = None
+        self._episode_start = True
 
     def act(self, obs) -> np.ndarray:
-        """Deterministic action for one observation (shape (act_dim,))."""
-        obs = np.asarray(obs, dtype=np.float32)
+        """Deterministic action for one observation (shape (act_dim,)); a frame-stack policy sees the last
+        ``frame_stack`` observations (zeros before the first, as SB3's VecFrameStack), a recurrent one its state."""
+        obs = np.asarray(obs, dtype=np.float32).ravel()
+        if self.frame_stack:
+            if self._stack is None:
+                self._stack = np.zeros(self.frame_stack * obs.size, dtype=np.float32)
+            self._stack = np.concatenate([self._stack[obs.size:], obs])
+            obs = self._stack
         if self.vecnormalize is not None:
             obs = self.vecnormalize.normalize_obs(obs)
-        action, _ = self.model.predict(obs, deterministic=True)
+        if self.algo == "recurrent-ppo":
+            action, self._state = self.model.predict(obs, state=self._state, deterministic=True,
+                                                     episode_start=np.array([self._episode_start]))
+            self._episode_start = False
+        else:
+            action, _ = self.model.predict(obs, deterministic=True)
         return np.asarray(action, dtype=np.float32)
 
 
@@ -384,7 +385,9 @@ def load_policy(run_dir: str | Path, model_file: str | None = None,
     path = run_dir / (model_file or MODEL_FILE)
     if not path.is_file():
         raise ValueError(f"model file {path} does not exist")
-    model = (PPO if algo == "ppo" else SAC).load(str(path), device="cpu")
+    if algo == "recurrent-ppo":
+        from sb3_contrib import RecurrentPPO as PPO
+    model = (SAC if algo == "sac" else PPO).load(str(path), device="cpu")
     vn = None
     vn_path = run_dir / (vecnormalize_file or VECNORM_FILE)
     if vn_path.is_file():

@@ -99,6 +99,10 @@ class LinearMap:
     def __call__(self, k_s: float, s_bar: float) -> float:
         return self.a * k_s + self.b
 
+    def batch(self, k_s: np.ndarray, s_bar: np.ndarray) -> np.ndarray:
+        """The map over arrays of slopes and mean slips (the batched estimator's form)."""
+        return self.a * np.asarray(k_s, dtype=float) + self.b
+
 
 PAPER_MAP = LinearMap(0.1, 0.02)  # eq. (15), for the paper's tire
 
@@ -120,6 +124,13 @@ class MagicFormulaFamilyMap:
             return k_s * self.linear_factor
         g = float(magic_formula(s_bar, self.B, self.C, self.E, 1.0))
         return k_s * s_bar / g * self.g_max
+
+    def batch(self, k_s: np.ndarray, s_bar: np.ndarray) -> np.ndarray:
+        """The map over arrays of slopes and mean slips (the batched estimator's form)."""
+        k_s, s_bar = np.asarray(k_s, dtype=float), np.asarray(s_bar, dtype=float)
+        small = s_bar < SLIP_SMALL
+        g = magic_formula(np.where(small, 1.0, s_bar), self.B, self.C, self.E, 1.0)
+        return np.where(small, k_s * self.linear_factor, k_s * s_bar / g * self.g_max)
 
 
 @dataclass(frozen=True)

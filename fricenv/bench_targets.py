@@ -25,6 +25,7 @@ __all__ = [
     "bench_gap",
     "bench_pendulum",
     "bench_ppo",
+    "bench_training",
     "bench_vector",
     "env_steps_per_s",
     "ratios",
@@ -47,6 +48,8 @@ COARSE_PHYSICS_DT = 0.005  # [s] 2 substeps per 10 ms control step (an option, n
 GAP_EFFECT = ("brake_lag", {"tau": 0.04})
 GAP_ROAD = "wet"
 GAP_JOBS = 2
+# The training target: env steps of one `fricenv train` run per estimator (the MHE is 10x slower per step).
+TRAINING_STEPS = {"none": 40_960, "ekf-rls": 40_960, "mhe": 8_192}
 SPEED_CALLS = 20  # speed reconstructions per repeat (one parameter set, as in a least-squares residual call)
 
 
@@ -230,6 +233,39 @@ def bench_ppo(args: argparse.Namespace) -> dict[str, Any]:
     return out
 
 
+def _training_rate(estimator: str, steps: int, seed: int) -> tuple[float, str]:
+    """env-steps/s of ``fricenv train`` (PPO, the committed hyperparameters, no checkpoints) and the vec env used."""
+    import tempfile
+
+    from agents.training import train
+
+    with tempfile.TemporaryDirectory() as out:
+        res = train(out, estimator=estimator, algo="ppo", steps=steps, seed=seed, progress_bar=False,
+                    checkpoint_every=0)
+    return res.steps_per_second, res.meta["vec"]
+
+
+def bench_training(args: argparse.Namespace) -> dict[str, Any]:
+    """PPO training speed as ``fricenv train`` runs it, without estimates, with the EKF/RLS and with the MHE, in
+    the same run, and the ratios to the run without estimates (issue 17's targets: EKF/RLS >= 10,000 env-steps/s
+    and >= 0.8x, MHE >= 2,000)."""
+    rates: dict[str, list[float]] = {name: [] for name in TRAINING_STEPS}
+    vec: dict[str, str] = {}
+    for k in range(args.repeats):
+        for name, steps in TRAINING_STEPS.items():
+            rate, vec[name] = _training_rate(name, steps, args.seed + k)
+            rates[name].append(rate)
+    med = {name: statistics.median(r) for name, r in rates.items()}
+    out = {"training_steps_per_s": med, "training_steps_per_s_all": rates, "training_vec": vec,
+           "training_steps": dict(TRAINING_STEPS),
+           "training_ratio_to_none": {name: r / med["none"] for name, r in med.items() if name != "none"}}
+    print("training (PPO, fricenv train): " + ", ".join(
+        f"{name} {med[name]:,.0f} env-steps/s ({vec[name]} vec, {TRAINING_STEPS[name]} steps"
+        + (f", {out['training_ratio_to_none'][name]:.2f}x none)" if name != "none" else ")") for name in med)
+        + f" (median of {args.repeats})")
+    return out
+
+
 def ratios(figures: dict[str, Any]) -> dict[str, Any]:
     """Every steps-per-second figure divided by ``pendulum_steps_per_s`` of the same run (empty without it)."""
     ref = figures.get("pendulum_steps_per_s")
@@ -313,6 +349,7 @@ TARGETS: dict[str, Callable[[argparse.Namespace], dict]] = {
     "estimators": bench_estimators,
     "ppo": bench_ppo,
     "gap": bench_gap,
+    "training": bench_training,
 }
 # Targets left out of ``fricenv bench all``: minutes per repeat.
-SLOW_TARGETS = ("gap",)
+SLOW_TARGETS = ("gap", "training")

@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 
 ENV_CHOICES = ("braking", "payload")
+VEC_CHOICES = ("auto", "native", "dummy", "subproc")  # agents.training.VEC_KINDS (not imported: CLI start-up)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -24,22 +25,33 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--steps", type=int, default=500_000, help="env steps (default %(default)s)")
     parser.add_argument("--seed", type=int, default=0, help="seed (default %(default)s)")
     parser.add_argument("--out", required=True, metavar="DIR", help="run directory")
-    parser.add_argument("--vec", choices=("dummy", "subproc"), default="dummy",
-                        help="vector env: all envs in one process, or one process each (default %(default)s)")
+    parser.add_argument("--vec", choices=VEC_CHOICES, default="auto",
+                        help="vector env: native (all cars and a batched estimator in one numpy call), dummy (single "
+                             "envs in one process), subproc (one process each); auto: native where the estimator "
+                             "has a batched form (default %(default)s)")
+    parser.add_argument("--hyperparams", metavar="PATH", default=None,
+                        help="hyperparameter JSON file (algorithm -> config fields); default: the committed "
+                             "agents/hyperparams/braking.json for braking")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     parser.add_argument("--json", metavar="PATH", help="write the run summary (wall time, steps/s) as JSON")
 
 
 def run(args) -> int:
     """Train and save; print wall time and steps per second."""
-    from agents.training import train
+    from agents.hyperparams import load_hyperparams
+    from agents.training import PPOConfig, SACConfig, train
     from fricenv.utils import write_json
 
     if args.steps < 1:
         raise SystemExit("fricenv train: --steps must be >= 1")
     try:
+        config = None
+        if args.hyperparams:
+            config = load_hyperparams(args.hyperparams, {"ppo": PPOConfig, "sac": SACConfig}).get(args.algo)
+            if config is None:
+                raise ValueError(f"{args.hyperparams} has no {args.algo!r} entry")
         result = train(args.out, env=args.env, estimator=args.estimator, algo=args.algo, steps=args.steps,
-                       seed=args.seed, vec=args.vec, progress_bar=not args.no_progress)
+                       seed=args.seed, config=config, vec=args.vec, progress_bar=not args.no_progress)
     except ValueError as exc:
         raise SystemExit(f"fricenv train: {exc}") from None
     print(f"trained {args.algo} on {args.env} (estimator {args.estimator}): {result.steps} steps in "

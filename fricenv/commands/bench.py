@@ -10,7 +10,10 @@ Targets (run one, or all when none is given):
   gap         one 5 s log diagnosed by `fricenv gap diagnose` on 2 cores, with all channels and with t, T_b, omega
               only (wall seconds), and the speed reconstruction of the latter against its sample-by-sample
               reference (ms per call). Not part of "all": about a minute per repeat.
-  all         all of the above except gap (default).
+  training    PPO training speed as `fricenv train` runs it (committed hyperparameters): env-steps/s without
+              estimates, with the EKF/RLS and with the MHE in the same run, and the ratios to the first. Not part of
+              "all": about a minute per repeat.
+  all         all of the above except gap and training (default).
 Every figure is a median over --repeats; ratios divide by Pendulum-v1 measured in the same run (a target that
 needs the reference measures it too). --json PATH writes single_steps_per_s, pendulum_steps_per_s,
 vector_steps_per_s {"1", "64", "1024"}, estimator_update_us {name: mean}, ppo_steps_per_s, ratio_to_pendulum

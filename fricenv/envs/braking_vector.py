@@ -41,7 +41,7 @@ Per-env roads: ``road`` may be one road spec for all sub-envs or a sequence of `
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any, ClassVar
 
 import numpy as np
@@ -83,6 +83,10 @@ class BrakingVectorEnv(VectorEnv):
     :param render_mode: only None (the vector env does not render; use single envs for videos).
     :param effects: effects of every sub-env's plant (see ``BrakingEnv``; None or [] is the plain env).
     :param effects_randomization: per-episode effect parameter ranges, drawn from each sub-env's generator.
+    :param scenarios: optional per-episode scenario draw ``rng -> reset options`` (e.g. the training mix
+        :class:`agents.training.ScenarioSampler`), called at every reset of a sub-env with that sub-env's own
+        scenario generator (seeded with the sub-env's seed); explicit reset options win over its draw. It is
+        what :class:`gymnasium.Wrapper` ``ScenarioMix`` does to a single env, with the same draws.
     :param config_kwargs: ``BrakingConfig`` fields, the same keyword arguments as ``BrakingEnv``
         (``action_mode``, ``observation``, ``t_max``, ``physics_dt``, ...).
     """
@@ -94,14 +98,15 @@ class BrakingVectorEnv(VectorEnv):
                  change_distance: float | tuple[float, float] | None = None,
                  autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
                  max_episode_steps: int | None = None, render_mode: str | None = None, effects: Any = None,
-                 effects_randomization: dict[str, Any] | None = None, **config_kwargs):
+                 effects_randomization: dict[str, Any] | None = None,
+                 scenarios: Callable[[np.random.Generator], dict[str, Any]] | None = None, **config_kwargs):
         if not isinstance(num_envs, (int, np.integer)) or isinstance(num_envs, bool) or num_envs < 1:
             raise ValueError(f"num_envs must be an int >= 1, got {num_envs!r}")
         unknown = sorted(set(config_kwargs) - set(CONFIG_KWARGS))
         if unknown:
             raise TypeError(f"unknown argument(s) {unknown} for BrakingVectorEnv; valid: "
                             f"num_envs, road, v0, change_distance, autoreset_mode, max_episode_steps, "
-                            f"render_mode, effects, effects_randomization, {', '.join(CONFIG_KWARGS)}")
+                            f"render_mode, effects, effects_randomization, scenarios, {', '.join(CONFIG_KWARGS)}")
         if render_mode is not None:
             raise ValueError(f"BrakingVectorEnv does not render (render_mode must be None, got {render_mode!r}); "
                              f"use single envs with render_mode='rgb_array'")
@@ -141,6 +146,10 @@ class BrakingVectorEnv(VectorEnv):
         self._autoreset = np.zeros(n, dtype=bool)
         self._road_names = np.full(n, "", dtype=object)
         self._was_reset = False
+        if scenarios is not None and not callable(scenarios):
+            raise TypeError(f"scenarios must be callable rng -> reset options, got {type(scenarios).__name__}")
+        self.scenarios = scenarios
+        self._scenario_rngs = [np.random.default_rng() for _ in range(n)]
 
     # ------------------------------------------------------------------ helpers
     def _per_env_roads(self, road: Any, name: str) -> list | None:
@@ -160,6 +169,8 @@ class BrakingVectorEnv(VectorEnv):
             o = {}
             if self._env_roads is not None:
                 o["road"] = self._env_roads[i]
+            if self.scenarios is not None:  # the draw replaces the constructor's defaults
+                o.update(self.scenarios(self._scenario_rngs[i]))
             o.update(opts)
             if roads is not None:
                 o["road"] = roads[i]
@@ -232,6 +243,8 @@ class BrakingVectorEnv(VectorEnv):
         idx = np.arange(n) if mask is None else np.flatnonzero(mask)
         rngs = []
         for i in idx:
+            if seeds[i] is not None and self.scenarios is not None:
+                self._scenario_rngs[i] = np.random.default_rng(int(seeds[i]))
             if seeds[i] is not None:
                 rngs.append(seeding.np_random(int(seeds[i]))[0])
             else:

@@ -54,6 +54,8 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
+from gymnasium.vector import AutoresetMode, VectorWrapper
+from gymnasium.vector.utils import batch_space
 
 from estimators.base import Estimate, Estimator, Health
 from estimators.registry import OBSERVATION_ESTIMATORS, check_name, get_estimator
@@ -64,6 +66,7 @@ __all__ = [
     "ESTIMATE_FIELDS",
     "ESTIMATOR_NAMES",
     "PAYLOAD_ORACLE_FIELDS",
+    "BatchedEstimatorObservation",
     "EstimatorObservation",
     "PayloadEstimatorObservation",
     "check_estimator_name",
@@ -283,6 +286,111 @@ class EstimatorObservation(gym.Wrapper):
 
     def __setstate__(self, state):
         self.__dict__.update(state)
+
+
+# ---------------------------------------------------------------------------------------------- vector env
+class BatchedEstimatorObservation(VectorWrapper):
+    """:class:`EstimatorObservation` for the native vector env: one batched estimator
+    (:mod:`estimators.batched`) updates every sub-env in one numpy call, with the single wrapper's layout and
+    timing, in every autoreset mode (an autoreset restarts that sub-env's estimator from its new wheel speed; in
+    ``SAME_STEP`` mode ``final_obs`` carries the last update). Sub-env ``i`` equals an :class:`EstimatorObservation`
+    fed the same observations (tests/test_batched_vector.py).
+
+    :param env: a :class:`fricenv.envs.braking_vector.BrakingVectorEnv`.
+    :param estimator: a registry name with a batched form (:data:`estimators.batched.BATCHED`).
+    """
+
+    def __init__(self, env, estimator: str = "ekf-rls"):
+        from estimators.batched import BATCHED, make_batched
+
+        super().__init__(env)
+        check_estimator_name(estimator)
+        cfg = env.config
+        self.estimator_name = estimator
+        self.batched = make_batched(estimator, env.num_envs, cfg.params, cfg.dt)
+        if self.batched is None:
+            raise ValueError(f"estimator {estimator!r} has no batched form; batched: {', '.join(BATCHED)} "
+                             f"(use make_vec's SyncVectorEnv fallback for the others)")
+        self._dt, self._r = float(cfg.dt), float(cfg.params.r)
+        value_names = get_estimator(estimator).values
+        self._keys = tuple((n, value_names.get(n, n)) for n in ESTIMATE_FIELDS
+                           if value_names.get(n, n) in self.batched.names)
+        base = tuple(env.observation_fields)
+        self._iw = next(j for j, f in enumerate(base) if f.name == "wheel_speed")
+        self._iax = next(j for j, f in enumerate(base) if f.name == "a_x")
+        self._scale_w, self._scale_ax = base[self._iw].scale, base[self._iax].scale
+        self.appended_fields = tuple(ESTIMATE_FIELDS[n] for n, _ in self._keys) + (HEALTH_FIELD,)
+        self.observation_fields = base + self.appended_fields
+        self._scale = np.array([f.scale for f in self.appended_fields])
+        self._low = np.array([f.low for f in self.appended_fields])
+        self._high = np.array([f.high for f in self.appended_fields])
+        inner = env.single_observation_space
+        self.single_observation_space = spaces.Box(
+            np.concatenate([inner.low, self._low.astype(np.float32)]),
+            np.concatenate([inner.high, self._high.astype(np.float32)]), dtype=np.float32)
+        self.observation_space = batch_space(self.single_observation_space, env.num_envs)
+        self._last_obs: np.ndarray | None = None
+        self._extra = np.zeros((env.num_envs, len(self.appended_fields)))
+        self._pending = np.zeros(env.num_envs, dtype=bool)
+
+    sim = property(lambda self: self.env.sim)
+    config = property(lambda self: self.env.config)
+    autoreset_mode = property(lambda self: self.env.autoreset_mode)
+
+    def _set(self, rows: np.ndarray, values: dict, health: np.ndarray, a_x: np.ndarray | None = None) -> None:
+        """Store the appended values of ``rows`` (physical units; v advanced by dt a_x when given)."""
+        cols = [values[k] + (self._dt * a_x if a_x is not None and n == "v" else 0.0) for n, k in self._keys]
+        raw = np.column_stack(cols + [health.astype(float)])
+        good = np.all(np.isfinite(raw), axis=1)
+        raw[~good, -1] = float(Health.SOLVER_FAILED)  # non-finite estimate: hold the last values, say so
+        raw[~good, :-1] = self._extra[~good, :-1]
+        self._extra[rows] = raw[rows]
+
+    def _augment(self, obs: np.ndarray, rows: slice | np.ndarray = slice(None)) -> np.ndarray:
+        extra = np.clip(self._extra[rows] / self._scale, self._low, self._high).astype(np.float32)
+        return np.concatenate([np.asarray(obs, dtype=np.float32), extra], axis=-1)
+
+    def _restart(self, obs: np.ndarray, rows: np.ndarray) -> None:
+        v0 = obs[:, self._iw].astype(float) * self._scale_w * self._r
+        self._set(rows, *self.batched.reset(rows, v0))
+
+    def reset(self, *, seed=None, options: dict[str, Any] | None = None):
+        obs, info = self.env.reset(seed=seed, options=options)
+        mask = (options or {}).get("reset_mask")
+        rows = np.ones(self.num_envs, dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
+        self._restart(obs, rows)
+        self._pending[rows] = False
+        self._last_obs = np.asarray(obs).copy()
+        return self._augment(obs), info
+
+    def step(self, actions):
+        if self._last_obs is None:
+            raise gym.error.ResetNeeded("call reset() before step()")
+        obs, reward, terminated, truncated, infos = self.env.step(actions)
+        torque, after = np.array(infos["torque"], dtype=float), np.asarray(obs)
+        done = terminated | truncated
+        same_step = self.env.autoreset_mode is AutoresetMode.SAME_STEP and done.any()
+        if same_step:  # the ended episodes' last step: their final torque and observation
+            torque[done] = infos["final_info"]["torque"][done]
+            after = after.copy()
+            after[done] = np.stack(infos["final_obs"][done])
+        prev = self._last_obs
+        omega = prev[:, self._iw].astype(float) * self._scale_w
+        a_x = prev[:, self._iax].astype(float) * self._scale_ax
+        values, health = self.batched.update(omega, a_x, torque)
+        live = ~self._pending
+        self._set(live, values, health, after[:, self._iax].astype(float) * self._scale_ax)
+        if same_step:
+            final = self._augment(after[done], done)
+            infos["final_obs"] = infos["final_obs"].copy()
+            for j, i in enumerate(np.flatnonzero(done)):
+                infos["final_obs"][i] = final[j]
+            self._restart(np.asarray(obs), done)
+        if self._pending.any():  # NEXT_STEP: these sub-envs were reset by this step
+            self._restart(np.asarray(obs), self._pending)
+        self._pending = done & (self.env.autoreset_mode is AutoresetMode.NEXT_STEP)
+        self._last_obs = np.asarray(obs).copy()
+        return self._augment(obs), reward, terminated, truncated, infos
 
 
 # ---------------------------------------------------------------------------------------------- payload

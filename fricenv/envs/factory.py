@@ -18,6 +18,7 @@ import gymnasium as gym
 from fricenv.envs.braking import BrakingEnv
 from fricenv.envs.estimator_observation import (
     ESTIMATOR_NAMES,
+    BatchedEstimatorObservation,
     EstimatorObservation,
     PayloadEstimatorObservation,
     check_estimator_name,
@@ -50,8 +51,10 @@ make_braking.metadata = BrakingEnv.metadata  # lets gymnasium.make validate rend
 def make_braking_vector(num_envs: int = 1, estimator: str = "none", render_mode: str | None = None,
                         max_episode_steps: int | None = None, **env_kwargs):
     """Vector entry point of every ``Braking`` id: the native
-    :class:`~fricenv.envs.braking_vector.BrakingVectorEnv`, or, for the keywords it does not take (an
-    ``estimator`` other than ``none``, a ``render_mode``), Gymnasium's ``SyncVectorEnv`` over
+    :class:`~fricenv.envs.braking_vector.BrakingVectorEnv` (wrapped in
+    :class:`~fricenv.envs.estimator_observation.BatchedEstimatorObservation` for an estimator with a batched form,
+    :data:`estimators.batched.BATCHED`), or, for the keywords it does not take (another estimator, a
+    ``render_mode``), Gymnasium's ``SyncVectorEnv`` over
     :func:`make_braking` envs (each in a ``TimeLimit`` of ``max_episode_steps``), with a warning.
 
     :param num_envs: number of sub-envs.
@@ -60,11 +63,13 @@ def make_braking_vector(num_envs: int = 1, estimator: str = "none", render_mode:
     :param max_episode_steps: truncation in control steps (``make_vec`` passes the registration's).
     :param env_kwargs: the single env's keyword arguments.
     """
+    from estimators.batched import BATCHED
     from fricenv.envs.braking_vector import BrakingVectorEnv
 
     check_estimator_name(estimator, ESTIMATOR_NAMES)
-    if estimator == "none" and render_mode is None:
-        return BrakingVectorEnv(num_envs, max_episode_steps=max_episode_steps, **env_kwargs)
+    if (estimator == "none" or estimator in BATCHED) and render_mode is None:
+        venv = BrakingVectorEnv(num_envs, max_episode_steps=max_episode_steps, **env_kwargs)
+        return venv if estimator == "none" else BatchedEstimatorObservation(venv, estimator)
     if "autoreset_mode" in env_kwargs:
         raise TypeError("autoreset_mode is not available with the sync fallback (estimator or render_mode given)")
     gym.logger.warn(f"fricenv/Braking vector env: estimator={estimator!r}, render_mode={render_mode!r} are not "

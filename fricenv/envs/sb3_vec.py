@@ -31,6 +31,7 @@ from stable_baselines3.common.vec_env import VecEnv, VecMonitor
 
 from fricenv.envs.braking import RENDER_FPS
 from fricenv.envs.braking_vector import FINAL_INFO_KEYS, STEP_INFO_KEYS, BrakingVectorEnv
+from fricenv.envs.estimator_observation import BatchedEstimatorObservation
 from fricenv.envs.rendering import EpisodeHistory
 
 __all__ = ["BrakingSB3VecEnv", "make_sb3_vec_env"]
@@ -48,7 +49,9 @@ class BrakingSB3VecEnv(VecEnv):
     :param venv: an existing :class:`BrakingVectorEnv` in ``SAME_STEP`` autoreset mode (else one is built).
     :param full_info: fill every step's info dicts with the truth keys (costs a dict per sub-env per step).
     :param render_mode: None or ``"rgb_array"`` (``render()`` draws the first sub-env).
-    :param env_kwargs: keyword arguments of :class:`BrakingVectorEnv` (``road``, ``v0``, ``observation``, ...).
+    :param env_kwargs: keyword arguments of :class:`BrakingVectorEnv` (``road``, ``v0``, ``observation``, ...),
+        plus ``estimator``: a batched estimator (:data:`estimators.batched.BATCHED`) whose outputs are appended
+        (:class:`~fricenv.envs.estimator_observation.BatchedEstimatorObservation`).
     """
 
     def __init__(self, num_envs: int = 1, *, venv: BrakingVectorEnv | None = None, full_info: bool = False,
@@ -58,12 +61,16 @@ class BrakingSB3VecEnv(VecEnv):
         if venv is None:
             if "autoreset_mode" in env_kwargs:
                 raise TypeError("autoreset_mode is fixed to SAME_STEP by the SB3 adapter (SB3's convention)")
-            venv = BrakingVectorEnv(num_envs, autoreset_mode=AutoresetMode.SAME_STEP, **env_kwargs)
+            kwargs = {k: v for k, v in env_kwargs.items() if k != "estimator"}
+            venv = BrakingVectorEnv(num_envs, autoreset_mode=AutoresetMode.SAME_STEP, **kwargs)
+            if env_kwargs.get("estimator", "none") != "none":
+                venv = BatchedEstimatorObservation(venv, env_kwargs["estimator"])
         else:
             if env_kwargs:
                 raise TypeError(f"give either venv or env kwargs, not both: {sorted(env_kwargs)}")
-            if not isinstance(venv, BrakingVectorEnv):
-                raise TypeError(f"venv must be a BrakingVectorEnv, got {type(venv).__name__}")
+            if not isinstance(venv, (BrakingVectorEnv, BatchedEstimatorObservation)):
+                raise TypeError(f"venv must be a BrakingVectorEnv (or one in BatchedEstimatorObservation), "
+                                f"got {type(venv).__name__}")
             if venv.autoreset_mode is not AutoresetMode.SAME_STEP:
                 raise ValueError(f"venv must use autoreset_mode SAME_STEP for SB3, got {venv.autoreset_mode}")
         self.venv = venv

@@ -1,0 +1,67 @@
+"""The batched EKF/RLS equals N single estimators (to 1e-9) across per-env resets, outliers and invalid samples."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from estimators.base import Health
+from estimators.batched import BatchedEkfRls, make_batched
+from estimators.registry import make_estimator
+from fricenv.plants.quarter_car import PAPER_PARAMS
+
+N, STEPS, DT = 6, 400, 0.01
+
+
+def _signals(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Braking-like wheel speed, a_x and torque per sub-env, with spikes (outliers) and a dropout run."""
+    t = np.arange(STEPS) * DT
+    v = 25.0 - 6.0 * t[:, None] * rng.uniform(0.5, 1.5, N)
+    slip = 0.05 + 0.04 * np.sin(7.0 * t[:, None] + rng.uniform(0, 6, N))
+    omega = v * (1.0 - slip) / PAPER_PARAMS.r + rng.normal(0, 0.05, (STEPS, N))
+    a_x = -6.0 + rng.normal(0, 0.05, (STEPS, N))
+    T_b = 800.0 + 300.0 * np.sin(11.0 * t[:, None] + rng.uniform(0, 6, N))
+    spikes = rng.random((STEPS, N)) < 0.02
+    omega[spikes] += rng.choice([-30.0, 30.0], spikes.sum())
+    omega[200:215, 1] = 0.0  # a dropout longer than max_rejections: rejections then a re-initialisation
+    omega[50, 2] = np.nan  # an invalid sample
+    return omega, a_x, T_b
+
+
+@pytest.mark.parametrize("name", ["ekf-rls", "ekf-rls-paper-loop", "ekf-rls-paper-map"])
+def test_batched_ekf_rls_equals_single_estimators(name):
+    rng = np.random.default_rng(3)
+    omega, a_x, T_b = _signals(rng)
+    resets = {k: rng.random(N) < 0.01 for k in range(1, STEPS)}  # per-env resets, as autoresets do
+    batched = make_batched(name, N, PAPER_PARAMS, DT)
+    singles = [make_estimator(name, PAPER_PARAMS, DT) for _ in range(N)]
+    v0 = omega[0] * PAPER_PARAMS.r
+    batched.reset(v0=v0)
+    for i, est in enumerate(singles):
+        est.reset(v0=float(v0[i]))
+    seen = set()
+    for k in range(STEPS):
+        mask = resets.get(k)
+        if mask is not None and mask.any():
+            batched.reset(mask, np.full(N, np.nan))  # restart from the next wheel speed
+            for i in np.flatnonzero(mask):
+                singles[i].reset()
+        values, health = batched.update(omega[k], a_x[k], T_b[k])
+        for i, est in enumerate(singles):
+            ref = est.update((omega[k, i], a_x[k, i]), (T_b[k, i],))
+            assert health[i] == int(ref.health), (k, i)
+            seen.add(int(ref.health))
+            for key in est.names:
+                np.testing.assert_allclose(values[key][i], ref.values[key], rtol=1e-9, atol=1e-9,
+                                           err_msg=f"{name} {key} step {k} env {i}")
+    assert {int(Health.OUTLIER), int(Health.REINITIALISED), int(Health.INVALID_INPUT), int(Health.OK)} <= seen
+
+
+def test_make_batched_answers_none_without_a_batched_form():
+    assert make_batched("mhe-paper", 2, PAPER_PARAMS, DT) is None
+    assert isinstance(make_batched("ekf-rls", 2, PAPER_PARAMS, DT), BatchedEkfRls)
+
+
+def test_batched_rejects_a_map_without_batch_form():
+    with pytest.raises(TypeError, match="batch"):
+        BatchedEkfRls(2, DT, PAPER_PARAMS, mu_map=lambda k_s, s_bar: 0.1 * k_s)
