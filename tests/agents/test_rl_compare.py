@@ -11,7 +11,7 @@ import pytest
 
 from agents.evaluation import COMPARE_KEYS, TRAINING_KEYS, _training_jobs
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def test_training_jobs_cover_every_row_and_seed(tmp_path):

@@ -10,7 +10,7 @@ import fricenv  # noqa: F401  (registers the envs)
 from fricenv.envs.braking_vector import BrakingVectorEnv
 from fricenv.envs.estimator_observation import BatchedEstimatorObservation, EstimatorObservation
 from fricenv.envs.factory import make_braking
-from tests.test_braking_vector import OBS_TOL, ROADS_PER_ENV, SHORT_V0, _compare_with_single_envs
+from tests.envs.test_braking_vector import OBS_TOL, ROADS_PER_ENV, SHORT_V0, _compare_with_single_envs
 
 
 def _lockstep(ours, ref, seed: int | None, steps: int) -> list[dict]:
