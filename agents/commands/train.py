@@ -51,7 +51,7 @@ def run(args) -> int:
             if config is None:
                 raise ValueError(f"{args.hyperparams} has no {args.algo!r} entry")
         result = train(args.out, env=args.env, estimator=args.estimator, algo=args.algo, steps=args.steps,
-                       seed=args.seed, config=config, vec=args.vec, progress_bar=not args.no_progress)
+                       seed=args.seed, config=config, vec=args.vec, progress_bar=getattr(args, "show_progress", True) and not args.no_progress)
     except ValueError as exc:
         raise SystemExit(f"fricenv train: {exc}") from None
     print(f"trained {args.algo} on {args.env} (estimator {args.estimator}): {result.steps} steps in "

@@ -23,10 +23,17 @@ from typing import ClassVar
 
 import numpy as np
 
-from fricenv.effects.registry import Excitation, FitContext, Param, QuarterCarEffect, always_testable, register
+from fricenv.effects.registry import (
+    Excitation,
+    FitContext,
+    Param,
+    QuarterCarEffect,
+    always_testable,
+    register,
+)
 
 __all__ = ["BrakeDelay", "BrakeFade", "BrakeGain", "BrakeLag", "Drag", "LoadTransfer", "MuChange", "RadiusError",
-           "RelaxationLength", "SlidingSpeedFriction"]
+           "RelaxationLength", "SlidingSpeedFriction", "drag_force"]
 
 # A road speed for the drag force used as drag's single error figure in the validation [m/s].
 DRAG_REFERENCE_SPEED = 15.0
@@ -120,6 +127,15 @@ class Drag:
     def __post_init__(self):
         _check_positive(self, "c0", allow_zero=True)
         _check_positive(self, "c2", allow_zero=True)
+
+
+def drag_force(v, c0, c2):
+    """The drag effect's force on the vehicle [N]: ``F_d = c0 + c2 v^2`` while moving, 0 at standstill.
+
+    :param v: vehicle speed [m/s] (array).
+    :param c0: constant resistance [N]; :param c2: quadratic (air drag) coefficient [N s^2/m^2].
+    """
+    return np.where(v > 0.0, c0 + c2 * v * v, 0.0)
 
 
 @dataclass(frozen=True)

@@ -46,6 +46,7 @@ from fricenv.effects.library import (
     RadiusError,
     RelaxationLength,
     SlidingSpeedFriction,
+    drag_force,
 )
 from fricenv.effects.relaxation import RELAX_GAMMA, relaxation_derivatives, relaxation_step
 from fricenv.plants import quarter_car as qc
@@ -334,14 +335,13 @@ class EffectSimulator:
 
     def accel(self) -> np.ndarray:
         """Current longitudinal acceleration [m/s^2] (negative when braking), as an accelerometer reads it."""
-        drag = np.where(self.v > 0.0, self.batch.c0 + self.batch.c2 * self.v**2, 0.0)
-        return -(self.tire_force() + drag) / self.p.m
+        return -(self.tire_force() + drag_force(self.v, self.batch.c0, self.batch.c2)) / self.p.m
 
     def _drag_half(self, h: float) -> None:
         b = self.batch
         s = self._std
-        dv = 0.5 * h * (b.c0[s] + b.c2[s] * self.v[s] ** 2) / self.p.m
-        self.v[s] = np.maximum(self.v[s] - np.where(self.v[s] > 0.0, dv, 0.0), 0.0)
+        dv = 0.5 * h * drag_force(self.v[s], b.c0[s], b.c2[s]) / self.p.m
+        self.v[s] = np.maximum(self.v[s] - dv, 0.0)
 
     # -- one sample
     def step(self, Tb: np.ndarray | float | None = None) -> tuple[np.ndarray, np.ndarray]:

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from fricenv.effects.library import drag_force
 from fricenv.plants import quarter_car as qc
 from fricenv.plants.tire import longitudinal_slip, magic_formula, magic_formula_dslip, slip_and_partials
 
@@ -37,7 +38,7 @@ def relaxation_derivatives(v, omega, lam_t, Tb, road, r, sigma, c0, c2, p: qc.Qu
     """
     road = np.asarray(road, dtype=float)
     F = p.Fz * magic_formula(lam_t, road[..., 0], road[..., 1], road[..., 2], road[..., 3])
-    drag = np.where(v > 0.0, c0 + c2 * v * v, 0.0)
+    drag = drag_force(v, c0, c2)
     lam = longitudinal_slip(v, omega, r)
     return -(F + drag) / p.m, (r * F - Tb) / p.J, v * (lam - lam_t) / sigma
 

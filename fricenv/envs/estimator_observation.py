@@ -12,7 +12,7 @@ v_hat       m/s     50         0      2      estimated vehicle speed
 slip_hat    -       1          -1     1      estimated wheel slip
 mu_hat      -       1          -2     2      estimated friction coefficient in use
 theta_hat   -       1          0      2      estimated road coefficient theta (peak factor of the Magic Formula)
-health      -       1          0      3      :class:`estimators.base.Health` of the last update (0 = OK)
+health      -       1          0      5      :class:`estimators.base.Health` of the last update (0 = OK, 4 = OUTLIER)
 ==========  ======  =========  =====  =====  ===============================================================
 
 Timing. The estimator interface's ``update(y_k, u_k)`` takes the torque *held from k to k+1*, which is known only
