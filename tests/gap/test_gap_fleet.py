@@ -24,14 +24,14 @@ from fricenv.gap.fleet import (
     run_fleet,
 )
 from fricenv.gap.fleet_report import PLOT_GAPS, PLOT_PARAMS, PLOT_VERDICTS
-from tests.gap.fleet_helpers import FAST, TAU, simulate_fleet
+from tests.gap.fleet_helpers import FAST, GAIN, simulate_fleet
 
 ROOT = Path(__file__).resolve().parents[2]
 
 
 @pytest.fixture(scope="module")
 def fleet_dir(tmp_path_factory) -> Path:
-    """Three small logs (brake_lag, brake_lag, none) and one unreadable one."""
+    """Three small logs (brake_gain, brake_gain, none) and one unreadable one."""
     folder = tmp_path_factory.mktemp("fleet") / "logs"
     simulate_fleet(folder, 3)
     (folder / "bad.csv").write_text("t,T_b\n0,1\n")
@@ -67,15 +67,15 @@ def test_fleet_rows_errors_resume_and_force(fleet_dir, tmp_path):
     bad, lag0, lag1, none = rows
     assert bad["verdict"] == "error" and "at least 3 data rows" in bad["error"] and not is_complete(out / "bad")
     for r in (lag0, lag1):
-        assert r["verdict"] == "brake_lag" and r["effects"] == ["brake_lag"] and r["error"] is None
-        assert abs(r["params"]["tau"] - TAU) < 0.2 * TAU
+        assert r["verdict"] == "brake_gain" and r["effects"] == ["brake_gain"] and r["error"] is None
+        assert abs(r["params"]["gain"] - GAIN) < 0.15 * GAIN
         assert r["gap_after"] < r["gap_before"]
         report = json.loads((out / Path(r["file"]).stem / "report.json").read_text())
         assert (report["verdict"], report["params"]) == (r["verdict"], r["params"])
     assert none["verdict"] == "none" and none["effects"] == [] and none["params"] == {}
     assert (s["diagnosed"], s["skipped"], s["failed"]) == (4, 0, 1)
     md = (out / "fleet.md").read_text()
-    assert "| `brake_lag` | 2 | 50% |" in md and "| `brake_lag` | tau | 2 |" in md and "LogFormatError" in md
+    assert "| `brake_gain` | 2 | 50% |" in md and "| `brake_gain` | gain | 2 |" in md and "LogFormatError" in md
     assert all((out / name).stat().st_size > 0 for name in (PLOT_VERDICTS, PLOT_PARAMS, PLOT_GAPS))
 
     again = run_fleet(str(fleet_dir), out, FleetSettings(config=FAST, jobs=1, plots=False))

@@ -61,7 +61,7 @@ def test_fleet_rows_identical_on_ray_and_in_the_process_pool(tmp_path, local_ray
         rows[name] = [{k: v for k, v in r.items() if k != "seconds"}
                       for r in json.loads((tmp_path / name / FLEET_JSON).read_text())["rows"]]
     assert local_ray.is_initialized()  # the test's instance was used, and is the test's to shut down
-    assert len(rows["ray"]) == 4 and [r["verdict"] for r in rows["ray"]] == ["error", "brake_lag", "brake_lag", "none"]
+    assert len(rows["ray"]) == 4 and [r["verdict"] for r in rows["ray"]] == ["error", "brake_gain", "brake_gain", "none"]
     assert rows["ray"] == rows["pool"]
 
 
