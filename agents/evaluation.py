@@ -15,16 +15,17 @@ Policies are named by a spec string, parsed by :func:`agents.policy_spec.parse_p
 :data:`agents.controllers.CONTROLLERS`, ``pipeline:EST`` for estimator EST + slip controller, or a trained run
 directory; see that module for the table).
 
-Jobs (one per policy, scenario and seed) run in ``workers`` processes.
+Jobs (one per policy, scenario and seed) run in ``workers`` local processes, or as Ray tasks with ``ray="auto"`` or
+a cluster address (:func:`fricenv.gap.pool.map_tasks`, the one parallel map of the project): the same jobs give the
+same rows on either.
 """
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import dataclasses
-import os
 from collections.abc import Sequence
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -32,6 +33,8 @@ from typing import Any
 import numpy as np
 
 from agents.policy_spec import PIPELINE_PREFIX, PolicySpec, PolicySpecError, parse_policy_spec
+from fricenv import progress as progress_events
+from fricenv.gap.pool import default_jobs, map_tasks
 from fricenv.utils import atomic_write, write_json
 
 __all__ = [
@@ -43,6 +46,7 @@ __all__ = [
     "evaluate",
     "format_table",
     "parse_policy",
+    "run_controller",
     "run_episode",
     "summarize",
     "write_outputs",
@@ -105,12 +109,26 @@ def run_episode(spec: PolicySpec, scenario: Scenario, seed: int) -> dict[str, An
     :param scenario: the scenario.
     :param seed: reset seed (noise).
     """
-    from agents.controllers import slip_reference
     from fricenv.envs.factory import make_braking
 
     env = make_braking(spec.estimator, road=scenario.road, v0=scenario.v0, change_distance=CHANGE_DISTANCE,
                        observation=spec.observation)
-    ctl = _controller(spec, env)
+    try:
+        return run_controller(_controller(spec, env), env, seed)
+    finally:
+        env.close()
+
+
+def run_controller(ctl, env, seed: int) -> dict[str, Any]:
+    """One episode of a controller (``reset()``, ``act(obs)``) on a Braking-v0 env set up for its scenario.
+
+    :param ctl: the controller or trained policy.
+    :param env: the env (``make_braking`` with the scenario's road, speed and change distance).
+    :param seed: reset seed (noise).
+    :return: ``ratio``, ``lock``, ``slip_err``, ``stopped`` (see the module docstring).
+    """
+    from agents.controllers import slip_reference
+
     obs, info = env.reset(seed=seed)
     ctl.reset()
     base = env.unwrapped
@@ -127,13 +145,12 @@ def run_episode(spec: PolicySpec, scenario: Scenario, seed: int) -> dict[str, An
             break
     stopped = bool(info["stopped"])
     distance = info["stopping_distance"] if stopped else info["distance"]
-    env.close()
     return {"ratio": float(distance / info["limit_distance"]), "lock": bool(info["lock_seen"]),
             "slip_err": float(np.mean(errs)) if errs else float("nan"), "stopped": stopped}
 
 
-def _job(args):
-    spec, scenario, seed = args
+def _job(spec: PolicySpec, scenario: Scenario, seed: int) -> dict[str, Any]:
+    """One episode in a worker (one torch thread)."""
     import torch
 
     torch.set_num_threads(1)
@@ -142,18 +159,17 @@ def _job(args):
 
 def evaluate(policies: Sequence[str | PolicySpec], scenarios: Sequence[Scenario] = SCENARIOS,
              seeds: int | Sequence[int] = DEFAULT_SEEDS, workers: int | None = None,
-             progress: bool = True) -> list[dict[str, Any]]:
+             progress: bool = True, ray: str | None = None) -> list[dict[str, Any]]:
     """Run every policy on every scenario and seed; one summary row per (policy, scenario).
 
     :param policies: policy specs (strings or :class:`PolicySpec`).
     :param scenarios: the scenario set.
     :param seeds: number of seeds (0..n-1) or an explicit list.
-    :param workers: worker processes (default: min(2, CPUs)); 1 runs in this process.
-    :param progress: show a progress bar.
+    :param workers: worker processes (default: min(2, CPUs)); 1 runs in this process. Not used with ``ray``.
+    :param progress: report progress (to the front end's sink, :mod:`fricenv.progress`).
+    :param ray: None (local processes), ``"auto"`` or a Ray cluster address (one CPU per episode).
     :return: rows with :data:`ROW_KEYS`.
     """
-    from fricenv.utils import progress as progress_bar
-
     specs = [p if isinstance(p, PolicySpec) else parse_policy(p) for p in policies]
     labels = [s.label for s in specs]
     if len(set(labels)) < len(labels):  # e.g. several runs of one algorithm and estimator: name them by directory
@@ -165,14 +181,8 @@ def evaluate(policies: Sequence[str | PolicySpec], scenarios: Sequence[Scenario]
     if not seed_list:
         raise ValueError("seeds must be a positive number or a non-empty list")
     jobs = [(spec, sc, s) for spec in specs for sc in scenarios for s in seed_list]
-    workers = workers if workers is not None else min(2, os.cpu_count() or 1)
-    if workers <= 1:
-        it = map(_job, jobs)
-        results = list(progress_bar(it, total=len(jobs), desc="evaluate") if progress else it)
-    else:
-        with ProcessPoolExecutor(max_workers=workers) as pool:
-            it = pool.map(_job, jobs, chunksize=1)
-            results = list(progress_bar(it, total=len(jobs), desc="evaluate") if progress else it)
+    with contextlib.nullcontext() if progress else progress_events.use_sink(None):
+        results = map_tasks(_job, jobs, default_jobs(workers), "evaluate", ray=ray)
     return summarize(jobs, results)
 
 
@@ -279,6 +289,7 @@ def summarize_policies(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
 
 
 def _train_job(kwargs: dict) -> dict:
+    """One :func:`agents.training.train` run in a worker (one torch thread); its metadata."""
     import torch
 
     torch.set_num_threads(1)
@@ -288,12 +299,10 @@ def _train_job(kwargs: dict) -> dict:
     return result.meta
 
 
-def _run_trainings(jobs: list[dict], workers: int) -> list[dict]:
-    """Run :func:`agents.training.train` jobs, ``workers`` at a time; returns their metadata in order."""
-    if workers <= 1 or len(jobs) <= 1:
-        return [_train_job(j) for j in jobs]
-    with ProcessPoolExecutor(max_workers=workers) as pool:
-        return list(pool.map(_train_job, jobs))
+def _run_trainings(jobs: list[dict], workers: int, ray: str | None = None) -> list[dict]:
+    """Run :func:`agents.training.train` jobs, ``workers`` at a time (or as Ray tasks with ``ray``); returns their
+    metadata in order."""
+    return map_tasks(_train_job, [(j,) for j in jobs], default_jobs(workers), "train", ray=ray)
 
 
 def _finished_run(run_dir: Path) -> dict | None:
@@ -328,7 +337,7 @@ def _training_jobs(out: Path, estimators: Sequence[str], baselines: Sequence[str
 def compare_abs(out: str | Path, estimators: Sequence[str] = ("none", "ekf-rls", "oracle"),
                 algo: str = "ppo", steps: int = 300_000, pipeline: str = "ekf-rls", train_seeds: Sequence[int] = (0,),
                 seeds: int = DEFAULT_SEEDS, workers: int = 2, reuse: bool = False,
-                baselines: Sequence[str] = tuple(MEMORY_BASELINES)) -> dict[str, Any]:
+                baselines: Sequence[str] = tuple(MEMORY_BASELINES), ray: str | None = None) -> dict[str, Any]:
     """Train every row on every training seed, then evaluate them with the rule ABS and the pipeline.
 
     :param out: directory; runs go to ``out/<row>-s<seed>`` (rows ``<algo>-<estimator>`` and the baselines).
@@ -341,6 +350,8 @@ def compare_abs(out: str | Path, estimators: Sequence[str] = ("none", "ekf-rls",
     :param workers: parallel processes (trainings, then evaluation jobs).
     :param reuse: reuse finished runs in ``out``.
     :param baselines: memory baselines (:data:`MEMORY_BASELINES`) trained without estimates.
+    :param ray: None (local processes), ``"auto"`` or a Ray cluster address: trainings and evaluation jobs run as
+        Ray tasks (``out`` must then be on a file system every node sees).
     :return: ``rows`` (:data:`COMPARE_KEYS` and more), ``training`` (:data:`TRAINING_KEYS` per run),
         ``evaluation_time_s``.
     """
@@ -357,13 +368,14 @@ def compare_abs(out: str | Path, estimators: Sequence[str] = ("none", "ekf-rls",
     jobs = _training_jobs(out, estimators, baselines, algo, steps, train_seeds)
     metas = {key: _finished_run(job["out"]) if reuse else None for key, job in jobs.items()}
     todo = [key for key, meta in metas.items() if meta is None]
-    metas.update(zip(todo, _run_trainings([jobs[k] for k in todo], workers)))
+    metas.update(zip(todo, _run_trainings([jobs[k] for k in todo], workers, ray)))
     specs = []
     for job in jobs.values():
         spec = parse_policy(str(job["out"]))
         specs.append(dataclasses.replace(spec, label=f"{spec.label}#s{job['seed']}"))
     t0 = time.perf_counter()
-    rows = evaluate(specs + ["rule-abs", f"{PIPELINE_PREFIX}{pipeline}"], seeds=seeds, workers=workers)
+    rows = evaluate(specs + ["rule-abs", f"{PIPELINE_PREFIX}{pipeline}"], seeds=seeds, workers=workers,
+                    ray=ray)
     for row in rows:
         label, _, seed = row["policy"].partition("#s")
         row["policy"], row["train_seed"] = label, int(seed) if seed else None
@@ -375,9 +387,10 @@ def compare_abs(out: str | Path, estimators: Sequence[str] = ("none", "ekf-rls",
 
 
 def compare_excitation(out: str | Path, steps: int = 100_000, seed: int = 0, episodes: int = 3, workers: int = 2,
-                       reuse: bool = False, calibration: str = "paper") -> dict[str, Any]:
+                       reuse: bool = False, calibration: str = "paper", ray: str | None = None) -> dict[str, Any]:
     """Excitation policies on PayloadExcitation-v0: PPO without and with the RLS estimate S_hat in the
-    observation, against the paper's multi-sine and a PRBS (same episodes, workspace and actuator limits).
+    observation, against the paper's multi-sine and a PRBS (same episodes, workspace and actuator limits). The
+    two trainings run in ``workers`` processes or as Ray tasks (``ray``: ``"auto"`` or an address).
 
     :return: ``rows`` (policy, ``t_below_1e-2`` median [s] or None, ``E_end`` median, ``effort`` mean,
         ``left_workspace``), ``training`` metadata.
@@ -397,7 +410,7 @@ def compare_excitation(out: str | Path, steps: int = 100_000, seed: int = 0, epi
         else:
             jobs.append({"out": d, "env": "payload", "estimator": est, "algo": "ppo", "steps": steps, "seed": seed,
                          "progress_bar": False})
-    for job, meta in zip(jobs, _run_trainings(jobs, workers)):
+    for job, meta in zip(jobs, _run_trainings(jobs, workers, ray)):
         metas[job["estimator"]] = meta
     rows = evaluate_excitation(("multisine", "prbs"), episodes=episodes, seed=0,
                                env_kwargs={"calibration": calibration})

@@ -8,6 +8,10 @@ runs in ``--out`` are reused with ``--reuse``), then evaluates all of them with 
 and prints the table, a per-policy and training-seed summary (mean and worst ratio over the scenarios, lock events)
 and the training wall times. The budget is printed at the start. ``--excitation`` also trains excitation policies on PayloadExcitation-v0 with and without the RLS estimate
 S_hat in the observation and compares their time to E < 1e-2 and final E with the multi-sine and PRBS.
+
+``--ray auto|ADDRESS`` runs the trainings and the evaluation episodes as Ray tasks (one CPU each) instead of
+``--workers`` local processes: 'auto' joins the instance this machine runs or ``RAY_ADDRESS`` names, else starts a
+local one; an address joins that cluster (every node needs fricenv installed and ``--out`` on a shared path).
 """
 
 from __future__ import annotations
@@ -36,6 +40,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="memory baselines without estimates (default: %(default)s)")
     parser.add_argument("--seeds", type=int, default=3, help="evaluation seeds (default %(default)s)")
     parser.add_argument("--workers", type=int, default=2, help="parallel processes (default %(default)s)")
+    parser.add_argument("--ray", metavar="auto|ADDRESS", default=None,
+                        help="run trainings and episodes as Ray tasks: 'auto' (a running instance, else a local "
+                             "one) or a cluster address; --workers is then not used")
     parser.add_argument("--out", default="runs/compare", metavar="DIR", help="output directory")
     parser.add_argument("--reuse", action="store_true", help="reuse finished runs found in --out")
     parser.add_argument("--excitation", action="store_true",
@@ -63,12 +70,13 @@ def run(args) -> int:
     n_runs = (len(args.estimators) + len(args.baselines)) * len(args.train_seeds)
     print(f"budget: {n_runs} trainings ({len(args.estimators)} estimator rows + {len(args.baselines)} memory "
           f"baselines) x {args.steps} steps on training seeds {args.train_seeds}, then evaluation over "
-          f"{args.seeds} seeds, {args.workers} workers")
+          f"{args.seeds} seeds, " + (f"on Ray {args.ray}" if args.ray else f"{args.workers} workers"))
     t0 = time.perf_counter()
     try:
         abs_result = compare_abs(out, estimators=args.estimators, algo=args.algo, steps=args.steps,
                                  pipeline=args.pipeline, train_seeds=args.train_seeds, seeds=args.seeds,
-                                 workers=args.workers, reuse=args.reuse, baselines=args.baselines)
+                                 workers=args.workers, reuse=args.reuse, baselines=args.baselines,
+                                 ray=args.ray)
     except ValueError as exc:
         raise SystemExit(f"fricenv compare: {exc}") from None
     rows = abs_result["rows"]
@@ -88,7 +96,7 @@ def run(args) -> int:
     payload = None
     if args.excitation:
         payload = compare_excitation(out / "excitation", steps=args.payload_steps, seed=args.train_seeds[0],
-                                     workers=args.workers, reuse=args.reuse)
+                                     workers=args.workers, reuse=args.reuse, ray=args.ray)
         print()
         print(f"{'excitation policy':<22} {'t(E<1e-2)':>10} {'E_end':>10} {'effort':>8} {'left ws':>7}")
         for r in payload["rows"]:

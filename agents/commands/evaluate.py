@@ -4,6 +4,11 @@ Scenarios: dry, wet, snow, ice at 20 and 30 m/s, dry->ice and ice->dry (at 15 m)
 on. Policies (:mod:`agents.policy_spec`): a controller (``rule-abs``, ``oracle-slip``, ``slip-pi``, ``locked``),
 ``pipeline:EST`` (estimator EST + slip controller) or a training run directory. Prints ratio to the physical limit (mean +- std), lock events and mean |slip - lambda*|;
 writes ``results.csv`` and ``ratios.png`` into ``--out`` and ``{"rows": [...]}`` to ``--json``.
+
+Episodes run in ``--workers`` local processes, or with ``--ray auto|ADDRESS`` as Ray tasks (one CPU each) on a Ray
+instance: the one this machine runs (``ray start``) or ``RAY_ADDRESS`` names, else a local one started for the run;
+an address (``ray://head:10001``) joins that cluster, whose nodes need fricenv installed and the policy run
+directories on a shared path. Both give the same rows.
 """
 
 from __future__ import annotations
@@ -20,6 +25,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seeds", type=int, default=3, help="episodes (seeds 0..n-1) per scenario "
                                                               "(default %(default)s)")
     parser.add_argument("--workers", type=int, default=2, help="worker processes (default %(default)s)")
+    parser.add_argument("--ray", metavar="auto|ADDRESS", default=None,
+                        help="run the episodes as Ray tasks: 'auto' (a running instance, else a local one) or a "
+                             "cluster address; --workers is then not used")
     parser.add_argument("--out", metavar="DIR", default="runs/evaluate", help="CSV and PNG directory")
     parser.add_argument("--json", metavar="PATH", help="write {\"rows\": [...]} as JSON")
 
@@ -37,10 +45,11 @@ def run(args) -> int:
     except ValueError as exc:
         raise SystemExit(f"fricenv evaluate: {exc}") from None
     t0 = time.perf_counter()
-    rows = evaluate(specs, seeds=args.seeds, workers=args.workers)
+    rows = evaluate(specs, seeds=args.seeds, workers=args.workers, ray=args.ray)
     wall = time.perf_counter() - t0
     print(format_table(rows))
-    print(f"evaluation wall time {wall:.1f} s ({args.seeds} seed(s), {args.workers} worker(s))")
+    engine = f"Ray {args.ray}" if args.ray else f"{args.workers} worker(s)"
+    print(f"evaluation wall time {wall:.1f} s ({args.seeds} seed(s), {engine})")
     written = write_outputs(rows, args.out, args.json)
     for kind, path in written.items():
         print(f"wrote {kind}: {path}")
