@@ -42,6 +42,7 @@ VERBS: dict[tuple[str, str | None], str] = {
     ("paper", "fms"): "fricenv.commands.paper_fms",
     ("excitation", None): "agents.commands.excitation",
     ("train", None): "agents.commands.train",
+    ("tune", None): "agents.commands.tune",
     ("evaluate", None): "agents.commands.evaluate",
     ("compare", None): "agents.commands.compare",
     ("gap", "simulate"): "fricenv.commands.gap_simulate",
