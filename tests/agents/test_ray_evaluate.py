@@ -6,6 +6,7 @@ from __future__ import annotations
 import pytest
 
 from agents.evaluation import Scenario, evaluate
+from tests.gap.test_ray_fleet import local_ray  # noqa: F401 - the fixture: a local 2-CPU Ray instance
 
 ray = pytest.importorskip("ray", reason="ray is a dependency of fricenv (pyproject.toml)")
 
@@ -13,18 +14,7 @@ SCENARIOS = (Scenario("wet", 20.0), Scenario("dry->ice", 20.0))
 POLICIES = ("rule-abs", "locked")
 
 
-@pytest.fixture
-def local_ray():
-    """A local Ray instance of 2 CPUs, started by the test and always shut down."""
-    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
-    try:
-        yield ray
-    finally:
-        ray.shutdown()
-    assert not ray.is_initialized()
-
-
-def test_rows_identical_in_process_pool_and_on_ray(local_ray):
+def test_rows_identical_in_process_pool_and_on_ray(local_ray):  # noqa: F811 - pytest fixture
     serial = evaluate(POLICIES, scenarios=SCENARIOS, seeds=[3, 8], workers=1, progress=False)
     pool = evaluate(POLICIES, scenarios=SCENARIOS, seeds=[3, 8], workers=2, progress=False)
     on_ray = evaluate(POLICIES, scenarios=SCENARIOS, seeds=[3, 8], progress=False, ray="auto")

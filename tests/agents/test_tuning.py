@@ -23,6 +23,7 @@ from agents.tuning import (
     sample_config,
 )
 from fricenv.cli import main
+from tests.gap.test_ray_fleet import local_ray  # noqa: F401 - the fixture: a local 2-CPU Ray instance
 
 pytest.importorskip("optuna", reason="optuna is a dependency of fricenv (pyproject.toml)")
 
@@ -112,16 +113,11 @@ def test_process_pool_workers_share_the_study(tmp_path):
     assert len({json.dumps(t["params"], sort_keys=True) for t in trials}) == 5  # the workers draw apart
 
 
-def test_ray_workers_share_the_study(tmp_path):
-    ray = pytest.importorskip("ray", reason="ray is a dependency of fricenv (pyproject.toml)")
-    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
-    try:
-        cfg = TuneSettings(out=str(tmp_path / "out"), n_trials=4, storage=str(tmp_path / "study.log"), workers=2,
-                           ray="auto")
-        result = run_study(cfg, stub_objective)
-        assert ray.is_initialized()  # the test's instance, left to the test
-    finally:
-        ray.shutdown()
+def test_ray_workers_share_the_study(tmp_path, local_ray):  # noqa: F811 - pytest fixture
+    cfg = TuneSettings(out=str(tmp_path / "out"), n_trials=4, storage=str(tmp_path / "study.log"), workers=2,
+                       ray="auto")
+    result = run_study(cfg, stub_objective)
+    assert local_ray.is_initialized()  # the test's instance was joined and left to the test
     trials = json.loads(result.trials_path.read_text())["trials"]
     assert result.n_trials == 4 and {t["state"] for t in trials} == {"COMPLETE"}
     assert result.best["value"] == min(t["value"] for t in trials)
