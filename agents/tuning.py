@@ -11,7 +11,9 @@ score every policy on the *tuning scenario set* (:data:`TUNING_SCENARIOS`: dry, 
     score = mean stopping-distance ratio + LOCK_PENALTY * (share of episodes with a wheel lock)    (lower is better)
 
 The stage's score is reported to the pruner, which stops a trial whose score is worse than the median of the
-earlier trials at the same stage.
+earlier trials at the same stage. A new study first runs the committed configuration of each algorithm
+(:func:`committed_params`), so the search is measured against it on the same seeds. Parameter names carry their
+algorithm (``ppo_gamma``, ``sac_gamma``).
 
 Seed split (:func:`seed_split`, written into both output files): ``fricenv evaluate`` and ``compare`` reset their
 episodes with seeds ``0..N-1`` and ``compare`` trains on seeds 0, 1, 2 (env ``i`` of a run with seed ``s`` is
@@ -55,6 +57,7 @@ __all__ = [
     "TuneResult",
     "TuneSettings",
     "TuningError",
+    "committed_params",
     "config_from_params",
     "run_study",
     "sample_config",
@@ -145,6 +148,38 @@ def sample_config(trial, algos: Sequence[str]) -> tuple[str, PPOConfig | SACConf
     return algo, dataclasses.replace(DEFAULT_CONFIGS[("braking", algo)], **SAMPLERS[algo](_Named(trial, algo)))
 
 
+class _Recorder:
+    """A trial that records the parameter names a sampler asks for (and answers with the first choice)."""
+
+    def __init__(self):
+        self.names: list[str] = []
+
+    def suggest_categorical(self, name: str, choices: list):
+        self.names.append(name)
+        return choices[0]
+
+    def suggest_float(self, name: str, low: float, high: float, log: bool = False) -> float:
+        self.names.append(name)
+        return low
+
+
+def committed_params(algo: str, algos: Sequence[str]) -> dict[str, Any] | None:
+    """The trial parameters of the committed configuration (``agents/hyperparams/braking.json``), or None when it
+    lies outside the search space. A new study runs it first, so its score is the bar the search must beat."""
+    cfg = DEFAULT_CONFIGS[("braking", algo)]
+    recorder = _Recorder()
+    SAMPLERS[algo](recorder)
+    arch = {v: k for k, v in NET_ARCHS.items()}.get(tuple(cfg.net_arch))
+    params = {f"{algo}_{n}": arch if n == "net_arch" else getattr(cfg, n) for n in recorder.names}
+    if len(algos) > 1:
+        params["algo"] = algo
+    try:
+        replayed = config_from_params(params, algos)
+    except ValueError:  # a committed value that is not among the choices
+        return None
+    return params if replayed == (algo, cfg) else None
+
+
 def config_from_params(params: dict[str, Any], algos: Sequence[str]) -> tuple[str, PPOConfig | SACConfig]:
     """The algorithm and config a trial with these parameters trained (:func:`sample_config` replayed)."""
     from optuna.trial import FixedTrial
@@ -177,6 +212,7 @@ class TuneSettings:
     :param train_seeds: tuning training seeds (in :data:`TRAIN_SEED_RANGE`).
     :param eval_seeds: tuning evaluation reset seeds (>= :data:`EVAL_SEED_MIN`).
     :param scenarios: the scenario set of the score.
+    :param baseline: a new study first runs the committed configuration of each algorithm.
     :param storage: Optuna storage shared by the workers (RDB URL or journal file path); None: in memory.
     :param study_name: the study's name in the storage.
     :param workers: local worker processes (each runs ``study.optimize``); not used with ``ray``.
@@ -195,6 +231,7 @@ class TuneSettings:
     scenarios: tuple[Scenario, ...] = field(default=TUNING_SCENARIOS, hash=False)
     storage: str | None = None
     study_name: str = "fricenv-tune"
+    baseline: bool = True
     workers: int = 1
     ray: str | None = None
 
@@ -375,6 +412,11 @@ def run_study(settings: TuneSettings, objective: Callable = train_and_score) -> 
     t0 = time.perf_counter()
     study = _open(settings)
     before = len(study.trials)
+    if before == 0 and settings.baseline:
+        for algo in settings.algos:
+            params = committed_params(algo, settings.algos)
+            if params is not None:
+                study.enqueue_trial(params, user_attrs={"baseline": "agents/hyperparams/braking.json"})
     if settings.storage is None:
         _optimize(settings, settings.n_trials, 0, objective, study)
     else:

@@ -10,6 +10,9 @@ Seed split: tuning trains on seeds 100..899 (default 101; env seeds s*1000+i) an
 >= 900000 (default 900000, 900001), disjoint from the reset seeds 0..N-1 of ``fricenv evaluate`` and ``compare``
 and from compare's training seeds 0, 1, 2. Both output files state the split.
 
+A new study first runs the committed configuration of each algorithm (``agents/hyperparams/braking.json``) on the
+same seeds, so its score is the bar the search must beat (``--no-baseline``: not).
+
 Writes into ``--out``: ``hyperparams.json`` (the best trial's configuration per algorithm, the format of
 ``agents/hyperparams/braking.json``: ``fricenv train --hyperparams OUT/hyperparams.json``) and ``trials.json``
 (every trial with its parameters, intermediate scores and state).
@@ -45,6 +48,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="tuning training seeds, in 100..899 (default 101)")
     parser.add_argument("--eval-seeds", type=int, nargs="+", default=None, metavar="S",
                         help="tuning evaluation reset seeds, >= 900000 (default 900000 900001)")
+    parser.add_argument("--no-baseline", action="store_true",
+                        help="do not run the committed configuration as the first trial of a new study")
     parser.add_argument("--storage", default=None, metavar="URL|PATH",
                         help="Optuna storage shared by the workers: sqlite:///study.db or a journal file path "
                              "(default: in memory, one worker, no resume)")
@@ -65,7 +70,8 @@ def run(args) -> int:
                             n_trials=args.trials, n_evals=args.evals, seed=args.seed,
                             train_seeds=tuple(args.train_seeds or TUNING_TRAIN_SEEDS),
                             eval_seeds=tuple(args.eval_seeds or TUNING_EVAL_SEEDS), storage=args.storage,
-                            study_name=args.study_name, workers=args.workers, ray=args.ray)
+                            study_name=args.study_name, workers=args.workers, ray=args.ray,
+                            baseline=not args.no_baseline)
     settings.check()  # a TuningError is one line on the CLI's error path, before any work
     engine = f"{args.workers} Ray task(s) on {args.ray}" if args.ray else f"{args.workers} worker(s)"
     print(f"study {args.study_name!r}: {args.trials} trial(s) x {args.steps} steps, {engine}, storage "

@@ -10,7 +10,7 @@ import pytest
 
 from agents.evaluation import DEFAULT_SEEDS
 from agents.hyperparams import load_hyperparams
-from agents.training import SEED_STRIDE, PPOConfig, SACConfig
+from agents.training import DEFAULT_CONFIGS, SEED_STRIDE, PPOConfig, SACConfig
 from agents.tuning import (
     HYPERPARAMS_FILE,
     TRIALS_FILE,
@@ -18,6 +18,7 @@ from agents.tuning import (
     TUNING_TRAIN_SEEDS,
     TuneSettings,
     TuningError,
+    committed_params,
     config_from_params,
     run_study,
     sample_config,
@@ -77,6 +78,17 @@ def test_cli_bad_arguments_are_one_line_exit_2(tmp_path, capsys):
         err = capsys.readouterr().err.strip()
         assert err.startswith("fricenv tune: error:") and expected in err and "\n" not in err, err
     assert not (tmp_path / "o" / HYPERPARAMS_FILE).exists()
+
+
+def test_new_study_runs_the_committed_configuration_first(tmp_path):
+    result = run_study(TuneSettings(out=str(tmp_path / "o"), n_trials=3, algos=("ppo", "sac")), stub_objective)
+    trials = json.loads(result.trials_path.read_text())["trials"]
+    assert [t["params"] for t in trials[:2]] == [committed_params(a, ("ppo", "sac")) for a in ("ppo", "sac")]
+    assert config_from_params(trials[0]["params"], ("ppo", "sac")) == ("ppo", DEFAULT_CONFIGS[("braking", "ppo")])
+    assert trials[1]["user_attrs"]["baseline"] == "agents/hyperparams/braking.json"
+    assert "baseline" not in trials[2]["user_attrs"]
+    plain = run_study(TuneSettings(out=str(tmp_path / "p"), n_trials=1, baseline=False), stub_objective)
+    assert _params(plain)[0] != committed_params("ppo", ("ppo",))
 
 
 def test_same_seed_same_parameters(tmp_path):
