@@ -11,7 +11,7 @@ score every policy on the *tuning scenario set* (:data:`TUNING_SCENARIOS`: dry, 
     score = mean stopping-distance ratio + LOCK_PENALTY * (share of episodes with a wheel lock)    (lower is better)
 
 The stage's score is reported to the pruner, which stops a trial whose score is worse than the median of the
-earlier trials at the same stage. A new study first runs the committed configuration of each algorithm
+earlier trials at the same stage (never after the last stage: a finished trial keeps its score). A new study first runs the committed configuration of each algorithm
 (:func:`committed_params`), so the search is measured against it on the same seeds. Parameter names carry their
 algorithm (``ppo_gamma``, ``sac_gamma``).
 
@@ -337,7 +337,7 @@ def train_and_score(trial, settings: TuneSettings) -> float:
         trial.set_user_attr("steps", int(models[0].num_timesteps))
         trial.set_user_attr("train_eval_seconds", time.perf_counter() - t0)
         trial.report(score, stage)
-        if trial.should_prune():
+        if stage < settings.n_evals - 1 and trial.should_prune():  # a finished trial keeps its score
             raise optuna.TrialPruned()
     return score
 
