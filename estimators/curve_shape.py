@@ -82,12 +82,6 @@ class ShapeFitParams:
                 raise EstimatorConfigError(f"ShapeFitParams.{name} must be finite and > 0, got {value!r}")
 
 
-def _ratio(num: np.ndarray, den: np.ndarray) -> np.ndarray:
-    """num / den where den > 0, else 0."""
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return np.where(den > 0, num / den, 0.0)
-
-
 class ShapeBank:
     """Candidate curve shapes, each a Magic Formula normalized to a peak of 1.
 
@@ -135,6 +129,8 @@ class ShapeFit:
         self.n_eff = np.zeros(self.n)
         self.fast = [np.zeros((self.n, k)) for _ in range(3)]  # (a, b, c) of (S1) with the fast forgetting
         self.n_fast = np.zeros(self.n)
+        self._best = np.zeros(self.n, dtype=int)  # winning shape (S3), the prior 0 until informed
+        self._informed = np.zeros(self.n, dtype=bool)  # n_eff has reached min_samples
         self.reset()
 
     def reset(self, mask: np.ndarray | None = None) -> None:
@@ -144,6 +140,8 @@ class ShapeFit:
             arr[m] = 0.0
         self.n_eff[m] = 0.0
         self.n_fast[m] = 0.0
+        self._best[m] = 0
+        self._informed[m] = False
 
     def update(self, slip: np.ndarray, mu: np.ndarray, speed: np.ndarray, active: np.ndarray) -> None:
         """Score one sample per estimator: |slip|, friction in use, filtered speed [m/s], each (N,); estimators
@@ -151,6 +149,8 @@ class ShapeFit:
         p = self.params
         s, m = np.abs(slip), np.abs(mu)
         scored = active & (s > p.slip_min)
+        if not scored.any():  # nothing to score: the sums, theta and the winner stay as they are
+            return
         g, dg = self.bank.g(np.where(scored, s, 1.0))
         v = np.maximum(np.asarray(speed, dtype=float), SPEED_FLOOR)[:, None]
         w = 1.0 / (p.sigma_mu**2 + (self.theta * dg * p.sigma_v / v) ** 2)
@@ -160,31 +160,37 @@ class ShapeFit:
         self.fast = [np.where(sc, p.fast_forgetting * x + t, x) for x, t in zip(self.fast, terms)]
         self.n_eff = np.where(scored, p.forgetting * self.n_eff + 1.0, self.n_eff)
         self.n_fast = np.where(scored, p.fast_forgetting * self.n_fast + 1.0, self.n_fast)
+        self._refresh()
         self._restart_on_jump()
-        self.theta = _ratio(self.b, self.a)  # (S2)
+
+    def _refresh(self) -> None:
+        """theta (S2), the costs (S3) and the winner from the sums."""
+        pos = self.a > 0
+        den = np.where(pos, self.a, 1.0)
+        self.theta = np.where(pos, self.b / den, 0.0)  # (S2)
+        cost = np.where(pos, self.c - self.b**2 / den, np.inf)  # (S3)
+        self._informed = self.n_eff >= self.params.min_samples
+        self._best = np.where(self._informed, np.argmin(cost, axis=1), 0)
 
     def _restart_on_jump(self) -> None:
         """A friction jump (the winning shape's theta over the last 0.2 s and over the whole memory differ by more
         than ``jump_ratio``): the memory restarts from the fast copy, i.e. from the data after the jump."""
-        j, rows = self.best(), np.arange(self.n)
-        slow, fast = _ratio(self.b, self.a)[rows, j], _ratio(self.fast[1], self.fast[0])[rows, j]
+        rows, j = np.arange(self.n), self._best
+        fa, fb = self.fast[0][rows, j], self.fast[1][rows, j]
+        slow, fast = self.theta[rows, j], np.where(fa > 0, fb / np.where(fa > 0, fa, 1.0), 0.0)
         ratio = self.params.jump_ratio
         jump = (self.n_fast >= JUMP_MIN_SAMPLES) & (slow > 0) & (fast > 0) \
             & ((fast > ratio * slow) | (slow > ratio * fast))
         if jump.any():
             self.a, self.b, self.c = (np.where(jump[:, None], f, x) for f, x in zip(self.fast, (self.a, self.b, self.c)))
             self.n_eff = np.where(jump, self.n_fast, self.n_eff)
+            self._refresh()
 
     def best(self) -> np.ndarray:
         """Index of the winning shape per estimator (N,), the prior (0) until the fit is used."""
-        with np.errstate(divide="ignore", invalid="ignore"):
-            cost = np.where(self.a > 0, self.c - self.b**2 / self.a, np.inf)  # (S3)
-        informed = self.n_eff >= self.params.min_samples
-        return np.where(informed, np.argmin(cost, axis=1), 0)
+        return self._best.copy()
 
     def outputs(self) -> tuple[np.ndarray, np.ndarray]:
         """(peak slip, peak friction) per estimator, each (N,); the peak friction is NaN until the fit is used."""
-        j = self.best()
-        rows = np.arange(self.n)
-        informed = self.n_eff >= self.params.min_samples
-        return self.bank.peak_slip[j], np.where(informed, self.theta[rows, j], np.nan)
+        j = self._best
+        return self.bank.peak_slip[j], np.where(self._informed, self.theta[np.arange(self.n), j], np.nan)
