@@ -182,7 +182,8 @@ class ShapeFit:
         jump = (self.n_fast >= JUMP_MIN_SAMPLES) & (slow > 0) & (fast > 0) \
             & ((fast > ratio * slow) | (slow > ratio * fast))
         if jump.any():
-            self.a, self.b, self.c = (np.where(jump[:, None], f, x) for f, x in zip(self.fast, (self.a, self.b, self.c)))
+            restart = jump[:, None]
+            self.a, self.b, self.c = (np.where(restart, f, x) for f, x in zip(self.fast, (self.a, self.b, self.c)))
             self.n_eff = np.where(jump, self.n_fast, self.n_eff)
             self._refresh()
 
