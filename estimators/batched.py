@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 
 from estimators.base import Health
+from estimators.curve_shape import ShapeFit
 from estimators.ekf_rls import KS0, PHI_MIN_SLIP, RLS_P0, QuarterCarEkfRls
 from estimators.outliers import Verdict
 from fricenv.plants.quarter_car import QuarterCarParams
@@ -119,6 +120,9 @@ class BatchedEkfRls:
         self.k_s, self.P_rls = np.full(self.n, KS0), np.full(self.n, RLS_P0)
         self.s_num, self.s_den, self.mu_peak = np.zeros(self.n), np.zeros(self.n), np.zeros(self.n)
         self.torque_prev = np.zeros(self.n)
+        fit = c.shape_fit  # the curve-shape fit, step 6 (estimators.curve_shape), with the single one's bank
+        self.shape_fit = None if fit is None else ShapeFit(self.n, fit.bank, fit.params)
+        self.prior_peak_slip = single.prior_peak_slip
         self.last = {k: np.zeros(self.n) for k in self.names}
         self.reset()
 
@@ -134,8 +138,10 @@ class BatchedEkfRls:
         self.P[m] = self.P0
         if self.gate is not None:
             self.gate.reset(m)
+        if self.shape_fit is not None:
+            self.shape_fit.reset(m)
         start = {"v": v, "slip": 0.0, "F_x": 0.0, "k_s": KS0, "mu": self.core.mu_map.batch(KS0, 0.0),
-                 "mu_peak": 0.0, "mu_utilized": 0.0}
+                 "mu_peak": 0.0, "mu_utilized": 0.0, "peak_slip": self.prior_peak_slip}
         for k, value in start.items():
             self.last[k][m] = np.broadcast_to(value, (self.n,))[m]
         health = np.full(self.n, int(Health.NOT_EXCITED))
@@ -185,6 +191,16 @@ class BatchedEkfRls:
         self.s_den = np.where(excited, lam * self.s_den + phi * phi, self.s_den)
         return excited
 
+    def _shape(self, active: np.ndarray, S: np.ndarray, mu_util: np.ndarray, mu_map: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray]:
+        """Step 6, the curve-shape fit: (peak friction, peak slip), the map's friction until the fit has data."""
+        if self.shape_fit is None:
+            return mu_map, np.full(self.n, self.prior_peak_slip)
+        Fz = self.core.Fz_total
+        self.shape_fit.update(np.abs(Fz * S) / Fz, mu_util, self.y, active)  # |phi| / F_z, as the single one
+        peak_slip, mu_fit = self.shape_fit.outputs()
+        return np.where(np.isfinite(mu_fit), mu_fit, mu_map), peak_slip
+
     def update(self, omega, a_x, T_b) -> tuple[dict[str, np.ndarray], np.ndarray]:
         """One sample for every sub-env: wheel speed [rad/s], a_x [m/s^2], brake torque held [N m], each (N,).
 
@@ -206,8 +222,9 @@ class BatchedEkfRls:
             s_bar = np.where(self.s_den > 0, self.s_num / self.s_den, 0.0)
         mu_util = np.abs(F) / self.core.Fz_total
         self.mu_peak = np.where(active, np.maximum(self.mu_peak, mu_util), self.mu_peak)
-        new = {"v": self.y, "slip": -S, "F_x": -F, "k_s": self.k_s, "mu": self.core.mu_map.batch(self.k_s, s_bar),
-               "mu_peak": self.mu_peak, "mu_utilized": mu_util}
+        mu, peak_slip = self._shape(active, S, mu_util, self.core.mu_map.batch(self.k_s, s_bar))
+        new = {"v": self.y, "slip": -S, "F_x": -F, "k_s": self.k_s, "mu": mu, "mu_peak": self.mu_peak,
+               "mu_utilized": mu_util, "peak_slip": peak_slip}
         for k, value in new.items():
             self.last[k] = np.where(active, value, self.last[k])
         health = np.select([~active, verdict == Verdict.REJECT, verdict == Verdict.REINIT, excited],

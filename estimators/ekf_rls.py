@@ -57,6 +57,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from estimators.base import Estimate, Estimator, EstimatorConfigError, Health, check_dt
+from estimators.curve_shape import DEFAULT_BANK, ShapeBank, ShapeFit, ShapeFitParams
 from estimators.ekf import ekf_predict, ekf_update
 from estimators.outliers import DEFAULT_GATE, GateParams, Verdict, check_gate, gate, nis
 from fricenv.plants.quarter_car import PAPER_PARAMS, QuarterCarParams
@@ -243,8 +244,9 @@ class WheelSpeedGate:
 class EkfRlsCore:
     """The four steps on traction-positive quantities (torques, forces, slips); see the module docstring."""
 
-    def __init__(self, cfg: EkfRlsConfig, dt: float, mu_map):
+    def __init__(self, cfg: EkfRlsConfig, dt: float, mu_map, shape_fit: ShapeFit | None = None):
         self.cfg = cfg
+        self.shape_fit = shape_fit  # step 6 (estimators.curve_shape), one estimator; None: off
         self.dt = check_dt(dt)
         self.mu_map = mu_map
         n = len(cfg.Fz)
@@ -280,6 +282,8 @@ class EkfRlsCore:
         self.torque_prev = np.zeros(self.n)  # torque held since the last sample (for the wheel-speed gate)
         if self.wheel_gate is not None:
             self.wheel_gate.reset()
+        if self.shape_fit is not None:
+            self.shape_fit.reset()
 
     def _dead(self, c: float) -> float:
         """The correction applied to the rate: c outside the dead zone (+-deadband), shrunk towards 0."""
@@ -343,8 +347,17 @@ class EkfRlsCore:
         mu = self.mu_map(self.k_s, s_bar)
         mu_util = abs(F_total) / self.Fz_total
         self.mu_peak = max(self.mu_peak, mu_util)
+        # 6. the curve's shape (estimators.curve_shape): peak slip, and the peak friction once the fit is used
+        peak_slip = np.nan
+        if self.shape_fit is not None:
+            self.shape_fit.update(np.array([abs(phi) / self.Fz_total]), np.array([mu_util]), np.array([y]),
+                                  np.array([True]))
+            slip_fit, mu_fit = self.shape_fit.outputs()
+            peak_slip = float(slip_fit[0])
+            mu = float(mu_fit[0]) if np.isfinite(mu_fit[0]) else mu
         return {"v": y, "S": S, "F": F, "k_s": self.k_s, "mu": mu, "mu_peak": self.mu_peak,
-                "mu_utilized": mu_util, "s_bar": s_bar, "excited": excited, "verdict": max(verdicts)}
+                "mu_utilized": mu_util, "s_bar": s_bar, "excited": excited, "verdict": max(verdicts),
+                "peak_slip": peak_slip}
 
 
 def _health(out: dict) -> Health:
@@ -374,27 +387,36 @@ class QuarterCarEkfRls(Estimator):
     :param omega_std: wheel-speed noise standard deviation assumed by the outlier gate [rad/s].
     :param outlier_gate: the wheel-speed gate (:class:`WheelSpeedGate`; ``Health.OUTLIER`` for a rejected sample,
         ``REINITIALISED`` when a wheel's gate restarts from it), or None to trust every sample.
+    :param shape_bank: candidate curve shapes of the online shape fit (:mod:`estimators.curve_shape`), which gives
+        ``peak_slip`` (the estimated curve's peak slip) and, once it has data, ``mu`` (the peak friction of the
+        fitted shape); None: no fit (``peak_slip`` is that of ``shape``, ``mu`` the map's). With a custom
+        ``mu_map`` there is no fit: the map is used as it is.
+    :param shape_params: tuning of the shape fit.
     """
 
     measurement_columns = ("omega", "a_x")
     input_columns = ("T_b",)
-    names = ("v", "slip", "F_x", "k_s", "mu", "mu_peak", "mu_utilized")
+    names = ("v", "slip", "F_x", "k_s", "mu", "mu_peak", "mu_utilized", "peak_slip")
 
     def __init__(self, dt: float = 0.01, p: QuarterCarParams = PAPER_PARAMS, shape: MagicFormula = DRY,
                  mu_map=None, ax_std: float = AX_STD_MIN, forgetting: float = FORGETTING,
                  correction_gain: float = DEFAULT_CORRECTION_GAIN, correction_deadband: float = 0.0,
-                 omega_std: float = OMEGA_NOISE_STD, outlier_gate: GateParams | None = DEFAULT_GATE):
+                 omega_std: float = OMEGA_NOISE_STD, outlier_gate: GateParams | None = DEFAULT_GATE,
+                 shape_bank: ShapeBank | None = DEFAULT_BANK, shape_params: ShapeFitParams | None = None):
         cfg = EkfRlsConfig(m=p.m, I_w=p.J, R_w=p.r, Fz=(p.Fz,), ax_std=ax_std, forgetting=forgetting,
                            K=correction_gain, deadband=correction_deadband, omega_std=omega_std,
                            outlier_gate=outlier_gate)
-        self.core = EkfRlsCore(cfg, dt, mu_map or MagicFormulaFamilyMap(shape))
+        fit = ShapeFit(1, shape_bank, shape_params) if shape_bank is not None and mu_map is None else None
+        self.core = EkfRlsCore(cfg, dt, mu_map or MagicFormulaFamilyMap(shape), fit)
+        self.prior_peak_slip = float(fit.outputs()[0][0]) if fit is not None else shape.peak_slip
         self._last = None
         self.reset()
 
     def reset(self, v0: float | None = None) -> Estimate:
         self.core.reset(v0)
         self._last = {"v": np.nan if v0 is None else float(v0), "slip": 0.0, "F_x": 0.0, "k_s": KS0,
-                      "mu": self.core.mu_map(KS0, 0.0), "mu_peak": 0.0, "mu_utilized": 0.0}
+                      "mu": self.core.mu_map(KS0, 0.0), "mu_peak": 0.0, "mu_utilized": 0.0,
+                      "peak_slip": self.prior_peak_slip}
         return Estimate(dict(self._last), Health.NOT_EXCITED)
 
     def update(self, measurement, u) -> Estimate:
@@ -403,8 +425,10 @@ class QuarterCarEkfRls(Estimator):
             return Estimate(dict(self._last), Health.INVALID_INPUT, {"reason": "NaN or wrong shape; skipped"})
         y, uu = sample
         out = self.core.step(np.array([y[0]]), float(y[1]), np.array([-uu[0]]))
+        peak_slip = self.prior_peak_slip if np.isnan(out["peak_slip"]) else out["peak_slip"]
         self._last = {"v": out["v"], "slip": float(-out["S"][0]), "F_x": float(-out["F"][0]), "k_s": out["k_s"],
-                      "mu": out["mu"], "mu_peak": out["mu_peak"], "mu_utilized": out["mu_utilized"]}
+                      "mu": out["mu"], "mu_peak": out["mu_peak"], "mu_utilized": out["mu_utilized"],
+                      "peak_slip": peak_slip}
         return Estimate(dict(self._last), _health(out), {"s_bar": out["s_bar"]})
 
 

@@ -1,0 +1,197 @@
+"""The friction curve's shape, fitted online: a bank of candidate shapes scored on the EKF/RLS's (slip, mu) pairs.
+
+The EKF/RLS estimator (:mod:`estimators.ekf_rls`) maps its slip slope on one fixed curve shape (dry asphalt), so
+its peak slip is the dry curve's 0.19 whatever the road: on wet asphalt (peak at 0.088) a slip controller on that
+reference brakes far past the peak. Here the shape is identified from the data the estimator already has: each
+sample gives a slip ``S`` (eq. (3) at the filtered speed) and the friction in use ``mu = |F| / F_z`` (force EKF).
+
+Model, per candidate shape j (a Magic Formula with its peak normalized to 1, ``g_j(S) = MF(S; B_j, C_j, E_j, 1) /
+max MF``): ``mu = theta_j g_j(S) + e``. ``theta_j`` (the road's peak friction if shape j is right) is a scalar
+weighted least-squares fit with exponential forgetting ``lam`` (a scalar RLS, eqs. (S1)-(S3) below), and the
+shape whose weighted residual is smallest wins:
+
+    (S1)  a_j = lam a_j + w_j g_j(S)^2,   b_j = lam b_j + w_j g_j(S) mu,   c_j = lam c_j + w_j mu^2
+    (S2)  theta_j = b_j / a_j
+    (S3)  J_j = c_j - b_j^2 / a_j       (the weighted residual sum of squares at theta_j); j* = argmin J_j
+
+Weights (errors in variables). The slip carries the filtered speed's error: a speed error ``sigma_v`` gives a slip
+error ``sigma_v / v``, which on the steep part of the curve is a friction error ``theta g'(S) sigma_v / v``. A
+sample's weight is the inverse of its total variance, ``w_j = 1 / (sigma_mu^2 + (theta_j g_j'(S) sigma_v /
+max(v, 1))^2)`` with the previous ``theta_j``: the steep low-slip part, where a speed bias of a few tenths of a m/s
+moves the slip as much as the shapes differ, counts little, and the shoulder and peak, where the shapes differ
+and the slope is small, count most. Only samples with ``S > SLIP_MIN`` are scored (below it every shape is the
+same straight line).
+
+Outputs: the winning shape's peak slip and its ``theta`` (the peak friction) once ``n_eff`` (the forgotten count
+of scored samples) reaches ``MIN_SAMPLES``; before, the prior shape (the bank's first, dry asphalt) and no peak
+friction (NaN: the caller keeps its own estimate).
+
+The bank (:data:`DEFAULT_BANK`) holds the shapes of the four road presets (:data:`fricenv.plants.tire.ROADS`: dry,
+wet, snow, ice). On these roads the fit identifies the surface, as the Burckhardt-table methods do; on another road
+it returns the closest shape of the bank. The snow preset rises all the way to slip 1 and is within 1.5 % of its
+peak from slip 0.17 on: between snow and dry the data (and the controller) can hardly tell, and need not.
+
+Every function works on a leading batch axis (N sub-envs, K shapes): the single estimator runs it with N = 1, the
+batched estimator (:mod:`estimators.batched`) with N, so the two cannot differ.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from estimators.base import EstimatorConfigError
+from fricenv.plants.tire import ROADS, MagicFormula, magic_formula_and_dslip
+
+__all__ = ["DEFAULT_BANK", "ShapeBank", "ShapeFit", "ShapeFitParams"]
+
+SHAPE_FORGETTING = 0.995  # lam of (S1): a memory of about 2 s at 10 ms [-]
+SIGMA_MU = 0.02  # friction noise of one sample (a_x noise 0.1 m/s^2 is 0.01 on mu) [-]
+SIGMA_V = 0.2  # error of the filtered speed (its reset from one noisy wheel speed) [m/s]
+SLIP_MIN = 0.02  # samples below this slip are not scored [-]
+MIN_SAMPLES = 20.0  # forgotten count of scored samples before the fit is used (0.2 s of braking) [-]
+FAST_FORGETTING = 0.95  # lam of the fast copy of (S1) that detects friction jumps: a memory of 0.2 s [-]
+JUMP_MIN_SAMPLES = 10.0  # forgotten count of the fast copy before it may detect a jump (it tends to 20) [-]
+JUMP_RATIO = 3.0  # a jump: the fast and slow theta of the winning shape differ by more than this factor [-]
+SPEED_FLOOR = 1.0  # floor of the speed in the slip-error weight [m/s]
+
+
+@dataclass(frozen=True)
+class ShapeFitParams:
+    """Tuning of the shape fit (module docstring)."""
+
+    forgetting: float = SHAPE_FORGETTING  # lam of (S1) [-]
+    sigma_mu: float = SIGMA_MU  # friction noise of one sample [-]
+    sigma_v: float = SIGMA_V  # speed error [m/s]
+    slip_min: float = SLIP_MIN  # smallest scored slip [-]
+    min_samples: float = MIN_SAMPLES  # forgotten sample count before the fit is used [-]
+    fast_forgetting: float = FAST_FORGETTING  # lam of the jump detector's fast copy [-]
+    jump_ratio: float = JUMP_RATIO  # fast / slow theta factor that is a jump [-]
+
+    def __post_init__(self):
+        for name in ("forgetting", "fast_forgetting"):
+            if not 0.9 <= getattr(self, name) <= 1.0:
+                raise EstimatorConfigError(f"ShapeFitParams.{name} must be in [0.9, 1], got {getattr(self, name)!r}")
+        if not (np.isfinite(self.jump_ratio) and self.jump_ratio > 1.0):
+            raise EstimatorConfigError(f"ShapeFitParams.jump_ratio must be finite and > 1, got {self.jump_ratio!r}")
+        for name in ("sigma_mu", "sigma_v", "slip_min", "min_samples"):
+            value = getattr(self, name)
+            if not (np.isfinite(value) and value > 0):
+                raise EstimatorConfigError(f"ShapeFitParams.{name} must be finite and > 0, got {value!r}")
+
+
+class ShapeBank:
+    """Candidate curve shapes, each a Magic Formula normalized to a peak of 1.
+
+    :param shapes: the candidates (their theta is ignored); the first is the prior (used before any data).
+    """
+
+    def __init__(self, shapes: Sequence[MagicFormula]):
+        if len(shapes) < 1:
+            raise EstimatorConfigError("a shape bank needs at least one candidate shape")
+        self.names = tuple(s.name for s in shapes)
+        unit = [MagicFormula(s.B, s.C, s.E, 1.0) for s in shapes]
+        self.B = np.array([u.B for u in unit])
+        self.C = np.array([u.C for u in unit])
+        self.E = np.array([u.E for u in unit])
+        self.g_max = np.array([u.mu_max for u in unit])
+        self.peak_slip = np.array([u.peak_slip for u in unit])
+
+    def __len__(self) -> int:
+        return len(self.names)
+
+    def g(self, slip: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Normalized shapes and their slopes at ``slip`` (N,): two (N, K) arrays."""
+        s = np.asarray(slip, dtype=float)[:, None]
+        mu, dmu = magic_formula_and_dslip(s, self.B, self.C, self.E, 1.0)
+        return mu / self.g_max, dmu / self.g_max
+
+
+DEFAULT_BANK = ShapeBank(tuple(ROADS.values()))
+
+
+class ShapeFit:
+    """State of eqs. (S1)-(S3) for N estimators over one bank (module docstring).
+
+    :param n: number of estimators (1 for the single estimator).
+    :param bank: the candidate shapes.
+    :param params: tuning.
+    """
+
+    def __init__(self, n: int, bank: ShapeBank = DEFAULT_BANK, params: ShapeFitParams | None = None):
+        self.n, self.bank = int(n), bank
+        self.params = params or ShapeFitParams()
+        k = len(bank)
+        self.a, self.b, self.c = np.zeros((self.n, k)), np.zeros((self.n, k)), np.zeros((self.n, k))
+        self.theta = np.zeros((self.n, k))
+        self.n_eff = np.zeros(self.n)
+        self.fast = [np.zeros((self.n, k)) for _ in range(3)]  # (a, b, c) of (S1) with the fast forgetting
+        self.n_fast = np.zeros(self.n)
+        self._best = np.zeros(self.n, dtype=int)  # winning shape (S3), the prior 0 until informed
+        self._informed = np.zeros(self.n, dtype=bool)  # n_eff has reached min_samples
+        self.reset()
+
+    def reset(self, mask: np.ndarray | None = None) -> None:
+        """Forget the data of the estimators in ``mask`` (all by default)."""
+        m = np.ones(self.n, dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
+        for arr in (self.a, self.b, self.c, self.theta, *self.fast):
+            arr[m] = 0.0
+        self.n_eff[m] = 0.0
+        self.n_fast[m] = 0.0
+        self._best[m] = 0
+        self._informed[m] = False
+
+    def update(self, slip: np.ndarray, mu: np.ndarray, speed: np.ndarray, active: np.ndarray) -> None:
+        """Score one sample per estimator: |slip|, friction in use, filtered speed [m/s], each (N,); estimators
+        not ``active`` (skipped samples) are left as they are."""
+        p = self.params
+        s, m = np.abs(slip), np.abs(mu)
+        scored = active & (s > p.slip_min)
+        if not scored.any():  # nothing to score: the sums, theta and the winner stay as they are
+            return
+        g, dg = self.bank.g(np.where(scored, s, 1.0))
+        v = np.maximum(np.asarray(speed, dtype=float), SPEED_FLOOR)[:, None]
+        w = 1.0 / (p.sigma_mu**2 + (self.theta * dg * p.sigma_v / v) ** 2)
+        sc, terms = scored[:, None], (w * g * g, w * g * m[:, None], w * m[:, None] ** 2)
+        self.a, self.b, self.c = (np.where(sc, p.forgetting * x + t, x)  # (S1)
+                                  for x, t in zip((self.a, self.b, self.c), terms))
+        self.fast = [np.where(sc, p.fast_forgetting * x + t, x) for x, t in zip(self.fast, terms)]
+        self.n_eff = np.where(scored, p.forgetting * self.n_eff + 1.0, self.n_eff)
+        self.n_fast = np.where(scored, p.fast_forgetting * self.n_fast + 1.0, self.n_fast)
+        self._refresh()
+        self._restart_on_jump()
+
+    def _refresh(self) -> None:
+        """theta (S2), the costs (S3) and the winner from the sums."""
+        pos = self.a > 0
+        den = np.where(pos, self.a, 1.0)
+        self.theta = np.where(pos, self.b / den, 0.0)  # (S2)
+        cost = np.where(pos, self.c - self.b**2 / den, np.inf)  # (S3)
+        self._informed = self.n_eff >= self.params.min_samples
+        self._best = np.where(self._informed, np.argmin(cost, axis=1), 0)
+
+    def _restart_on_jump(self) -> None:
+        """A friction jump (the winning shape's theta over the last 0.2 s and over the whole memory differ by more
+        than ``jump_ratio``): the memory restarts from the fast copy, i.e. from the data after the jump."""
+        rows, j = np.arange(self.n), self._best
+        fa, fb = self.fast[0][rows, j], self.fast[1][rows, j]
+        slow, fast = self.theta[rows, j], np.where(fa > 0, fb / np.where(fa > 0, fa, 1.0), 0.0)
+        ratio = self.params.jump_ratio
+        jump = (self.n_fast >= JUMP_MIN_SAMPLES) & (slow > 0) & (fast > 0) \
+            & ((fast > ratio * slow) | (slow > ratio * fast))
+        if jump.any():
+            restart = jump[:, None]
+            self.a, self.b, self.c = (np.where(restart, f, x) for f, x in zip(self.fast, (self.a, self.b, self.c)))
+            self.n_eff = np.where(jump, self.n_fast, self.n_eff)
+            self._refresh()
+
+    def best(self) -> np.ndarray:
+        """Index of the winning shape per estimator (N,), the prior (0) until the fit is used."""
+        return self._best.copy()
+
+    def outputs(self) -> tuple[np.ndarray, np.ndarray]:
+        """(peak slip, peak friction) per estimator, each (N,); the peak friction is NaN until the fit is used."""
+        j = self._best
+        return self.bank.peak_slip[j], np.where(self._informed, self.theta[np.arange(self.n), j], np.nan)

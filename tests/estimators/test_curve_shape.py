@@ -1,0 +1,145 @@
+"""The EKF/RLS estimator places the peak slip of every road preset, and follows friction jumps (issue 17, item 3).
+
+Logs: the quarter-car plant (:func:`fricenv.plants.quarter_car.step`, 1 ms substeps) braked from 25 m/s by a slip
+hysteresis excitation common to every road (torque up at ``UP`` times the road's peak torque per second until the
+true slip passes ``BAND[1]``, down at ``DOWN`` times it until it is below ``BAND[0]``), measured as the braking env
+measures (:mod:`fricenv.envs.braking_core`): wheel speed with noise of variance 0.2 (rad/s)^2, a_x the speed
+difference over the sample plus N(0, 0.1^2). The shape fit was tuned on noise seeds 1-8; these tests use the
+validation seed ``VALIDATION_SEED`` (not used in tuning). The truth is the road's own curve
+(:attr:`fricenv.plants.tire.MagicFormula.peak_slip`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from estimators.base import EstimatorConfigError
+from estimators.curve_shape import DEFAULT_BANK, ShapeBank, ShapeFit, ShapeFitParams
+from estimators.ekf_rls import QuarterCarEkfRls
+from fricenv.plants import quarter_car as qc
+from fricenv.plants import sui_johansen as sj
+from fricenv.plants.tire import DRY, ICE, ROADS, MagicFormula
+
+P = qc.PAPER_PARAMS
+DT = 0.01
+V0 = 25.0  # [m/s]
+V_END = 4.0  # logs end below this speed [m/s]
+BAND = (0.03, 0.3)  # slip hysteresis band of the excitation, the same on every road [-]
+UP, DOWN = 1.5, 3.0  # torque rates, multiples of the road's peak torque r F_z mu_max per second [1/s]
+AX_NOISE_STD = 0.1  # the braking env's accelerometer noise [m/s^2] (estimator tests do not import the envs)
+VALIDATION_SEED = 201  # noise seed of these tests; the fit was tuned on seeds 1-8 and developed on 101-110
+SETTLE = 1.5  # braking time after which the peak slip is checked [s]
+SLIP_TOL = 0.02  # |estimated - true| peak slip [-]
+WET_FRACTION = 0.9  # wet: share of the samples after SETTLE within SLIP_TOL (the rest: dry's 0.19) [-]
+SNOW_MU_FRACTION = 0.97  # snow (flat from slip 0.17 to 1): friction at the estimated peak slip / its peak [-]
+JUMP_AT = 1.5  # time of the friction jump in the jump logs [s]
+FOLLOW_TIME = 0.5  # dry->ice: every sample this long after the jump is within SLIP_TOL of ice's peak slip [s]
+DRY_AGAIN_TIME = 1.0  # ice->dry: from this long after the jump, ...
+DRY_AGAIN_FRACTION = 0.75  # ... this share of the samples is within SLIP_TOL of dry's peak slip (the rest pick
+# snow or ice, whose peak slip capped at the slip controllers' 0.4 keeps 94 % of dry's friction) [-]
+
+
+def braking_log(road, seed: int, road_after: MagicFormula | None = None) -> dict[str, np.ndarray]:
+    """A noisy braking log (module docstring); the road becomes ``road_after`` at ``JUMP_AT`` if given."""
+    rng = np.random.default_rng(seed)
+    v, w = np.array([V0]), np.array([V0 / P.r])
+    torque, applying, v_prev = 0.3 * P.r * P.Fz * road.mu_max, True, V0
+    rows = []
+    for k in range(round(6.0 / DT)):
+        now = road if road_after is None or k * DT < JUMP_AT else road_after
+        s = float(qc.slip(v, w, P)[0])
+        applying = s <= BAND[1] if applying else s < BAND[0]
+        torque = max(torque + (UP if applying else -DOWN) * P.r * P.Fz * now.mu_max * DT, 0.0)
+        a_x = (v[0] - v_prev) / DT + rng.normal(0.0, AX_NOISE_STD)
+        rows.append((k * DT, w[0] + rng.normal(0.0, sj.OMEGA_NOISE_STD), a_x, torque, now.peak_slip))
+        v_prev = v[0]
+        v, w = qc.step(v, w, np.array([torque]), now.as_array(), DT, P, 10)
+        if v[0] < V_END:
+            break
+    t, omega, a_x, T_b, peak = (np.array(c) for c in zip(*rows))
+    return {"t": t, "omega": omega, "a_x": a_x, "T_b": T_b, "peak_slip": peak}
+
+
+def estimated_peak_slip(log: dict[str, np.ndarray], **options) -> np.ndarray:
+    """The estimator's peak slip at every sample of ``log``."""
+    est = QuarterCarEkfRls(dt=DT, p=P, **options)
+    est.reset(v0=float(log["omega"][0]) * P.r)
+    return np.array([est.update((w, a), (T,)).values["peak_slip"]
+                     for w, a, T in zip(log["omega"], log["a_x"], log["T_b"])])
+
+
+def _after(log: dict[str, np.ndarray], start: float) -> np.ndarray:
+    after = log["t"] >= start
+    assert after.sum() > 50, "the log must run for more than 0.5 s after the checked time"
+    return after
+
+
+@pytest.mark.parametrize("name", ["dry", "ice"])
+def test_peak_slip_within_tolerance_after_settling(name):
+    road = ROADS[name]
+    log = braking_log(road, VALIDATION_SEED)
+    err = np.abs(estimated_peak_slip(log)[_after(log, SETTLE)] - road.peak_slip)
+    assert err.max() <= SLIP_TOL, (name, float(err.max()), road.peak_slip)
+
+
+def test_wet_peak_slip_mostly_within_tolerance_and_not_without_the_fit():
+    """With the fit, wet's 0.088 on at least WET_FRACTION of the samples; without it (the family map's dry shape,
+    as before the fit) the peak slip is dry's 0.19 on every sample, 0.10 off."""
+    wet = ROADS["wet"]
+    log = braking_log(wet, VALIDATION_SEED)
+    after = _after(log, SETTLE)
+    within = np.abs(estimated_peak_slip(log)[after] - wet.peak_slip) <= SLIP_TOL
+    assert within.mean() >= WET_FRACTION, float(within.mean())
+    without = estimated_peak_slip(log, shape_bank=None)
+    assert np.all(np.abs(without - wet.peak_slip) > 0.1)
+
+
+def test_snow_peak_slip_keeps_its_friction():
+    snow = ROADS["snow"]
+    log = braking_log(snow, VALIDATION_SEED)
+    est = estimated_peak_slip(log)[_after(log, SETTLE)]
+    assert np.min(snow.mu(est)) >= SNOW_MU_FRACTION * snow.mu_max
+
+
+def test_peak_slip_follows_dry_to_ice():
+    log = braking_log(DRY, VALIDATION_SEED, road_after=ICE)
+    est, t = estimated_peak_slip(log), log["t"]
+    before = (t >= JUMP_AT - 0.5) & (t < JUMP_AT)
+    assert np.all(np.abs(est[before] - DRY.peak_slip) <= SLIP_TOL)
+    assert np.all(np.abs(est[_after(log, JUMP_AT + FOLLOW_TIME)] - ICE.peak_slip) <= SLIP_TOL)
+
+
+def test_peak_slip_follows_ice_to_dry():
+    log = braking_log(ICE, VALIDATION_SEED, road_after=DRY)
+    est, t = estimated_peak_slip(log), log["t"]
+    before = (t >= JUMP_AT - 0.5) & (t < JUMP_AT)
+    assert np.all(np.abs(est[before] - ICE.peak_slip) <= SLIP_TOL)
+    after = _after(log, JUMP_AT + DRY_AGAIN_TIME)
+    assert np.mean(np.abs(est[after] - DRY.peak_slip) <= SLIP_TOL) >= DRY_AGAIN_FRACTION
+
+
+def test_fit_picks_the_shape_that_generated_noise_free_data():
+    """On exact samples of one shape (any theta) the fit returns that shape's peak slip and theta."""
+    rng = np.random.default_rng(0)
+    for j, road in enumerate(ROADS.values()):
+        fit = ShapeFit(1)
+        for s in rng.uniform(0.03, 0.4, 100):
+            fit.update(np.array([s]), np.array([0.7 * road.mu(s) / road.mu_max]), np.array([20.0]),
+                       np.array([True]))
+        peak, mu = fit.outputs()
+        assert fit.best()[0] == j and peak[0] == pytest.approx(road.peak_slip, abs=1e-8)
+        assert mu[0] == pytest.approx(0.7, rel=1e-9)
+
+
+def test_fit_holds_the_prior_without_data_and_rejects_bad_tuning():
+    fit = ShapeFit(2)
+    fit.update(np.array([0.01, 0.2]), np.array([0.3, 0.5]), np.array([20.0, 20.0]), np.array([True, False]))
+    peak, mu = fit.outputs()
+    assert np.all(peak == DEFAULT_BANK.peak_slip[0]) and np.all(np.isnan(mu))  # below slip_min / inactive
+    with pytest.raises(EstimatorConfigError, match="forgetting"):
+        ShapeFitParams(forgetting=0.5)
+    with pytest.raises(EstimatorConfigError, match="sigma_v"):
+        ShapeFitParams(sigma_v=0.0)
+    with pytest.raises(EstimatorConfigError, match="at least one"):
+        ShapeBank(())
