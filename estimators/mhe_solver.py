@@ -1,0 +1,207 @@
+"""The batched MHE's window solve: N projected Levenberg-Marquardt solves of eq. (12) in lockstep.
+
+:class:`BatchedWindowSolver` is :meth:`estimators.mhe.RegularizedMHE._solve` (EKF arrival cost, scaled weighting)
+over a leading batch axis: the window weights of eqs. (14)-(16) in the arrival covariance's units, the arrival
+cost ``||L^-1 (x(t-N) - xbar)||^2`` (P = L L^T), the process-noise terms and the projected Levenberg-Marquardt
+iterations with the bounds (12c), one trial point per live instance per pass, one mapped CasADi call per pass
+(see :mod:`estimators.mhe_batched`). The constants (tolerances, damping, bounds) are the single MHE's.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from estimators.mhe import (
+    BOUND_TOL,
+    LM_DAMPING0,
+    LM_DAMPING_MAX,
+    MAX_EVALS,
+    PD_JITTER,
+    TOL_STEP,
+    RegularizedMHE,
+)
+
+__all__ = ["BatchedWindowSolver", "WindowSolution", "rowwise", "sym"]
+
+
+@dataclass
+class WindowSolution:
+    """The solves of one batched update (rows that were not live carry placeholders).
+
+    :param z: decision vectors (x(t-N), model errors), (N, nz).
+    :param X: window trajectories, row i = x(t-N+i), (N, N+1, nx).
+    :param rank: singular values kept by the SVD thresholding, (N,).
+    :param failed: the solve failed (single MHE: an exception or a non-finite cost or solution), (N,).
+    """
+
+    z: np.ndarray
+    X: np.ndarray
+    rank: np.ndarray
+    failed: np.ndarray
+
+
+def rowwise(fn: Callable[..., np.ndarray], failed: np.ndarray, *arrays: np.ndarray) -> np.ndarray:
+    """``fn`` over a batch; if it raises a LinAlgError, row by row, marking the rows that raise in ``failed``
+    (their results NaN), so that one bad instance fails alone as a single MHE would."""
+    try:
+        return fn(*arrays)
+    except np.linalg.LinAlgError:
+        pass
+    out = None
+    for i in range(len(arrays[0])):
+        try:
+            value = fn(*(a[i:i + 1] for a in arrays))[0]
+        except np.linalg.LinAlgError:
+            failed[i] = True
+            continue
+        if out is None:
+            out = np.full((len(arrays[0]),) + value.shape, np.nan)
+        out[i] = value
+    if out is None:
+        raise np.linalg.LinAlgError("every instance failed")
+    return out
+
+
+class BatchedWindowSolver:
+    """Lockstep solves of eq. (12) for N windows.
+
+    :param template: the single MHE whose constants are used (EKF arrival cost, scaled weighting).
+    :param window: its window function (dense outputs) over N instances
+        (:class:`~estimators.casadi_compiled.BatchCall`): (z, U) -> (outputs, Jacobian, f(x0)).
+    :param n: number of instances.
+    """
+
+    def __init__(self, template: RegularizedMHE, window: Callable[..., list[np.ndarray]], n: int):
+        self.t, self.window, self.n = template, window, int(n)
+        self.nx, self.N1, self.nz = template.model.nx, template.N + 1, template._nz
+        nw = self.nz - self.nx
+        self.zlo, self.zhi = template._zlo, template._zhi
+        self.span = np.minimum(self.zhi - self.zlo, 1.0)
+        self.w_scale = template._w_scale
+        self.Jw = np.zeros((nw, self.nz))  # Jacobian of the process-noise terms z[nx:] / w_scale
+        self.Jw[:, self.nx:] = np.diag(1.0 / self.w_scale) if nw else np.zeros((0, 0))
+        self.safe_x = template.model.nominal_state(19.0, 0.0)  # inputs of the rows that are not solved
+
+    # ------------------------------------------------------------------ pieces
+    def evaluate(self, z: np.ndarray, U: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Window outputs H (N, N+1), Jacobian dH/dz (N, N+1, nz), trajectory X (N, N+1, nx): one mapped call."""
+        out, J, _ = self.window(z, U)
+        out = out[:, :, 0]
+        return out[:, :self.N1], J, out[:, self.N1:].reshape(self.n, self.N1, self.nx)
+
+    def weights(self, Phi: np.ndarray, used: np.ndarray, L: np.ndarray, failed: np.ndarray):
+        """W_t of the scaled reading (estimators.mhe: ``_weights``, ``_masked_weights``) with zero weight on the
+        samples the gate rejected; returns (W (N, N+1, N+1), rank kept (N,))."""
+        t = self.t
+        Phi_s = (Phi * used[:, :, None]) @ L / t.noise_std  # a rejected sample's row removed (zeroed)
+        # one SVD per window, eq. (14): U (N+1 x nx) and the singular values packed in one array for rowwise
+        Us = rowwise(lambda A: _svd_packed(A), failed, Phi_s)
+        Uu, s = Us[:, :-1], Us[:, -1]
+        keep = s >= t.delta
+        Ud = Uu * ~keep[:, None, :]
+        W = (np.eye(self.N1) - Ud @ np.swapaxes(Ud, 1, 2)) / t.noise_std
+        return W * (used[:, :, None] & used[:, None, :]), keep.sum(axis=1)
+
+    def residual(self, z, e, PhiZ, W, Wa, xb0) -> tuple[np.ndarray, np.ndarray]:
+        """Weighted residual (N, nr) and Jacobian (N, nr, nz) of (12a) with the arrival and process-noise terms."""
+        nx = self.nx
+        r = [(W @ e[:, :, None])[:, :, 0], (Wa @ (z[:, :nx] - xb0)[:, :, None])[:, :, 0], z[:, nx:] / self.w_scale]
+        Ja = np.zeros((self.n, nx, self.nz))
+        Ja[:, :, :nx] = Wa
+        J = [-W @ PhiZ, Ja, np.broadcast_to(self.Jw, (self.n,) + self.Jw.shape)]
+        return np.concatenate(r, axis=1), np.concatenate(J, axis=1)
+
+    # ------------------------------------------------------------------ solve
+    def solve(self, live: np.ndarray, xb0: np.ndarray, P: np.ndarray, Y: np.ndarray, U: np.ndarray,
+              used: np.ndarray, w_warm: np.ndarray) -> WindowSolution:
+        """Solve the windows of the ``live`` rows from their a priori starts.
+
+        :param live: rows to solve, (N,).
+        :param xb0: a priori x(t-N) (the EKF's prior), (N, nx).
+        :param P: its covariance, (N, nx, nx).
+        :param Y: window wheel speeds, (N, N+1).
+        :param U: window torques, (N, N).
+        :param used: samples the outlier gate kept, (N, N+1).
+        :param w_warm: the previous solve's model errors (NaN rows: none), (N, nz - nx).
+        """
+        nx, t = self.nx, self.t
+        xb0 = np.where(live[:, None], xb0, self.safe_x)
+        P = np.where(live[:, None, None], P, t._P0)
+        Y = np.where(live[:, None], Y, 0.0)
+        U = np.where(live[:, None], U, 0.0)
+        used = used | ~live[:, None]
+        failed = np.zeros(self.n, dtype=bool)
+        z = np.zeros((self.n, self.nz))
+        z[:, :nx] = xb0
+        if self.nz > nx:
+            warm = np.concatenate([w_warm[:, 2:], np.zeros((self.n, 2))], axis=1)
+            z[:, nx:] = np.where(np.isfinite(w_warm[:, :1]), warm, 0.0)
+        H, PhiZ, X = self.evaluate(z, U)
+        eye = np.eye(nx)
+        L = rowwise(np.linalg.cholesky, failed, sym(P) + PD_JITTER * eye)
+        L = np.where(failed[:, None, None], eye, L)
+        W, rank = self.weights(PhiZ[:, :, :nx], used, L, failed)
+        Wa = rowwise(lambda A: np.linalg.solve(A, np.broadcast_to(eye, A.shape)), failed, L)
+        W, Wa = np.where(failed[:, None, None], 0.0, W), np.where(failed[:, None, None], 0.0, Wa)
+        r, J = self.residual(z, Y - H, PhiZ, W, Wa, xb0)
+        cost = np.einsum("ni,ni->n", r, r)
+        failed |= ~np.isfinite(cost)
+        z, X = self._iterate(live & ~failed, failed, z, X, r, J, cost, (U, Y, W, Wa, xb0))
+        failed |= ~(np.all(np.isfinite(z), axis=1) & np.all(np.isfinite(X), axis=(1, 2)))
+        return WindowSolution(z, X, rank, failed & live)
+
+    def _iterate(self, alive, failed, z, X, r, J, cost, data):
+        """Projected Levenberg-Marquardt in lockstep (estimators.mhe: ``_solve``); the solutions (z, X)."""
+        U, Y, W, Wa, xb0 = data
+        lam = np.full(self.n, LM_DAMPING0)
+        n_eval = np.ones(self.n, dtype=int)
+        iters = np.zeros(self.n, dtype=int)
+        alive = alive & (lam <= LM_DAMPING_MAX) & (n_eval < MAX_EVALS)
+        idx = np.arange(self.nz)
+        while alive.any():
+            Jt = np.swapaxes(J, 1, 2)
+            g = (Jt @ r[:, :, None])[:, :, 0]
+            JtJ = Jt @ J
+            diag = JtJ[:, idx, idx] + 1e-12
+            # active bounds (12c): variables at a bound whose descent direction points out are held there
+            free = ~(((z <= self.zlo + BOUND_TOL * self.span) & (g > 0))
+                     | ((z >= self.zhi - BOUND_TOL * self.span) & (g < 0)))
+            both = free[:, :, None] & free[:, None, :]
+            A = np.where(both, JtJ, 0.0)
+            A[:, idx, idx] = np.where(free, JtJ[:, idx, idx] + lam[:, None] * diag, 1.0)
+            rhs = np.where(free & alive[:, None], -g, 0.0)
+            bad = np.zeros(self.n, dtype=bool)
+            step = rowwise(lambda M, b: np.linalg.solve(M, b[:, :, None])[:, :, 0], bad, A, rhs)
+            failed |= bad & alive
+            alive &= ~bad
+            step = np.where(free & alive[:, None], step, 0.0)
+            z_new = np.clip(z + step, self.zlo, self.zhi)  # bounds (12c) by projection
+            H_new, PhiZ_new, X_new = self.evaluate(np.where(alive[:, None], z_new, z), U)
+            n_eval += alive
+            r_new, J_new = self.residual(z_new, Y - H_new, PhiZ_new, W, Wa, xb0)
+            cost_new = np.einsum("ni,ni->n", r_new, r_new)
+            with np.errstate(invalid="ignore"):
+                ok = alive & np.isfinite(cost_new) & (cost_new <= cost)
+            lam = np.where(ok, np.maximum(lam / 10.0, LM_DAMPING0), np.where(alive, lam * 10.0, lam))
+            rel = (cost - cost_new) / np.maximum(cost, 1e-300)
+            z, X = np.where(ok[:, None], z_new, z), np.where(ok[:, None, None], X_new, X)
+            r, J = np.where(ok[:, None], r_new, r), np.where(ok[:, None, None], J_new, J)
+            cost = np.where(ok, cost_new, cost)
+            iters += ok
+            alive &= ~(ok & ((rel < TOL_STEP) | (iters >= self.t.max_iter)))
+            alive &= (lam <= LM_DAMPING_MAX) & (n_eval < MAX_EVALS)
+        return z, X
+
+
+def sym(P: np.ndarray) -> np.ndarray:
+    """Symmetric part of a batch of square matrices (N, n, n)."""
+    return 0.5 * (P + np.swapaxes(P, -1, -2))
+
+
+def _svd_packed(A: np.ndarray) -> np.ndarray:
+    """Thin SVD of a batch (N, m, k): U (N, m, k) with the singular values appended as row m, (N, m + 1, k)."""
+    Uu, s, _ = np.linalg.svd(A, full_matrices=False)
+    return np.concatenate([Uu, s[:, None, :]], axis=1)
