@@ -94,16 +94,30 @@ class BatchedWindowSolver:
 
     def weights(self, Phi: np.ndarray, used: np.ndarray, L: np.ndarray, failed: np.ndarray):
         """W_t of the scaled reading (estimators.mhe: ``_weights``, ``_masked_weights``) with zero weight on the
-        samples the gate rejected; returns (W (N, N+1, N+1), rank kept (N,))."""
-        t = self.t
-        Phi_s = (Phi * used[:, :, None]) @ L / t.noise_std  # a rejected sample's row removed (zeroed)
-        # one SVD per window, eq. (14): U (N+1 x nx) and the singular values packed in one array for rowwise
-        Us = rowwise(lambda A: _svd_packed(A), failed, Phi_s)
-        Uu, s = Us[:, :-1], Us[:, -1]
-        keep = s >= t.delta
-        Ud = Uu * ~keep[:, None, :]
-        W = (np.eye(self.N1) - Ud @ np.swapaxes(Ud, 1, 2)) / t.noise_std
-        return W * (used[:, :, None] & used[:, None, :]), keep.sum(axis=1)
+        samples the gate rejected; returns (W (N, N+1, N+1), rank kept (N,)).
+
+        The windows are grouped by their pattern of kept samples and of thresholded singular values, so that each
+        group runs the single MHE's own operations (the same LAPACK/BLAS calls on the same operands): a window
+        that carries no information (a stopped car: every singular value near 0) has an arbitrary SVD basis, and
+        any other rounding would change its weights."""
+        t, N1 = self.t, self.N1
+        W = np.zeros((self.n, N1, N1))
+        rank = np.zeros(self.n, dtype=int)
+        for pattern, rows in groups(used):
+            Phi_s = Phi[rows][:, pattern] @ L[rows] / t.noise_std
+            bad = np.zeros(len(rows), dtype=bool)
+            # one SVD per window, eq. (14): U and the singular values packed in one array for rowwise
+            Us = rowwise(_svd_packed, bad, Phi_s)
+            failed[rows[bad]] = True
+            Uu, sv = Us[:, :-1], Us[:, -1]
+            keep = sv >= t.delta
+            rank[rows] = keep.sum(axis=1)
+            k = int(pattern.sum())
+            for kept, sub in groups(keep):
+                Ud = Uu[sub][:, :, ~kept]
+                Wg = (np.eye(k) - Ud @ np.swapaxes(Ud, 1, 2)) / t.noise_std
+                W[np.ix_(rows[sub], pattern, pattern)] = Wg
+        return W, rank
 
     def residual(self, z, e, PhiZ, W, Wa, xb0) -> tuple[np.ndarray, np.ndarray]:
         """Weighted residual (N, nr) and Jacobian (N, nr, nz) of (12a) with the arrival and process-noise terms."""
@@ -147,11 +161,24 @@ class BatchedWindowSolver:
         Wa = rowwise(lambda A: np.linalg.solve(A, np.broadcast_to(eye, A.shape)), failed, L)
         W, Wa = np.where(failed[:, None, None], 0.0, W), np.where(failed[:, None, None], 0.0, Wa)
         r, J = self.residual(z, Y - H, PhiZ, W, Wa, xb0)
-        cost = np.einsum("ni,ni->n", r, r)
+        cost = _dot(r, r)
         failed |= ~np.isfinite(cost)
         z, X = self._iterate(live & ~failed, failed, z, X, r, J, cost, (U, Y, W, Wa, xb0))
         failed |= ~(np.all(np.isfinite(z), axis=1) & np.all(np.isfinite(X), axis=(1, 2)))
         return WindowSolution(z, X, rank, failed & live)
+
+    def _steps(self, alive, free, JtJ, diag, lam, g, failed) -> np.ndarray:
+        """Levenberg-Marquardt steps of the alive rows on their free variables, grouped by free set so that each
+        group solves the single MHE's own system; a singular system fails its row."""
+        step = np.zeros((self.n, self.nz))
+        for pattern, rows in groups(free[alive]):
+            rows = np.flatnonzero(alive)[rows]
+            A = JtJ[rows][:, pattern][:, :, pattern] + lam[rows, None, None] * _diag(diag[rows][:, pattern])
+            bad = np.zeros(len(rows), dtype=bool)
+            sol = rowwise(lambda M, b: np.linalg.solve(M, b[:, :, None])[:, :, 0], bad, A, -g[rows][:, pattern])
+            failed[rows[bad]] = True
+            step[np.ix_(rows, pattern)] = np.where(bad[:, None], 0.0, sol)
+        return step
 
     def _iterate(self, alive, failed, z, X, r, J, cost, data):
         """Projected Levenberg-Marquardt in lockstep (estimators.mhe: ``_solve``); the solutions (z, X)."""
@@ -160,29 +187,21 @@ class BatchedWindowSolver:
         n_eval = np.ones(self.n, dtype=int)
         iters = np.zeros(self.n, dtype=int)
         alive = alive & (lam <= LM_DAMPING_MAX) & (n_eval < MAX_EVALS)
-        idx = np.arange(self.nz)
         while alive.any():
             Jt = np.swapaxes(J, 1, 2)
             g = (Jt @ r[:, :, None])[:, :, 0]
             JtJ = Jt @ J
-            diag = JtJ[:, idx, idx] + 1e-12
+            diag = np.diagonal(JtJ, axis1=1, axis2=2) + 1e-12
             # active bounds (12c): variables at a bound whose descent direction points out are held there
             free = ~(((z <= self.zlo + BOUND_TOL * self.span) & (g > 0))
                      | ((z >= self.zhi - BOUND_TOL * self.span) & (g < 0)))
-            both = free[:, :, None] & free[:, None, :]
-            A = np.where(both, JtJ, 0.0)
-            A[:, idx, idx] = np.where(free, JtJ[:, idx, idx] + lam[:, None] * diag, 1.0)
-            rhs = np.where(free & alive[:, None], -g, 0.0)
-            bad = np.zeros(self.n, dtype=bool)
-            step = rowwise(lambda M, b: np.linalg.solve(M, b[:, :, None])[:, :, 0], bad, A, rhs)
-            failed |= bad & alive
-            alive &= ~bad
-            step = np.where(free & alive[:, None], step, 0.0)
+            step = self._steps(alive, free, JtJ, diag, lam, g, failed)
+            alive &= ~failed
             z_new = np.clip(z + step, self.zlo, self.zhi)  # bounds (12c) by projection
             H_new, PhiZ_new, X_new = self.evaluate(np.where(alive[:, None], z_new, z), U)
             n_eval += alive
             r_new, J_new = self.residual(z_new, Y - H_new, PhiZ_new, W, Wa, xb0)
-            cost_new = np.einsum("ni,ni->n", r_new, r_new)
+            cost_new = _dot(r_new, r_new)
             with np.errstate(invalid="ignore"):
                 ok = alive & np.isfinite(cost_new) & (cost_new <= cost)
             lam = np.where(ok, np.maximum(lam / 10.0, LM_DAMPING0), np.where(alive, lam * 10.0, lam))
@@ -199,6 +218,30 @@ class BatchedWindowSolver:
 def sym(P: np.ndarray) -> np.ndarray:
     """Symmetric part of a batch of square matrices (N, n, n)."""
     return 0.5 * (P + np.swapaxes(P, -1, -2))
+
+
+def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Row-wise dot products of (N, m) arrays through matmul (rounds as the single ``a @ b``; einsum does not)."""
+    return (a[:, None, :] @ b[:, :, None])[:, 0, 0]
+
+
+def _diag(d: np.ndarray) -> np.ndarray:
+    """Diagonal matrices (N, m, m) from diagonals (N, m)."""
+    out = np.zeros(d.shape + d.shape[-1:])
+    idx = np.arange(d.shape[-1])
+    out[:, idx, idx] = d
+    return out
+
+
+def groups(patterns: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Rows of a boolean matrix (N, m) grouped by pattern: [(pattern (m,), row indices), ...]."""
+    if len(patterns) == 0:
+        return []
+    keys = patterns.astype(np.int64) @ (np.int64(1) << np.arange(patterns.shape[1], dtype=np.int64))
+    if np.all(keys == keys[0]):  # the usual case: one group
+        return [(patterns[0], np.arange(len(patterns)))]
+    unique, first, inverse = np.unique(keys, return_index=True, return_inverse=True)
+    return [(patterns[first[j]], np.flatnonzero(inverse == j)) for j in range(len(unique))]
 
 
 def _svd_packed(A: np.ndarray) -> np.ndarray:
