@@ -90,9 +90,9 @@ class BatchedMHE:
         dense = [densified(f) for f in (t._fun, t.model._functions()["fF"])]
         fast = [compiled(f) if compile_c else None for f in dense]
         self.compiled = all(f is not None for f in fast)  # else the virtual machine (same results)
-        window, predict = (BatchCall(c or d, self.n, parallel, threads) for c, d in zip(fast, dense))
-        self.solver = BatchedWindowSolver(t, window, self.n)
-        self._predict = predict
+        window, predict = (c or d for c, d in zip(fast, dense))
+        self.solver = BatchedWindowSolver(t, lambda k: BatchCall(window, k, parallel, threads))
+        self._predict = BatchCall(predict, self.n, parallel, threads)
         n, nx, N1 = self.n, self.nx, self.N1
         self.ekf_x, self.ekf_P = np.zeros((n, nx)), np.zeros((n, nx, nx))
         self.post_x, self.post_P = np.zeros((n, nx)), np.zeros((n, nx, nx))
@@ -224,13 +224,17 @@ class BatchedMHE:
         live = active & ~warm
         if not live.any():
             return health
-        sol = self.solver.solve(live, self.hist_x[:, 0], self.hist_P[:, 0], self.y, self.u[:, :t.N], self.used,
-                                np.where(self.has_prev[:, None], self.w_prev, np.nan))
-        ok = live & ~sol.failed
-        self.has_prev = np.where(ok, True, self.has_prev)
-        self.w_prev[ok] = sol.z[ok, nx:]
-        self.last[ok] = sol.X[ok, -1]
-        health[ok] = np.where(sol.rank[ok] == nx, int(Health.OK), int(Health.NOT_EXCITED))
+        rows = np.flatnonzero(live)
+        warm = np.where(self.has_prev[rows, None], self.w_prev[rows], np.nan)
+        sol = self.solver.solve(self.hist_x[rows, 0], self.hist_P[rows, 0], self.y[rows], self.u[rows, :t.N],
+                                self.used[rows], warm)
+        good = ~sol.failed
+        ok = np.zeros(self.n, dtype=bool)
+        ok[rows[good]] = True
+        self.has_prev[ok] = True
+        self.w_prev[ok] = sol.z[good, nx:]
+        self.last[ok] = sol.X[good, -1]
+        health[ok] = np.where(sol.rank[good] == nx, int(Health.OK), int(Health.NOT_EXCITED))
         if t.gate:
             d = self.last - self.post_x
             Pj = self.post_P + PD_JITTER * np.eye(nx)
@@ -238,7 +242,7 @@ class BatchedMHE:
             gated = ok & (d2 > t.gate)
             self.last[gated] = np.clip(self.post_x[gated], t.lower, t.upper)
             self.has_prev[gated] = False
-        for i in np.flatnonzero(live & sol.failed):
+        for i in rows[sol.failed]:
             self._fallback(i)
             health[i] = int(Health.SOLVER_FAILED)
         return health
@@ -257,12 +261,15 @@ class BatchedMHE:
 
 def mhe_builder(name: str) -> Callable[[int, float, Any, dict], BatchedMHE]:
     """A :data:`estimators.batched.BATCHED` builder ``(n, dt, p, options) -> BatchedMHE`` for the registry entry
-    ``name``: the template is ``get_estimator(name).make(p, dt, **options)``, as a single env builds its MHE."""
+    ``name``: the template is ``get_estimator(name).make(p, dt, **options)``, as a single env builds its MHE.
+    ``options["shape"]`` (the friction-map shape :func:`estimators.batched.make_batched` adds from the entry's
+    ``assumed_shape`` for the EKF/RLS) is dropped: the registry builds the MHE's model from that same shape."""
 
     def build(n: int, dt: float, p: Any, options: dict) -> BatchedMHE:
         from estimators.registry import get_estimator
 
-        return BatchedMHE(get_estimator(name).make(p, dt, **options), n)
+        own = {k: v for k, v in options.items() if k != "shape"}
+        return BatchedMHE(get_estimator(name).make(p, dt, **own), n)
 
     return build
 

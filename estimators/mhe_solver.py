@@ -66,16 +66,16 @@ def rowwise(fn: Callable[..., np.ndarray], failed: np.ndarray, *arrays: np.ndarr
 
 
 class BatchedWindowSolver:
-    """Lockstep solves of eq. (12) for N windows.
+    """Lockstep solves of eq. (12) for up to N windows; only the windows being solved are evaluated.
 
     :param template: the single MHE whose constants are used (EKF arrival cost, scaled weighting).
-    :param window: its window function (dense outputs) over N instances
-        (:class:`~estimators.casadi_compiled.BatchCall`): (z, U) -> (outputs, Jacobian, f(x0)).
-    :param n: number of instances.
+    :param window: ``k -> evaluator`` of its window function (dense outputs) over k instances
+        (:class:`~estimators.casadi_compiled.BatchCall`): (z, U) -> (outputs, Jacobian, f(x0)); built per k on
+        first use and kept.
     """
 
-    def __init__(self, template: RegularizedMHE, window: Callable[..., list[np.ndarray]], n: int):
-        self.t, self.window, self.n = template, window, int(n)
+    def __init__(self, template: RegularizedMHE, window: Callable[[int], Callable[..., list[np.ndarray]]]):
+        self.t, self._make_window, self._windows = template, window, {}
         self.nx, self.N1, self.nz = template.model.nx, template.N + 1, template._nz
         nw = self.nz - self.nx
         self.zlo, self.zhi = template._zlo, template._zhi
@@ -83,26 +83,28 @@ class BatchedWindowSolver:
         self.w_scale = template._w_scale
         self.Jw = np.zeros((nw, self.nz))  # Jacobian of the process-noise terms z[nx:] / w_scale
         self.Jw[:, self.nx:] = np.diag(1.0 / self.w_scale) if nw else np.zeros((0, 0))
-        self.safe_x = template.model.nominal_state(19.0, 0.0)  # inputs of the rows that are not solved
 
     # ------------------------------------------------------------------ pieces
     def evaluate(self, z: np.ndarray, U: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Window outputs H (N, N+1), Jacobian dH/dz (N, N+1, nz), trajectory X (N, N+1, nx): one mapped call."""
-        out, J, _ = self.window(z, U)
+        """Window outputs H (k, N+1), Jacobian dH/dz (k, N+1, nz), trajectory X (k, N+1, nx): one mapped call."""
+        k = len(z)
+        if k not in self._windows:
+            self._windows[k] = self._make_window(k)
+        out, J, _ = self._windows[k](z, U)
         out = out[:, :, 0]
-        return out[:, :self.N1], J, out[:, self.N1:].reshape(self.n, self.N1, self.nx)
+        return out[:, :self.N1], J, out[:, self.N1:].reshape(k, self.N1, self.nx)
 
     def weights(self, Phi: np.ndarray, used: np.ndarray, L: np.ndarray, failed: np.ndarray):
         """W_t of the scaled reading (estimators.mhe: ``_weights``, ``_masked_weights``) with zero weight on the
-        samples the gate rejected; returns (W (N, N+1, N+1), rank kept (N,)).
+        samples the gate rejected; returns (W (k, N+1, N+1), rank kept (k,)).
 
         The windows are grouped by their pattern of kept samples and of thresholded singular values, so that each
         group runs the single MHE's own operations (the same LAPACK/BLAS calls on the same operands): a window
         that carries no information (a stopped car: every singular value near 0) has an arbitrary SVD basis, and
         any other rounding would change its weights."""
         t, N1 = self.t, self.N1
-        W = np.zeros((self.n, N1, N1))
-        rank = np.zeros(self.n, dtype=int)
+        W = np.zeros((len(Phi), N1, N1))
+        rank = np.zeros(len(Phi), dtype=int)
         for pattern, rows in groups(used):
             Phi_s = Phi[rows][:, pattern] @ L[rows] / t.noise_std
             bad = np.zeros(len(rows), dtype=bool)
@@ -120,38 +122,32 @@ class BatchedWindowSolver:
         return W, rank
 
     def residual(self, z, e, PhiZ, W, Wa, xb0) -> tuple[np.ndarray, np.ndarray]:
-        """Weighted residual (N, nr) and Jacobian (N, nr, nz) of (12a) with the arrival and process-noise terms."""
-        nx = self.nx
+        """Weighted residual (k, nr) and Jacobian (k, nr, nz) of (12a) with the arrival and process-noise terms."""
+        nx, k = self.nx, len(z)
         r = [(W @ e[:, :, None])[:, :, 0], (Wa @ (z[:, :nx] - xb0)[:, :, None])[:, :, 0], z[:, nx:] / self.w_scale]
-        Ja = np.zeros((self.n, nx, self.nz))
+        Ja = np.zeros((k, nx, self.nz))
         Ja[:, :, :nx] = Wa
-        J = [-W @ PhiZ, Ja, np.broadcast_to(self.Jw, (self.n,) + self.Jw.shape)]
+        J = [-W @ PhiZ, Ja, np.broadcast_to(self.Jw, (k,) + self.Jw.shape)]
         return np.concatenate(r, axis=1), np.concatenate(J, axis=1)
 
     # ------------------------------------------------------------------ solve
-    def solve(self, live: np.ndarray, xb0: np.ndarray, P: np.ndarray, Y: np.ndarray, U: np.ndarray,
-              used: np.ndarray, w_warm: np.ndarray) -> WindowSolution:
-        """Solve the windows of the ``live`` rows from their a priori starts.
+    def solve(self, xb0: np.ndarray, P: np.ndarray, Y: np.ndarray, U: np.ndarray, used: np.ndarray,
+              w_warm: np.ndarray) -> WindowSolution:
+        """Solve k windows from their a priori starts.
 
-        :param live: rows to solve, (N,).
-        :param xb0: a priori x(t-N) (the EKF's prior), (N, nx).
-        :param P: its covariance, (N, nx, nx).
-        :param Y: window wheel speeds, (N, N+1).
-        :param U: window torques, (N, N).
-        :param used: samples the outlier gate kept, (N, N+1).
-        :param w_warm: the previous solve's model errors (NaN rows: none), (N, nz - nx).
+        :param xb0: a priori x(t-N) (the EKF's prior), (k, nx).
+        :param P: its covariance, (k, nx, nx).
+        :param Y: window wheel speeds, (k, N+1).
+        :param U: window torques, (k, N).
+        :param used: samples the outlier gate kept, (k, N+1).
+        :param w_warm: the previous solve's model errors (NaN rows: none), (k, nz - nx).
         """
-        nx, t = self.nx, self.t
-        xb0 = np.where(live[:, None], xb0, self.safe_x)
-        P = np.where(live[:, None, None], P, t._P0)
-        Y = np.where(live[:, None], Y, 0.0)
-        U = np.where(live[:, None], U, 0.0)
-        used = used | ~live[:, None]
-        failed = np.zeros(self.n, dtype=bool)
-        z = np.zeros((self.n, self.nz))
+        nx, k = self.nx, len(xb0)
+        failed = np.zeros(k, dtype=bool)
+        z = np.zeros((k, self.nz))
         z[:, :nx] = xb0
         if self.nz > nx:
-            warm = np.concatenate([w_warm[:, 2:], np.zeros((self.n, 2))], axis=1)
+            warm = np.concatenate([w_warm[:, 2:], np.zeros((k, 2))], axis=1)
             z[:, nx:] = np.where(np.isfinite(w_warm[:, :1]), warm, 0.0)
         H, PhiZ, X = self.evaluate(z, U)
         eye = np.eye(nx)
@@ -163,54 +159,61 @@ class BatchedWindowSolver:
         r, J = self.residual(z, Y - H, PhiZ, W, Wa, xb0)
         cost = _dot(r, r)
         failed |= ~np.isfinite(cost)
-        z, X = self._iterate(live & ~failed, failed, z, X, r, J, cost, (U, Y, W, Wa, xb0))
+        z, X = self._iterate(failed, z, X, r, J, cost, (U, Y, W, Wa, xb0))
         failed |= ~(np.all(np.isfinite(z), axis=1) & np.all(np.isfinite(X), axis=(1, 2)))
-        return WindowSolution(z, X, rank, failed & live)
+        return WindowSolution(z, X, rank, failed)
 
-    def _steps(self, alive, free, JtJ, diag, lam, g, failed) -> np.ndarray:
-        """Levenberg-Marquardt steps of the alive rows on their free variables, grouped by free set so that each
-        group solves the single MHE's own system; a singular system fails its row."""
-        step = np.zeros((self.n, self.nz))
-        for pattern, rows in groups(free[alive]):
-            rows = np.flatnonzero(alive)[rows]
+    def _steps(self, a, free, JtJ, diag, lam, g, failed) -> np.ndarray:
+        """Levenberg-Marquardt steps of rows ``a`` on their free variables, grouped by free set so that each
+        group solves the single MHE's own system; a singular system fails its row. Arguments are rows ``a``'s."""
+        step = np.zeros((len(a), self.nz))
+        for pattern, rows in groups(free):
             A = JtJ[rows][:, pattern][:, :, pattern] + lam[rows, None, None] * _diag(diag[rows][:, pattern])
             bad = np.zeros(len(rows), dtype=bool)
             sol = rowwise(lambda M, b: np.linalg.solve(M, b[:, :, None])[:, :, 0], bad, A, -g[rows][:, pattern])
-            failed[rows[bad]] = True
+            failed[a[rows[bad]]] = True
             step[np.ix_(rows, pattern)] = np.where(bad[:, None], 0.0, sol)
         return step
 
-    def _iterate(self, alive, failed, z, X, r, J, cost, data):
-        """Projected Levenberg-Marquardt in lockstep (estimators.mhe: ``_solve``); the solutions (z, X)."""
+    def _iterate(self, failed, z, X, r, J, cost, data):
+        """Projected Levenberg-Marquardt in lockstep (estimators.mhe: ``_solve``) on the rows still iterating;
+        the solutions (z, X)."""
         U, Y, W, Wa, xb0 = data
-        lam = np.full(self.n, LM_DAMPING0)
-        n_eval = np.ones(self.n, dtype=int)
-        iters = np.zeros(self.n, dtype=int)
-        alive = alive & (lam <= LM_DAMPING_MAX) & (n_eval < MAX_EVALS)
+        k = len(z)
+        lam = np.full(k, LM_DAMPING0)
+        n_eval = np.ones(k, dtype=int)
+        iters = np.zeros(k, dtype=int)
+        alive = ~failed & (lam <= LM_DAMPING_MAX) & (n_eval < MAX_EVALS)
         while alive.any():
-            Jt = np.swapaxes(J, 1, 2)
-            g = (Jt @ r[:, :, None])[:, :, 0]
-            JtJ = Jt @ J
+            a = np.flatnonzero(alive)
+            Ja = J[a]
+            Jt = np.swapaxes(Ja, 1, 2)
+            g = (Jt @ r[a][:, :, None])[:, :, 0]
+            JtJ = Jt @ Ja  # one buffer transposed: numpy's matmul takes the symmetric (syrk) path, as J.T @ J
             diag = np.diagonal(JtJ, axis1=1, axis2=2) + 1e-12
             # active bounds (12c): variables at a bound whose descent direction points out are held there
-            free = ~(((z <= self.zlo + BOUND_TOL * self.span) & (g > 0))
-                     | ((z >= self.zhi - BOUND_TOL * self.span) & (g < 0)))
-            step = self._steps(alive, free, JtJ, diag, lam, g, failed)
-            alive &= ~failed
-            z_new = np.clip(z + step, self.zlo, self.zhi)  # bounds (12c) by projection
-            H_new, PhiZ_new, X_new = self.evaluate(np.where(alive[:, None], z_new, z), U)
-            n_eval += alive
-            r_new, J_new = self.residual(z_new, Y - H_new, PhiZ_new, W, Wa, xb0)
+            za = z[a]
+            free = ~(((za <= self.zlo + BOUND_TOL * self.span) & (g > 0))
+                     | ((za >= self.zhi - BOUND_TOL * self.span) & (g < 0)))
+            step = self._steps(a, free, JtJ, diag, lam[a], g, failed)
+            keep = ~failed[a]
+            a, za, step = a[keep], za[keep], step[keep]
+            alive[failed] = False
+            if not len(a):
+                break
+            z_new = np.clip(za + step, self.zlo, self.zhi)  # bounds (12c) by projection
+            H_new, PhiZ_new, X_new = self.evaluate(z_new, U[a])
+            n_eval[a] += 1
+            r_new, J_new = self.residual(z_new, Y[a] - H_new, PhiZ_new, W[a], Wa[a], xb0[a])
             cost_new = _dot(r_new, r_new)
             with np.errstate(invalid="ignore"):
-                ok = alive & np.isfinite(cost_new) & (cost_new <= cost)
-            lam = np.where(ok, np.maximum(lam / 10.0, LM_DAMPING0), np.where(alive, lam * 10.0, lam))
-            rel = (cost - cost_new) / np.maximum(cost, 1e-300)
-            z, X = np.where(ok[:, None], z_new, z), np.where(ok[:, None, None], X_new, X)
-            r, J = np.where(ok[:, None], r_new, r), np.where(ok[:, None, None], J_new, J)
-            cost = np.where(ok, cost_new, cost)
-            iters += ok
-            alive &= ~(ok & ((rel < TOL_STEP) | (iters >= self.t.max_iter)))
+                ok = np.isfinite(cost_new) & (cost_new <= cost[a])
+            lam[a] = np.where(ok, np.maximum(lam[a] / 10.0, LM_DAMPING0), lam[a] * 10.0)
+            rel = (cost[a] - cost_new) / np.maximum(cost[a], 1e-300)
+            acc = a[ok]
+            z[acc], X[acc], r[acc], J[acc], cost[acc] = z_new[ok], X_new[ok], r_new[ok], J_new[ok], cost_new[ok]
+            iters[acc] += 1
+            alive[acc[(rel[ok] < TOL_STEP) | (iters[acc] >= self.t.max_iter)]] = False
             alive &= (lam <= LM_DAMPING_MAX) & (n_eval < MAX_EVALS)
         return z, X
 

@@ -110,6 +110,12 @@ def test_batched_mhe_refuses_the_paper_variants_and_bad_options():
 
 
 def test_registry_builders_build_the_entries_estimator():
+    from estimators.registry import ESTIMATORS
+
     full = BATCHED_MHE["mhe-full"](2, DT, P, {})
     assert full.t.model.estimated == ("theta", "B", "C", "E")
     assert BATCHED_MHE["mhe"](2, DT, P, {}).t.model.estimated == ("theta",)
+    for name in BATCHED_MHE:  # the options estimators.batched.make_batched passes once "mhe" is in BATCHED
+        entry = ESTIMATORS[name]
+        built = BATCHED_MHE[name](2, DT, P, {**entry.options, "shape": object()}).t
+        assert built.model.fixed == entry.make(P, DT).model.fixed
