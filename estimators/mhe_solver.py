@@ -168,7 +168,10 @@ class BatchedWindowSolver:
         group solves the single MHE's own system; a singular system fails its row. Arguments are rows ``a``'s."""
         step = np.zeros((len(a), self.nz))
         for pattern, rows in groups(free):
-            A = JtJ[rows][:, pattern][:, :, pattern] + lam[rows, None, None] * _diag(diag[rows][:, pattern])
+            # a C-ordered copy (so that the reshape below is a view): its diagonal gets + lam diag(J^T J)
+            A = np.ascontiguousarray(JtJ[rows][:, pattern][:, :, pattern])
+            m = A.shape[-1]
+            A.reshape(len(rows), m * m)[:, ::m + 1] += lam[rows, None] * diag[rows][:, pattern]
             bad = np.zeros(len(rows), dtype=bool)
             sol = rowwise(lambda M, b: np.linalg.solve(M, b[:, :, None])[:, :, 0], bad, A, -g[rows][:, pattern])
             failed[a[rows[bad]]] = True
@@ -228,18 +231,12 @@ def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return (a[:, None, :] @ b[:, :, None])[:, 0, 0]
 
 
-def _diag(d: np.ndarray) -> np.ndarray:
-    """Diagonal matrices (N, m, m) from diagonals (N, m)."""
-    out = np.zeros(d.shape + d.shape[-1:])
-    idx = np.arange(d.shape[-1])
-    out[:, idx, idx] = d
-    return out
-
-
 def groups(patterns: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
     """Rows of a boolean matrix (N, m) grouped by pattern: [(pattern (m,), row indices), ...]."""
     if len(patterns) == 0:
         return []
+    if patterns.all():  # the usual case (every sample kept, every variable free): one group, no key arithmetic
+        return [(patterns[0], np.arange(len(patterns)))]
     keys = patterns.astype(np.int64) @ (np.int64(1) << np.arange(patterns.shape[1], dtype=np.int64))
     if np.all(keys == keys[0]):  # the usual case: one group
         return [(patterns[0], np.arange(len(patterns)))]
