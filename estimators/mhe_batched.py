@@ -5,9 +5,10 @@ Levenberg-Marquardt trial point: the alongside EKF (outlier gate, Joseph update,
 the SVD weighting of eqs. (14)-(16) in the arrival covariance's units, the projected Levenberg-Marquardt solve of
 eq. (12), the fallback to the a priori trajectory and the EKF-consistency gate, all over a leading batch axis.
 
-Where the single MHE's time goes (profiled in the braking env, theta alone): about a third in CasADi's virtual
-machine evaluating the window function (about 24,000 SX instructions, 3 calls per update) and two thirds in
-Python and numpy bookkeeping of small arrays. The batched form removes both: the numpy work is shared by the N
+Where the single MHE's time goes (cProfile of 1,000 updates in the braking env, theta alone): about 40 % in
+CasADi's virtual machine (the window function, about 24,000 SX instructions, 3 calls per update, and the EKF's
+model step, 1 call), the rest in Python and numpy bookkeeping of small arrays, of which about 0.2 ms per update
+in converting CasADi's ``DM`` results to numpy. The batched form removes both: the numpy work is shared by the N
 sub-envs, and the window function and the EKF's model step are compiled to C (:mod:`estimators.casadi_compiled`,
 about 10x faster than the virtual machine, same results) and evaluated for all N sub-envs by one
 ``Function.map(N)`` call (``parallel="thread"``: CasADi's thread map, at most 2 threads).
