@@ -57,12 +57,7 @@ def _source(fun: ca.Function) -> str:
     with tempfile.TemporaryDirectory() as tmp:
         gen = ca.CodeGenerator(f"{fun.name()}.c")
         gen.add(fun)
-        cwd = os.getcwd()
-        try:
-            os.chdir(tmp)  # the generator writes into the working directory
-            gen.generate()
-        finally:
-            os.chdir(cwd)
+        gen.generate(f"{tmp}{os.sep}")  # the prefix is the directory written into
         return (Path(tmp) / f"{fun.name()}.c").read_text()
 
 
