@@ -69,7 +69,9 @@ __all__ = [
     "BatchedEstimatorObservation",
     "EstimatorObservation",
     "PayloadEstimatorObservation",
+    "batched_names",
     "check_estimator_name",
+    "make_batched_estimator",
     "make_estimator",
 ]
 
@@ -107,6 +109,33 @@ def make_estimator(name: str, dt: float, params: QuarterCarParams) -> Estimator 
     if check_estimator_name(name) in (NO_ESTIMATOR, ORACLE):
         return None
     return get_estimator(name).make(params, dt)
+
+
+def batched_names() -> tuple[str, ...]:
+    """Estimator names with a batched form: :data:`estimators.batched.BATCHED` and the batched MHE's
+    (:data:`estimators.mhe_batched.BATCHED_MHE`)."""
+    from estimators.batched import BATCHED
+    from estimators.mhe_batched import BATCHED_MHE
+
+    return tuple(dict.fromkeys([*BATCHED, *BATCHED_MHE]))
+
+
+def make_batched_estimator(name: str, n: int, params: QuarterCarParams, dt: float):
+    """The batched estimator of registry entry ``name`` for ``n`` sub-envs (None if it has none): from
+    :func:`estimators.batched.make_batched`, else the batched MHE (:data:`estimators.mhe_batched.BATCHED_MHE`).
+
+    :param name: registry name.
+    :param n: number of sub-envs.
+    :param params: the env's vehicle parameters.
+    :param dt: sample time [s].
+    """
+    from estimators.batched import make_batched
+    from estimators.mhe_batched import BATCHED_MHE
+
+    batched = make_batched(name, n, params, dt)
+    if batched is None and name in BATCHED_MHE:
+        batched = BATCHED_MHE[name](n, dt, params, dict(get_estimator(name).options))
+    return batched
 
 
 def _reset(est: Estimator, v0: float) -> Estimate:
@@ -291,25 +320,24 @@ class EstimatorObservation(gym.Wrapper):
 # ---------------------------------------------------------------------------------------------- vector env
 class BatchedEstimatorObservation(VectorWrapper):
     """:class:`EstimatorObservation` for the native vector env: one batched estimator
-    (:mod:`estimators.batched`) updates every sub-env in one numpy call, with the single wrapper's layout and
+    (:mod:`estimators.batched`, :mod:`estimators.mhe_batched`) updates every sub-env in one numpy call, with the single wrapper's layout and
     timing, in every autoreset mode (an autoreset restarts that sub-env's estimator from its new wheel speed; in
     ``SAME_STEP`` mode ``final_obs`` carries the last update). Sub-env ``i`` equals an :class:`EstimatorObservation`
     fed the same observations (tests/test_batched_vector.py).
 
     :param env: a :class:`fricenv.envs.braking_vector.BrakingVectorEnv`.
-    :param estimator: a registry name with a batched form (:data:`estimators.batched.BATCHED`).
+    :param estimator: a registry name with a batched form (:func:`batched_names`: the EKF/RLS variants of
+        :data:`estimators.batched.BATCHED`, ``mhe`` and ``mhe-full``).
     """
 
     def __init__(self, env, estimator: str = "ekf-rls"):
-        from estimators.batched import BATCHED, make_batched
-
         super().__init__(env)
         check_estimator_name(estimator)
         cfg = env.config
         self.estimator_name = estimator
-        self.batched = make_batched(estimator, env.num_envs, cfg.params, cfg.dt)
+        self.batched = make_batched_estimator(estimator, env.num_envs, cfg.params, cfg.dt)
         if self.batched is None:
-            raise ValueError(f"estimator {estimator!r} has no batched form; batched: {', '.join(BATCHED)} "
+            raise ValueError(f"estimator {estimator!r} has no batched form; batched: {', '.join(batched_names())} "
                              f"(use make_vec's SyncVectorEnv fallback for the others)")
         self._dt, self._r = float(cfg.dt), float(cfg.params.r)
         value_names = get_estimator(estimator).values

@@ -21,6 +21,7 @@ from fricenv.envs.estimator_observation import (
     BatchedEstimatorObservation,
     EstimatorObservation,
     PayloadEstimatorObservation,
+    batched_names,
     check_estimator_name,
 )
 
@@ -53,9 +54,8 @@ def make_braking_vector(num_envs: int = 1, estimator: str = "none", render_mode:
     """Vector entry point of every ``Braking`` id: the native
     :class:`~fricenv.envs.braking_vector.BrakingVectorEnv` (wrapped in
     :class:`~fricenv.envs.estimator_observation.BatchedEstimatorObservation` for an estimator with a batched form,
-    :data:`estimators.batched.BATCHED`), or, for the keywords it does not take (another estimator, a
-    ``render_mode``), Gymnasium's ``SyncVectorEnv`` over
-    :func:`make_braking` envs (each in a ``TimeLimit`` of ``max_episode_steps``), with a warning.
+    :func:`~fricenv.envs.estimator_observation.batched_names`), or, for the keywords it does not take (another
+    estimator, a ``render_mode``), Gymnasium's ``SyncVectorEnv`` over :func:`make_braking` envs (each in a ``TimeLimit`` of ``max_episode_steps``), with a warning.
 
     :param num_envs: number of sub-envs.
     :param estimator: as :func:`make_braking`.
@@ -63,11 +63,10 @@ def make_braking_vector(num_envs: int = 1, estimator: str = "none", render_mode:
     :param max_episode_steps: truncation in control steps (``make_vec`` passes the registration's).
     :param env_kwargs: the single env's keyword arguments.
     """
-    from estimators.batched import BATCHED
     from fricenv.envs.braking_vector import BrakingVectorEnv
 
     check_estimator_name(estimator, ESTIMATOR_NAMES)
-    if (estimator == "none" or estimator in BATCHED) and render_mode is None:
+    if (estimator == "none" or estimator in batched_names()) and render_mode is None:
         venv = BrakingVectorEnv(num_envs, max_episode_steps=max_episode_steps, **env_kwargs)
         return venv if estimator == "none" else BatchedEstimatorObservation(venv, estimator)
     if "autoreset_mode" in env_kwargs:
