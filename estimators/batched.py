@@ -12,7 +12,8 @@ outputs and health flags equal N single estimators to 1e-9 across per-env resets
 A sub-env is reset alone (``reset(mask, v0)``), as an autoreset of a vector env needs. A sample with a non-finite
 entry is skipped for that sub-env (values held, ``Health.INVALID_INPUT``), as the single estimator does.
 
-:data:`BATCHED` maps registry names (:data:`estimators.registry.ESTIMATORS`) to batched builders;
+:data:`BATCHED` maps registry names (:data:`estimators.registry.ESTIMATORS`) to batched builders, the MHE's
+(:mod:`estimators.mhe_batched`) included;
 :func:`make_batched` returns None for an estimator without a batched form (the caller then runs single ones).
 """
 
@@ -27,6 +28,7 @@ import numpy as np
 from estimators.base import Health
 from estimators.curve_shape import ShapeFit
 from estimators.ekf_rls import KS0, PHI_MIN_SLIP, RLS_P0, QuarterCarEkfRls
+from estimators.mhe_batched import BATCHED_MHE
 from estimators.outliers import Verdict
 from fricenv.plants.quarter_car import QuarterCarParams
 
@@ -238,6 +240,7 @@ BATCHED: Mapping[str, Callable[..., BatchedEstimator]] = MappingProxyType({
     "ekf-rls": lambda n, dt, p, options: BatchedEkfRls(n, dt, p, **options),
     "ekf-rls-paper-loop": lambda n, dt, p, options: BatchedEkfRls(n, dt, p, **options),
     "ekf-rls-paper-map": lambda n, dt, p, options: BatchedEkfRls(n, dt, p, **options),
+    **BATCHED_MHE,
 })
 
 

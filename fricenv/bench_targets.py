@@ -48,8 +48,8 @@ COARSE_PHYSICS_DT = 0.005  # [s] 2 substeps per 10 ms control step (an option, n
 GAP_EFFECT = ("brake_lag", {"tau": 0.04})
 GAP_ROAD = "wet"
 GAP_JOBS = 2
-# The training target: env steps of one `fricenv train` run per estimator (the MHE is 10x slower per step).
-TRAINING_STEPS = {"none": 40_960, "ekf-rls": 40_960, "mhe": 8_192}
+# The training target: env steps of one `fricenv train` run per estimator (all on the native vector env).
+TRAINING_STEPS = {"none": 40_960, "ekf-rls": 40_960, "mhe": 40_960}
 SPEED_CALLS = 20  # speed reconstructions per repeat (one parameter set, as in a least-squares residual call)
 
 

@@ -12,6 +12,8 @@ v_hat       m/s     50         0      2      estimated vehicle speed
 slip_hat    -       1          -1     1      estimated wheel slip
 mu_hat      -       1          -2     2      estimated friction coefficient in use
 theta_hat   -       1          0      2      estimated road coefficient theta (peak factor of the Magic Formula)
+peak_slip_  -       1          0      1      estimated slip of the friction peak (``peak_slip_hat``; estimators that
+hat                                          report one: ``ekf-rls`` with its curve-shape fit, and the oracle)
 health      -       1          0      5      :class:`estimators.base.Health` of the last update (0 = OK, 4 = OUTLIER)
 ==========  ======  =========  =====  =====  ===============================================================
 
@@ -27,13 +29,14 @@ Estimators (:data:`ESTIMATOR_NAMES`; each is an entry of :data:`estimators.regis
 env's own plant parameters and sample time): ``ekf`` (:class:`estimators.ekf.QuarterCarEKF`, theta augmented),
 ``mhe`` (:class:`estimators.mhe.RegularizedMHE`, theta augmented), ``ekf-rls``
 (:class:`estimators.ekf_rls.QuarterCarEkfRls`, which also uses ``a_x``; its ``mu_utilized`` fills ``mu_hat`` and
-its peak-friction estimate ``mu`` fills ``theta_hat``, as its registry entry's ``values`` say), and ``ekf-full`` /
+its peak-friction estimate ``mu`` fills ``theta_hat``, as its registry entry's ``values`` say; its ``peak_slip``,
+from the online curve-shape fit of :mod:`estimators.curve_shape`, fills ``peak_slip_hat``), and ``ekf-full`` /
 ``mhe-full`` (theta, B, C, E augmented, Sui & Johansen's cases 3-4; the appended layout is the same, B, C, E are
 in ``info`` of the estimate, ``EstimatorObservation.last_estimate``). An unknown name raises ValueError listing
 the choices.
 
-``oracle`` appends the truth in the same layout (true speed, slip, friction and the theta of the road under the
-car, health 0): an upper bound. ``none`` appends nothing (use the env as it is).
+``oracle`` appends the truth in the same layout (true speed, slip, friction, the theta and peak slip of the road
+under the car, health 0): an upper bound. ``none`` appends nothing (use the env as it is).
 
 A failed update never raises inside ``step``: the estimator's own fallback (held values, health flag) is used; if
 an estimator raises anyway, or returns non-finite values, the last good values are held and ``health`` is
@@ -83,6 +86,7 @@ ESTIMATE_FIELDS: dict[str, ObsField] = {
     "slip": ObsField("slip_hat", "-", 1.0, -1.0, 1.0, "estimated wheel slip"),
     "mu": ObsField("mu_hat", "-", 1.0, -2.0, 2.0, "estimated friction coefficient in use"),
     "theta": ObsField("theta_hat", "-", 1.0, 0.0, 2.0, "estimated road coefficient theta"),
+    "peak_slip": ObsField("peak_slip_hat", "-", 1.0, 0.0, 1.0, "estimated slip of the friction curve's peak"),
 }
 HEALTH_FIELD = ObsField("health", "-", 1.0, 0.0, HEALTH_MAX, "estimator health flag (0 = OK)")
 # Measured signals the wrapper can feed an estimator: estimator column name -> env observation entry.
@@ -121,8 +125,8 @@ def batched_names() -> tuple[str, ...]:
 
 
 def make_batched_estimator(name: str, n: int, params: QuarterCarParams, dt: float):
-    """The batched estimator of registry entry ``name`` for ``n`` sub-envs (None if it has none): from
-    :func:`estimators.batched.make_batched`, else the batched MHE (:data:`estimators.mhe_batched.BATCHED_MHE`).
+    """The batched estimator of registry entry ``name`` for ``n`` sub-envs (None if it has none), from
+    :func:`estimators.batched.make_batched` (the batched EKF/RLS and MHE).
 
     :param name: registry name.
     :param n: number of sub-envs.
@@ -130,12 +134,8 @@ def make_batched_estimator(name: str, n: int, params: QuarterCarParams, dt: floa
     :param dt: sample time [s].
     """
     from estimators.batched import make_batched
-    from estimators.mhe_batched import BATCHED_MHE
 
-    batched = make_batched(name, n, params, dt)
-    if batched is None and name in BATCHED_MHE:
-        batched = BATCHED_MHE[name](n, dt, params, dict(get_estimator(name).options))
-    return batched
+    return make_batched(name, n, params, dt)
 
 
 def _reset(est: Estimator, v0: float) -> Estimate:
@@ -237,8 +237,8 @@ class EstimatorObservation(gym.Wrapper):
 
     def _truth(self, info: dict[str, Any]) -> Estimate:
         road = self.env.unwrapped.road
-        return Estimate({"v": info["v"], "slip": info["slip"], "mu": info["mu"], "theta": float(road.theta)},
-                        Health.OK)
+        return Estimate({"v": info["v"], "slip": info["slip"], "mu": info["mu"], "theta": float(road.theta),
+                         "peak_slip": float(road.peak_slip)}, Health.OK)
 
     def _safe(self, call: Callable[[], Estimate]) -> tuple[dict[str, float], int]:
         """Values and health of an estimator call; never raises, holds the last values on failure."""

@@ -36,13 +36,14 @@ def _lockstep(ours, ref, seed: int | None, steps: int) -> list[dict]:
     return ended
 
 
+@pytest.mark.parametrize("estimator", ["ekf-rls", "mhe"])
 @pytest.mark.parametrize("same_step", [False, True])
-def test_batched_estimator_vector_env_equals_wrapped_single_envs(same_step):
+def test_batched_estimator_vector_env_equals_wrapped_single_envs(same_step, estimator):
     kw = {"v0": SHORT_V0, "change_distance": (0.5, 2.0)}
     mode = "SameStep" if same_step else "NextStep"
     venv = BatchedEstimatorObservation(BrakingVectorEnv(4, road=ROADS_PER_ENV, autoreset_mode=mode, **kw),
-                                       "ekf-rls")
-    singles = [make_braking("ekf-rls", road=r, **kw) for r in ROADS_PER_ENV]
+                                       estimator)
+    singles = [make_braking(estimator, road=r, **kw) for r in ROADS_PER_ENV]
     assert venv.observation_fields == singles[0].observation_fields
     assert venv.single_observation_space == singles[0].observation_space
     ended, _ = _compare_with_single_envs(venv, singles, seed=5, steps=300, same_step=same_step)
@@ -65,8 +66,8 @@ def test_make_vec_uses_the_batched_estimator_and_sb3_adapter_matches_dummy_vec_e
 
 def test_batched_wrapper_refuses_an_estimator_without_batched_form():
     with pytest.raises(ValueError, match="no batched form"):
-        BatchedEstimatorObservation(BrakingVectorEnv(2), "mhe")
-    assert isinstance(make_braking("mhe"), EstimatorObservation)
+        BatchedEstimatorObservation(BrakingVectorEnv(2), "oracle")
+    assert isinstance(make_braking("oracle"), EstimatorObservation)
 
 
 def test_native_training_env_draws_the_scenarios_of_scenario_mix():

@@ -25,6 +25,8 @@ from fricenv.plants.tire import DRY
 
 WRAPPED = ("ekf", "mhe", "ekf-rls", "oracle")
 APPENDED = ("v_hat", "slip_hat", "mu_hat", "theta_hat", "health")
+# estimators that also report the friction peak's slip (the EKF/RLS curve-shape fit, the oracle's truth)
+WITH_PEAK_SLIP = {"ekf-rls", "oracle"}
 
 
 def _quiet_check(env):
@@ -41,7 +43,9 @@ def test_wrapped_env_passes_both_checkers(estimator):
     _quiet_check(env)
     names = env.observation_names
     assert names[:4] == ("wheel_speed", "wheel_decel", "torque", "a_x")
-    assert names[4:] == APPENDED  # every registered estimator gives v, slip, mu and theta
+    # every registered estimator gives v, slip, mu and theta; peak_slip_hat only where the estimator reports it
+    expected = APPENDED[:4] + (("peak_slip_hat",) if estimator in WITH_PEAK_SLIP else ()) + APPENDED[4:]
+    assert names[4:] == expected
     assert env.observation_space.dtype == np.float32
     assert np.all(np.isfinite(env.observation_space.low)) and np.all(np.isfinite(env.observation_space.high))
 
@@ -62,9 +66,9 @@ def test_registered_variants_make_through_gymnasium():
     assert set(BRAKING_VARIANTS) <= set(ENV_IDS)
     env = gym.make("fricenv/BrakingEKFRLS-v0", road="wet")
     obs, info = env.reset(seed=1)
-    assert obs.shape == (9,) and env.observation_space.contains(obs)
+    assert obs.shape == (10,) and env.observation_space.contains(obs)
     assert info["road"] == "wet" and set(info["estimate"]) == {"v_hat", "slip_hat", "mu_hat", "theta_hat",
-                                                              "health"}
+                                                              "peak_slip_hat", "health"}
 
 
 def test_factory_as_braking_entry_point_takes_estimator_kwarg():
