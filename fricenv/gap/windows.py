@@ -70,6 +70,7 @@ class Data:
     meas: dict | None = None  # channel -> measured samples, NaN where missing, held or an outlier
     counts: np.ndarray | None = None  # (windows,) residual samples with a fresh measurement per window
     sensors: dict | None = None  # channel -> ChannelCondition.summary() (missing, outliers, filtered, quantised)
+    compiled: bool = True  # windows simulated by the compiled kernel (DiagnoseConfig.compiled)
 
     @property
     def n(self) -> int:
@@ -140,7 +141,7 @@ def prepare(log: QuarterCarLog, p: qc.QuarterCarParams, cfg: DiagnoseConfig) -> 
                 v=cond["v"].filled if "v" in cond else None, a_x=cond["a_x"].filled if "a_x" in cond else None,
                 sigma=sigma, v_smooth=v_smooth, starts=starts, fold=fold, test=fold == 0, horizon=H,
                 free_end=free_end, p=p, substeps=cfg.substeps, meas=meas, counts=_window_counts(meas, starts, H),
-                sensors={c: k.summary() for c, k in cond.items()})
+                sensors={c: k.summary() for c, k in cond.items()}, compiled=cfg.compiled)
 
 
 def model_batch(effects: Sequence[str], names: Sequence[str], X: np.ndarray, p: qc.QuarterCarParams) -> ModelBatch:
@@ -177,13 +178,25 @@ def _simulate_windows(batch: ModelBatch, d: Data, widx: np.ndarray, v0, w0, Ta0,
     """Simulate the windows ``widx`` for every element of ``batch`` and ``reps`` wheel-speed starts each.
 
     v0, w0, Ta0, lt0 have shape (K, W, reps) (Ta0, lt0 may be None). Returns dict channel -> (K, W, reps, H).
+    The compiled kernel (:mod:`fricenv.effects.kernels`) runs them when ``d.compiled`` and the model has no plug-in
+    effect with Python hooks; else the numpy :class:`EffectSimulator`, sample by sample.
     """
     K, W, H = len(batch), len(widx), d.horizon
     full = batch.repeat(W * reps)
-    sim = EffectSimulator(full, d.dt, d.n, d.p, d.substeps, d.t0, commands=d.Tb)
     k0 = np.tile(np.repeat(d.starts[widx], reps), K)
-    sim.reset(v0.ravel(), w0.ravel(), k0=k0, Ta=None if Ta0 is None else Ta0.ravel(),
-              lam_t=None if lt0 is None else lt0.ravel())
+    Ta0 = None if Ta0 is None else Ta0.ravel()
+    lt0 = None if lt0 is None else lt0.ravel()
+    if d.compiled:
+        from fricenv.effects import kernels
+
+        if kernels.supported(full):
+            sim = kernels.simulate_windows(full, d.Tb, k0, v0.ravel(), w0.ravel(), Ta0, lt0, H, d.dt, d.t0,
+                                           d.substeps, d.p, want_ax=d.a_x is not None)
+            out = {"omega": sim[0], **({"v": sim[1]} if d.v is not None else {}),
+                   **({"a_x": sim[2]} if d.a_x is not None else {})}
+            return {k: v.reshape(K, W, reps, H) for k, v in out.items()}
+    sim = EffectSimulator(full, d.dt, d.n, d.p, d.substeps, d.t0, commands=d.Tb)
+    sim.reset(v0.ravel(), w0.ravel(), k0=k0, Ta=Ta0, lam_t=lt0)
     out = {"omega": np.empty((K * W * reps, H))}
     if d.v is not None:
         out["v"] = np.empty_like(out["omega"])

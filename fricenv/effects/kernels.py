@@ -1,0 +1,234 @@
+"""Compiled (numba) window simulator: :class:`fricenv.effects.quarter_car.EffectSimulator` for a whole batch of
+prediction windows in one call, element by element in machine code instead of numpy calls on small arrays.
+
+One formula: the physics is not written again here. The ROS2 substep is
+:func:`fricenv.plants.quarter_car_fast.ros2_core` (with the reference's refinement of unphysical substeps,
+:func:`fricenv.plants.quarter_car.refine_where_unphysical`, as bounded recursion), the relaxation plant is
+:func:`fricenv.effects.relaxation.relaxation_step_elementwise`, the Magic Formula, the slip and the drag force are
+:mod:`fricenv.plants.tire`'s and :func:`fricenv.effects.library.drag_force`: numba compiles those same Python
+functions (:func:`_compile`, which rebinds their callees to compiled ones). What is written here is the loop of
+:meth:`EffectSimulator.step` over substeps (actuator chain delay -> lag -> gain -> fade, road change, load transfer,
+sliding-speed friction, drag halves, pitch mode), elementwise. It is tested against ``EffectSimulator`` to 1e-12
+(``tests/effects/test_kernels.py``).
+
+Plug-in effects with Python hooks (registry entries that are not built in) are not compiled: :func:`supported`
+says so and the caller keeps the numpy simulator. numba is imported by this module only, which nothing imports at
+``import fricenv``; compiled code is cached on disk (``cache=True``).
+"""
+
+from __future__ import annotations
+
+import types
+
+import numba
+import numpy as np
+
+from fricenv.effects import registry
+from fricenv.effects.batch import ModelBatch
+from fricenv.effects.library import drag_force
+from fricenv.effects.relaxation import RELAX_GAMMA, relaxation_step_elementwise
+from fricenv.plants import quarter_car as qc
+from fricenv.plants import quarter_car_fast as qcf
+from fricenv.plants.tire import longitudinal_slip, magic_formula
+
+__all__ = ["PARAM_COLUMNS", "simulate_windows", "supported"]
+
+# Columns of the per-element parameter matrix the kernel reads.
+PARAM_COLUMNS = ("B", "C", "E", "theta", "tau", "delay", "gain", "sigma", "r_eff", "t_change", "theta_after", "c0",
+                 "c2", "fade", "load", "slide")
+_INDEX_EPS = 1e-9  # as EffectSimulator's delay index guard
+_PITCH_OMEGA = 2.0 * np.pi * 1.5  # as EffectSimulator's pitch mode [rad/s]
+_PITCH_ZETA = 0.4
+
+
+def _compile(func, seen: dict | None = None):
+    """numba-compile ``func`` and, first, every plain Python function of fricenv it calls (rebound in a copy of
+    its globals), so that the library's own numpy formulas run compiled on floats."""
+    seen = {} if seen is None else seen
+    if func in seen:
+        return seen[func]
+    deps = {}
+    for name in func.__code__.co_names:
+        g = func.__globals__.get(name)
+        if isinstance(g, types.FunctionType) and g.__module__.startswith("fricenv"):
+            deps[name] = _compile(g, seen)
+    if deps:
+        func = types.FunctionType(func.__code__, {**func.__globals__, **deps}, func.__name__, func.__defaults__)
+    seen[func] = compiled = numba.njit(cache=not deps)(func)
+    return compiled
+
+
+_ros2 = _compile(qcf.ros2_core)
+_mf = _compile(magic_formula)
+_slip = _compile(longitudinal_slip)
+_drag = _compile(drag_force)
+_relax = _compile(relaxation_step_elementwise)
+_GAMMA = qcf.ROS2_GAMMA
+_REFINE_PARTS = qc.REFINE_PARTS
+_REFINE_MIN_STEP = qc.REFINE_MIN_STEP
+
+
+@numba.njit(cache=True)
+def _plant_substep(v, w, Tb, B, C, E, th, h, r, m, J, Fz):
+    """One substep of :func:`quarter_car.step` for one car (``substeps=1``), the refinement included."""
+    road = (B, C, E, Fz * th, Fz * th * C * B, 1.0 - E, h * Fz * _mf(1.0, B, C, E, th) / m)
+    hg = h * _GAMMA
+    k = (r, hg / m, hg * r * r / J, hg * r / J, h / m, h * r / J, h / J)
+    v_new, w_new, broken = _ros2(v, w, Tb, road, k)
+    if not broken or h <= _REFINE_MIN_STEP:
+        return v_new, w_new
+    hp = h / _REFINE_PARTS
+    for _ in range(_REFINE_PARTS):
+        v, w = _plant_substep(v, w, Tb, B, C, E, th, hp, r, m, J, Fz)
+    return v, w
+
+
+@numba.njit(cache=True)
+def _theta(par, t_end, h, v, w, pitch, flags):
+    """Peak factor over the substep ending at ``t_end`` (EffectSimulator._road_at, one element)."""
+    th = par[3]
+    if flags[5] and np.isfinite(par[9]):
+        frac = min(max((t_end - par[9]) / h, 0.0), 1.0)
+        th = th + frac * (par[10] - th)
+    if flags[3]:
+        th = th * max(1.0 + par[14] * pitch, 0.0)
+    if flags[4]:
+        th = th * np.exp(-par[15] * max(v - w * par[8], 0.0))
+    return th
+
+
+@numba.njit(cache=True)
+def _tire_force(par, t, h, v, w, lt, pitch, flags, Fz):
+    """EffectSimulator.tire_force of one element at time ``t``."""
+    th = _theta(par, t, h, v, w, pitch, flags)
+    if par[7] > 0.0:
+        return Fz * _mf(lt, par[0], par[1], par[2], th) if v > 0.0 else 0.0
+    return Fz * _mf(_slip(v, w, par[8]), par[0], par[1], par[2], th)
+
+
+@numba.njit(cache=True)
+def _command(cmd, idx):
+    return cmd[min(max(idx, 0), cmd.shape[0] - 1)]
+
+
+@numba.njit(cache=True)
+def _applied(cmd, k, j, par, Ta, energy, keep, spread, dt, substeps, flags):
+    """Mean applied torque over substep ``j`` and the new lag state (EffectSimulator._actuator_substep)."""
+    if flags[0]:
+        width = 1.0 / substeps
+        s_a = j * width - par[5] / dt
+        i0 = int(np.floor(s_a + _INDEX_EPS))
+        f = min(max((i0 + 1 - s_a) / width, 0.0), 1.0)
+        u = f * _command(cmd, k + i0) + (1.0 - f) * _command(cmd, k + i0 + 1)
+    else:
+        u = _command(cmd, k)
+    if flags[1]:
+        offset = Ta - u
+        mean = u + offset * spread
+        Ta = u + offset * keep
+    else:
+        mean = u
+        Ta = u
+    torque = par[6] * mean
+    if flags[2]:
+        torque = torque / (1.0 + par[13] * energy)
+    return torque, Ta
+
+
+@numba.njit(cache=True)
+def _sample(cmd, k, par, x, keep, spread, dt, t0, substeps, flags, consts):
+    """Advance one element by one sample (EffectSimulator.step); ``x`` = (v, w, Ta, lam_t, energy, pitch, rate)."""
+    m, J, Fz, g = consts
+    v, w, Ta, lt, energy, pitch, rate = x
+    h = dt / substeps
+    relax = par[7] > 0.0
+    for j in range(substeps):
+        torque, Ta = _applied(cmd, k, j, par, Ta, energy, keep, spread, dt, substeps, flags)
+        t_end = t0 + (k + (j + 1) / substeps) * dt
+        th = _theta(par, t_end, h, v, w, pitch, flags)
+        decel = 0.0
+        if flags[2] or flags[3]:
+            decel = _tire_force(par, t0 + k * dt, h, v, w, lt, pitch, flags, Fz) / m
+        if relax:
+            v, w, lt = _relax(v, w, lt, torque, par[0], par[1], par[2], th, h, par[8], par[7], par[11], par[12],
+                              m, J, Fz, RELAX_GAMMA)
+        else:
+            if flags[6]:
+                v = max(v - 0.5 * h * _drag(v, par[11], par[12]) / m, 0.0)
+            v, w = _plant_substep(v, w, torque, par[0], par[1], par[2], th, h, par[8], m, J, Fz)
+            if flags[6]:
+                v = max(v - 0.5 * h * _drag(v, par[11], par[12]) / m, 0.0)
+        if flags[2]:
+            energy = energy + torque * w * h
+        if flags[3]:
+            acc = _PITCH_OMEGA**2 * (decel / g - pitch) - 2 * _PITCH_ZETA * _PITCH_OMEGA * rate
+            rate = rate + h * acc
+            pitch = pitch + h * rate
+    return v, w, Ta, lt, energy, pitch, rate
+
+
+@numba.njit(cache=True)
+def _windows(cmd, k0, x0, par, flags, dt, t0, substeps, consts, want_ax, out):
+    """Simulate every element's window: ``out`` (3, n, H) receives omega, v and a_x at the sample times."""
+    m, Fz = consts[0], consts[2]
+    h = dt / substeps
+    H = out.shape[2]
+    for i in range(x0.shape[0]):
+        p = par[i]
+        keep, spread = 0.0, 0.0
+        if p[4] > 0.0:
+            e = np.exp(-h / p[4])
+            keep, spread = e, p[4] / h * (1.0 - e)
+        x = (x0[i, 0], x0[i, 1], x0[i, 2], x0[i, 3], 0.0, 0.0, 0.0)
+        k = k0[i]
+        for jj in range(H):
+            out[0, i, jj] = x[1]
+            out[1, i, jj] = x[0]
+            if want_ax:
+                F = _tire_force(p, t0 + k * dt, h, x[0], x[1], x[3], x[5], flags, Fz)
+                out[2, i, jj] = -(F + _drag(x[0], p[11], p[12])) / m
+            if jj < H - 1:
+                x = _sample(cmd, k, p, x, keep, spread, dt, t0, substeps, flags, consts)
+                k += 1
+
+
+def supported(batch: ModelBatch) -> bool:
+    """Whether :func:`simulate_windows` can run ``batch``: no plug-in effect with Python hooks switched on."""
+    return not any(not e.builtin and e.param_names[0] in batch.extra and (e.torque is not None or e.theta is not None)
+                   for e in registry.REGISTRY.values())
+
+
+def simulate_windows(batch: ModelBatch, commands: np.ndarray, k0: np.ndarray, v0: np.ndarray, w0: np.ndarray,
+                     Ta0: np.ndarray | None, lt0: np.ndarray | None, horizon: int, dt: float, t0: float,
+                     substeps: int, p: qc.QuarterCarParams, want_ax: bool = True) -> np.ndarray:
+    """Every element of ``batch`` simulated ``horizon`` samples from its own start, as ``EffectSimulator`` (preset
+    shared command log, ``reset(v0, w0, k0, Ta0, lt0)``, then ``step()`` between samples) does.
+
+    :param batch: per-element model, n elements (:func:`supported` must hold).
+    :param commands: the shared command log [N m], (n_samples,).
+    :param k0: start sample index per element, (n,).
+    :param v0: start speed [m/s], (n,); :param w0: start wheel speed [rad/s], (n,).
+    :param Ta0: lag state [N m] (None: the command at ``k0``); :param lt0: transient slip (None: the start slip).
+    :param horizon: samples per window (the start included).
+    :param dt: sample time [s]; :param t0: log time of sample 0 [s]; :param substeps: physics substeps per sample.
+    :param p: quarter-car parameters; :param want_ax: also compute the acceleration (else that row is left 0).
+    :return: (3, n, horizon): omega, v and a_x at the sample times.
+    """
+    cmd = np.ascontiguousarray(commands, dtype=float)
+    n = len(batch)
+    k0 = np.ascontiguousarray(np.broadcast_to(k0, (n,)), dtype=np.int64)
+    v0 = np.broadcast_to(np.asarray(v0, dtype=float), (n,))
+    w0 = np.broadcast_to(np.asarray(w0, dtype=float), (n,))
+    Ta0 = cmd[np.clip(k0, 0, len(cmd) - 1)] if Ta0 is None else np.broadcast_to(Ta0, (n,))
+    lt0 = longitudinal_slip(v0, w0, batch.r_eff) if lt0 is None else np.broadcast_to(lt0, (n,))
+    x0 = np.ascontiguousarray(np.column_stack([v0, w0, Ta0, lt0]), dtype=float)
+    b = batch
+    par = np.ascontiguousarray(np.column_stack([b.road, b.tau, b.delay, b.gain, b.sigma, b.r_eff, b.t_change,
+                                                b.theta_after, b.c0, b.c2, b.fade, b.load, b.slide]), dtype=float)
+    # the numpy simulator switches each part on for the whole batch when any element needs it: same here
+    flags = np.array([np.any(b.delay > 0.0), np.any(b.tau > 0.0), np.any(b.fade != 0.0), np.any(b.load != 0.0),
+                      np.any(b.slide != 0.0), np.any(np.isfinite(b.t_change)),
+                      np.any(b.c0 != 0.0) or np.any(b.c2 != 0.0)], dtype=np.bool_)
+    out = np.zeros((3, n, int(horizon)))
+    _windows(cmd, k0, x0, par, flags, float(dt), float(t0), int(substeps), (p.m, p.J, p.Fz, p.g), bool(want_ax), out)
+    return out
