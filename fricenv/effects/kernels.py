@@ -31,7 +31,7 @@ from fricenv.plants import quarter_car as qc
 from fricenv.plants import quarter_car_fast as qcf
 from fricenv.plants.tire import longitudinal_slip, magic_formula
 
-__all__ = ["PARAM_COLUMNS", "simulate_windows", "supported"]
+__all__ = ["PARAM_COLUMNS", "actuator_run", "simulate_windows", "supported"]
 
 # Columns of the per-element parameter matrix the kernel reads.
 PARAM_COLUMNS = ("B", "C", "E", "theta", "tau", "delay", "gain", "sigma", "r_eff", "t_change", "theta_after", "c0",
@@ -69,17 +69,30 @@ _REFINE_MIN_STEP = qc.REFINE_MIN_STEP
 
 
 @numba.njit(cache=True)
-def _plant_substep(v, w, Tb, B, C, E, th, h, r, m, J, Fz):
-    """One substep of :func:`quarter_car.step` for one car (``substeps=1``), the refinement included."""
-    road = (B, C, E, Fz * th, Fz * th * C * B, 1.0 - E, h * Fz * _mf(1.0, B, C, E, th) / m)
+def _plant_substep(v, w, Tb, B, C, E, th, s1, h, r, m, J, Fz):
+    """One substep of :func:`quarter_car.step` for one car (``substeps=1``), the refinement included; ``s1`` is
+    ``mu(1)`` at ``theta = 1`` (the sliding friction per unit peak factor)."""
+    road = (B, C, E, Fz * th, Fz * th * C * B, 1.0 - E, h * Fz * (th * s1) / m)
     hg = h * _GAMMA
     k = (r, hg / m, hg * r * r / J, hg * r / J, h / m, h * r / J, h / J)
     v_new, w_new, broken = _ros2(v, w, Tb, road, k)
     if not broken or h <= _REFINE_MIN_STEP:
         return v_new, w_new
-    hp = h / _REFINE_PARTS
+    return _refined(v, w, Tb, B, C, E, th, s1, h / _REFINE_PARTS, r, m, J, Fz)
+
+
+@numba.njit(cache=True)
+def _refined(v, w, Tb, B, C, E, th, s1, h, r, m, J, Fz):
+    """:func:`quarter_car.refine_where_unphysical`: :data:`REFINE_PARTS` substeps of ``h``, each refined again
+    while longer than ``REFINE_MIN_STEP`` (bounded recursion)."""
     for _ in range(_REFINE_PARTS):
-        v, w = _plant_substep(v, w, Tb, B, C, E, th, hp, r, m, J, Fz)
+        road = (B, C, E, Fz * th, Fz * th * C * B, 1.0 - E, h * Fz * (th * s1) / m)
+        hg = h * _GAMMA
+        k = (r, hg / m, hg * r * r / J, hg * r / J, h / m, h * r / J, h / J)
+        v_new, w_new, broken = _ros2(v, w, Tb, road, k)
+        if broken and h > _REFINE_MIN_STEP:
+            v_new, w_new = _refined(v, w, Tb, B, C, E, th, s1, h / _REFINE_PARTS, r, m, J, Fz)
+        v, w = v_new, w_new
     return v, w
 
 
@@ -136,7 +149,7 @@ def _applied(cmd, k, j, par, Ta, energy, keep, spread, dt, substeps, flags):
 
 
 @numba.njit(cache=True)
-def _sample(cmd, k, par, x, keep, spread, dt, t0, substeps, flags, consts):
+def _sample(cmd, k, par, x, keep, spread, s1, dt, t0, substeps, flags, consts):
     """Advance one element by one sample (EffectSimulator.step); ``x`` = (v, w, Ta, lam_t, energy, pitch, rate)."""
     m, J, Fz, g = consts
     v, w, Ta, lt, energy, pitch, rate = x
@@ -155,7 +168,7 @@ def _sample(cmd, k, par, x, keep, spread, dt, t0, substeps, flags, consts):
         else:
             if flags[6]:
                 v = max(v - 0.5 * h * _drag(v, par[11], par[12]) / m, 0.0)
-            v, w = _plant_substep(v, w, torque, par[0], par[1], par[2], th, h, par[8], m, J, Fz)
+            v, w = _plant_substep(v, w, torque, par[0], par[1], par[2], th, s1, h, par[8], m, J, Fz)
             if flags[6]:
                 v = max(v - 0.5 * h * _drag(v, par[11], par[12]) / m, 0.0)
         if flags[2]:
@@ -179,6 +192,7 @@ def _windows(cmd, k0, x0, par, flags, dt, t0, substeps, consts, want_ax, out):
         if p[4] > 0.0:
             e = np.exp(-h / p[4])
             keep, spread = e, p[4] / h * (1.0 - e)
+        s1 = _mf(1.0, p[0], p[1], p[2], 1.0)
         x = (x0[i, 0], x0[i, 1], x0[i, 2], x0[i, 3], 0.0, 0.0, 0.0)
         k = k0[i]
         for jj in range(H):
@@ -188,8 +202,56 @@ def _windows(cmd, k0, x0, par, flags, dt, t0, substeps, consts, want_ax, out):
                 F = _tire_force(p, t0 + k * dt, h, x[0], x[1], x[3], x[5], flags, Fz)
                 out[2, i, jj] = -(F + _drag(x[0], p[11], p[12])) / m
             if jj < H - 1:
-                x = _sample(cmd, k, p, x, keep, spread, dt, t0, substeps, flags, consts)
+                x = _sample(cmd, k, p, x, keep, spread, s1, dt, t0, substeps, flags, consts)
                 k += 1
+
+
+@numba.njit(cache=True)
+def _actuator(cmd, k0, Ta0, par, flags, dt, substeps, out):
+    """Lag state at the start of each sample, actuator chain only (EffectSimulator.actuator_run's loop)."""
+    h = dt / substeps
+    for i in range(Ta0.shape[0]):
+        p = par[i]
+        keep, spread = 0.0, 0.0
+        if p[4] > 0.0:
+            e = np.exp(-h / p[4])
+            keep, spread = e, p[4] / h * (1.0 - e)
+        Ta = Ta0[i]
+        for k in range(out.shape[1]):
+            out[i, k] = Ta
+            for j in range(substeps):
+                Ta = _applied(cmd, k0[i] + k, j, p, Ta, 0.0, keep, spread, dt, substeps, flags)[1]
+
+
+def actuator_run(batch: ModelBatch, commands: np.ndarray, k0, Ta0, n_steps: int, dt: float,
+                 substeps: int) -> np.ndarray:
+    """:meth:`EffectSimulator.actuator_run` (preset shared command log, no plant) compiled: the lag-filter state at
+    the start of each of ``n_steps`` samples, (n, n_steps), from ``reset(..., k0, Ta=Ta0)``.
+
+    :param batch: per-element model; :param commands: the shared command log [N m], (n_samples,).
+    :param k0: start sample index, int or (n,); :param Ta0: lag state at ``k0`` [N m], float or (n,).
+    :param n_steps: samples to run; :param dt: sample time [s]; :param substeps: physics substeps per sample.
+    """
+    n = len(batch)
+    k0 = np.ascontiguousarray(np.broadcast_to(k0, (n,)), dtype=np.int64)
+    Ta0 = np.ascontiguousarray(np.broadcast_to(np.asarray(Ta0, dtype=float), (n,)))
+    out = np.empty((n, int(n_steps)))
+    _actuator(np.ascontiguousarray(commands, dtype=float), k0, Ta0, _params(batch), _flags(batch), float(dt),
+              int(substeps), out)
+    return out
+
+
+def _params(b: ModelBatch) -> np.ndarray:
+    """The (n, len(PARAM_COLUMNS)) parameter matrix of the kernels."""
+    return np.ascontiguousarray(np.column_stack([b.road, b.tau, b.delay, b.gain, b.sigma, b.r_eff, b.t_change,
+                                                 b.theta_after, b.c0, b.c2, b.fade, b.load, b.slide]), dtype=float)
+
+
+def _flags(b: ModelBatch) -> np.ndarray:
+    """Parts switched on: the numpy simulator switches each on for the whole batch when any element needs it."""
+    return np.array([np.any(b.delay > 0.0), np.any(b.tau > 0.0), np.any(b.fade != 0.0), np.any(b.load != 0.0),
+                     np.any(b.slide != 0.0), np.any(np.isfinite(b.t_change)),
+                     np.any(b.c0 != 0.0) or np.any(b.c2 != 0.0)], dtype=np.bool_)
 
 
 def supported(batch: ModelBatch) -> bool:
@@ -222,13 +284,6 @@ def simulate_windows(batch: ModelBatch, commands: np.ndarray, k0: np.ndarray, v0
     Ta0 = cmd[np.clip(k0, 0, len(cmd) - 1)] if Ta0 is None else np.broadcast_to(Ta0, (n,))
     lt0 = longitudinal_slip(v0, w0, batch.r_eff) if lt0 is None else np.broadcast_to(lt0, (n,))
     x0 = np.ascontiguousarray(np.column_stack([v0, w0, Ta0, lt0]), dtype=float)
-    b = batch
-    par = np.ascontiguousarray(np.column_stack([b.road, b.tau, b.delay, b.gain, b.sigma, b.r_eff, b.t_change,
-                                                b.theta_after, b.c0, b.c2, b.fade, b.load, b.slide]), dtype=float)
-    # the numpy simulator switches each part on for the whole batch when any element needs it: same here
-    flags = np.array([np.any(b.delay > 0.0), np.any(b.tau > 0.0), np.any(b.fade != 0.0), np.any(b.load != 0.0),
-                      np.any(b.slide != 0.0), np.any(np.isfinite(b.t_change)),
-                      np.any(b.c0 != 0.0) or np.any(b.c2 != 0.0)], dtype=np.bool_)
     out = np.zeros((3, n, int(horizon)))
-    _windows(cmd, k0, x0, par, flags, float(dt), float(t0), int(substeps), (p.m, p.J, p.Fz, p.g), bool(want_ax), out)
+    _windows(cmd, k0, x0, _params(batch), _flags(batch), float(dt), float(t0), int(substeps), (p.m, p.J, p.Fz, p.g), bool(want_ax), out)
     return out

@@ -163,9 +163,14 @@ def _effect_states(batch: ModelBatch, d: Data, vhat: np.ndarray):
     """Lag-filter output and transient slip (K, n) estimated from the command log and the measured slip."""
     Ta = None
     if np.any(batch.tau > 0):
-        sim = EffectSimulator(batch, d.dt, d.n, d.p, d.substeps, d.t0, commands=d.Tb)
-        sim.reset(vhat[:, 0], d.omega[0], k0=0, Ta=d.Tb[0])
-        Ta = sim.actuator_run(d.n)
+        if d.compiled and (np.any(batch.delay > 0) or np.any(batch.fade != 0)):
+            from fricenv.effects import kernels  # the lag alone runs as a linear filter, already fast
+
+            Ta = kernels.actuator_run(batch, d.Tb, 0, d.Tb[0], d.n, d.dt, d.substeps)
+        else:
+            sim = EffectSimulator(batch, d.dt, d.n, d.p, d.substeps, d.t0, commands=d.Tb)
+            sim.reset(vhat[:, 0], d.omega[0], k0=0, Ta=d.Tb[0])
+            Ta = sim.actuator_run(d.n)
     lt = None
     if RELAX_STATE_FROM_FILTER and np.any(batch.sigma > 0):
         lam = longitudinal_slip(vhat, d.omega[None, :], batch.r_eff[:, None])
