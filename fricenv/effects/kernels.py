@@ -39,22 +39,36 @@ PARAM_COLUMNS = ("B", "C", "E", "theta", "tau", "delay", "gain", "sigma", "r_eff
 _INDEX_EPS = 1e-9  # as EffectSimulator's delay index guard
 _PITCH_OMEGA = 2.0 * np.pi * 1.5  # as EffectSimulator's pitch mode [rad/s]
 _PITCH_ZETA = 0.4
+# the numpy error model: a float division by zero gives inf or NaN as in numpy (no Python exception check per
+# division, which also costs a branch in every division of the hot loop)
+_jit = numba.njit(cache=True, error_model="numpy")
+
+
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def _where(condition, x, y):
+    """``np.where`` on floats (numba's makes a 0-d array, which costs an allocation per call)."""
+    return x if condition else y
+
+
+# the numpy namespace the compiled copies of the library's formulas see: numpy with a scalar ``where``
+_NP = types.ModuleType("numpy_for_kernels")
+_NP.__dict__.update({k: getattr(np, k) for k in ("arctan", "sin", "cos", "exp", "maximum", "minimum", "isfinite")})
+_NP.where = _where
 
 
 def _compile(func, seen: dict | None = None):
-    """numba-compile ``func`` and, first, every plain Python function of fricenv it calls (rebound in a copy of
-    its globals), so that the library's own numpy formulas run compiled on floats."""
+    """numba-compile ``func`` and, first, every plain Python function of fricenv it calls, rebound in a copy of its
+    globals (with :data:`_NP` for numpy), so that the library's own numpy formulas run compiled on floats."""
     seen = {} if seen is None else seen
     if func in seen:
         return seen[func]
-    deps = {}
+    deps = {"np": _NP} if "np" in func.__code__.co_names else {}
     for name in func.__code__.co_names:
         g = func.__globals__.get(name)
         if isinstance(g, types.FunctionType) and g.__module__.startswith("fricenv"):
             deps[name] = _compile(g, seen)
-    if deps:
-        func = types.FunctionType(func.__code__, {**func.__globals__, **deps}, func.__name__, func.__defaults__)
-    seen[func] = compiled = numba.njit(cache=not deps)(func)
+    rebound = types.FunctionType(func.__code__, {**func.__globals__, **deps}, func.__name__, func.__defaults__)
+    seen[func] = compiled = numba.njit(error_model="numpy")(rebound)
     return compiled
 
 
@@ -68,7 +82,7 @@ _REFINE_PARTS = qc.REFINE_PARTS
 _REFINE_MIN_STEP = qc.REFINE_MIN_STEP
 
 
-@numba.njit(cache=True)
+@_jit
 def _plant_substep(v, w, Tb, B, C, E, th, s1, h, r, m, J, Fz):
     """One substep of :func:`quarter_car.step` for one car (``substeps=1``), the refinement included; ``s1`` is
     ``mu(1)`` at ``theta = 1`` (the sliding friction per unit peak factor)."""
@@ -81,7 +95,7 @@ def _plant_substep(v, w, Tb, B, C, E, th, s1, h, r, m, J, Fz):
     return _refined(v, w, Tb, B, C, E, th, s1, h / _REFINE_PARTS, r, m, J, Fz)
 
 
-@numba.njit(cache=True)
+@_jit
 def _refined(v, w, Tb, B, C, E, th, s1, h, r, m, J, Fz):
     """:func:`quarter_car.refine_where_unphysical`: :data:`REFINE_PARTS` substeps of ``h``, each refined again
     while longer than ``REFINE_MIN_STEP`` (bounded recursion)."""
@@ -96,7 +110,7 @@ def _refined(v, w, Tb, B, C, E, th, s1, h, r, m, J, Fz):
     return v, w
 
 
-@numba.njit(cache=True)
+@_jit
 def _theta(par, t_end, h, v, w, pitch, flags):
     """Peak factor over the substep ending at ``t_end`` (EffectSimulator._road_at, one element)."""
     th = par[3]
@@ -110,7 +124,7 @@ def _theta(par, t_end, h, v, w, pitch, flags):
     return th
 
 
-@numba.njit(cache=True)
+@_jit
 def _tire_force(par, t, h, v, w, lt, pitch, flags, Fz):
     """EffectSimulator.tire_force of one element at time ``t``."""
     th = _theta(par, t, h, v, w, pitch, flags)
@@ -119,12 +133,12 @@ def _tire_force(par, t, h, v, w, lt, pitch, flags, Fz):
     return Fz * _mf(_slip(v, w, par[8]), par[0], par[1], par[2], th)
 
 
-@numba.njit(cache=True)
+@_jit
 def _command(cmd, idx):
     return cmd[min(max(idx, 0), cmd.shape[0] - 1)]
 
 
-@numba.njit(cache=True)
+@_jit
 def _applied(cmd, k, j, par, Ta, energy, keep, spread, dt, substeps, flags):
     """Mean applied torque over substep ``j`` and the new lag state (EffectSimulator._actuator_substep)."""
     if flags[0]:
@@ -148,7 +162,7 @@ def _applied(cmd, k, j, par, Ta, energy, keep, spread, dt, substeps, flags):
     return torque, Ta
 
 
-@numba.njit(cache=True)
+@_jit
 def _sample(cmd, k, par, x, keep, spread, s1, dt, t0, substeps, flags, consts):
     """Advance one element by one sample (EffectSimulator.step); ``x`` = (v, w, Ta, lam_t, energy, pitch, rate)."""
     m, J, Fz, g = consts
@@ -180,7 +194,7 @@ def _sample(cmd, k, par, x, keep, spread, s1, dt, t0, substeps, flags, consts):
     return v, w, Ta, lt, energy, pitch, rate
 
 
-@numba.njit(cache=True)
+@_jit
 def _windows(cmd, k0, x0, par, flags, dt, t0, substeps, consts, want_ax, out):
     """Simulate every element's window: ``out`` (3, n, H) receives omega, v and a_x at the sample times."""
     m, Fz = consts[0], consts[2]
@@ -206,7 +220,7 @@ def _windows(cmd, k0, x0, par, flags, dt, t0, substeps, consts, want_ax, out):
                 k += 1
 
 
-@numba.njit(cache=True)
+@_jit
 def _actuator(cmd, k0, Ta0, par, flags, dt, substeps, out):
     """Lag state at the start of each sample, actuator chain only (EffectSimulator.actuator_run's loop)."""
     h = dt / substeps
