@@ -195,29 +195,36 @@ def _sample(cmd, k, par, x, keep, spread, s1, dt, t0, substeps, flags, consts):
 
 
 @_jit
-def _windows(cmd, k0, x0, par, flags, dt, t0, substeps, consts, want_ax, out):
-    """Simulate every element's window: ``out`` (3, n, H) receives omega, v and a_x at the sample times."""
+def _window(i, cmd, k0, x0, par, flags, dt, t0, substeps, consts, want_ax, out):
+    """Simulate element ``i``'s window: ``out[:, i]`` (3, H) receives omega, v and a_x at the sample times."""
     m, Fz = consts[0], consts[2]
     h = dt / substeps
+    p = par[i]
+    keep, spread = 0.0, 0.0
+    if p[4] > 0.0:
+        e = np.exp(-h / p[4])
+        keep, spread = e, p[4] / h * (1.0 - e)
+    s1 = _mf(1.0, p[0], p[1], p[2], 1.0)
+    x = (x0[i, 0], x0[i, 1], x0[i, 2], x0[i, 3], 0.0, 0.0, 0.0)
+    k = k0[i]
     H = out.shape[2]
-    for i in range(x0.shape[0]):
-        p = par[i]
-        keep, spread = 0.0, 0.0
-        if p[4] > 0.0:
-            e = np.exp(-h / p[4])
-            keep, spread = e, p[4] / h * (1.0 - e)
-        s1 = _mf(1.0, p[0], p[1], p[2], 1.0)
-        x = (x0[i, 0], x0[i, 1], x0[i, 2], x0[i, 3], 0.0, 0.0, 0.0)
-        k = k0[i]
-        for jj in range(H):
-            out[0, i, jj] = x[1]
-            out[1, i, jj] = x[0]
-            if want_ax:
-                F = _tire_force(p, t0 + k * dt, h, x[0], x[1], x[3], x[5], flags, Fz)
-                out[2, i, jj] = -(F + _drag(x[0], p[11], p[12])) / m
-            if jj < H - 1:
-                x = _sample(cmd, k, p, x, keep, spread, s1, dt, t0, substeps, flags, consts)
-                k += 1
+    for jj in range(H):
+        out[0, i, jj] = x[1]
+        out[1, i, jj] = x[0]
+        if want_ax:
+            F = _tire_force(p, t0 + k * dt, h, x[0], x[1], x[3], x[5], flags, Fz)
+            out[2, i, jj] = -(F + _drag(x[0], p[11], p[12])) / m
+        if jj < H - 1:
+            x = _sample(cmd, k, p, x, keep, spread, s1, dt, t0, substeps, flags, consts)
+            k += 1
+
+
+@numba.njit(cache=True, error_model="numpy", parallel=True)
+def _windows(cmd, k0, x0, par, flags, dt, t0, substeps, consts, want_ax, out):
+    """Every element's window (:func:`_window`), the elements shared among numba's threads (each is independent,
+    so the result does not depend on the thread count)."""
+    for i in numba.prange(x0.shape[0]):
+        _window(i, cmd, k0, x0, par, flags, dt, t0, substeps, consts, want_ax, out)
 
 
 @_jit
@@ -276,7 +283,7 @@ def supported(batch: ModelBatch) -> bool:
 
 def simulate_windows(batch: ModelBatch, commands: np.ndarray, k0: np.ndarray, v0: np.ndarray, w0: np.ndarray,
                      Ta0: np.ndarray | None, lt0: np.ndarray | None, horizon: int, dt: float, t0: float,
-                     substeps: int, p: qc.QuarterCarParams, want_ax: bool = True) -> np.ndarray:
+                     substeps: int, p: qc.QuarterCarParams, want_ax: bool = True, threads: int = 1) -> np.ndarray:
     """Every element of ``batch`` simulated ``horizon`` samples from its own start, as ``EffectSimulator`` (preset
     shared command log, ``reset(v0, w0, k0, Ta0, lt0)``, then ``step()`` between samples) does.
 
@@ -288,6 +295,7 @@ def simulate_windows(batch: ModelBatch, commands: np.ndarray, k0: np.ndarray, v0
     :param horizon: samples per window (the start included).
     :param dt: sample time [s]; :param t0: log time of sample 0 [s]; :param substeps: physics substeps per sample.
     :param p: quarter-car parameters; :param want_ax: also compute the acceleration (else that row is left 0).
+    :param threads: threads sharing the elements (at most numba's thread count).
     :return: (3, n, horizon): omega, v and a_x at the sample times.
     """
     cmd = np.ascontiguousarray(commands, dtype=float)
@@ -299,5 +307,7 @@ def simulate_windows(batch: ModelBatch, commands: np.ndarray, k0: np.ndarray, v0
     lt0 = longitudinal_slip(v0, w0, batch.r_eff) if lt0 is None else np.broadcast_to(lt0, (n,))
     x0 = np.ascontiguousarray(np.column_stack([v0, w0, Ta0, lt0]), dtype=float)
     out = np.zeros((3, n, int(horizon)))
-    _windows(cmd, k0, x0, _params(batch), _flags(batch), float(dt), float(t0), int(substeps), (p.m, p.J, p.Fz, p.g), bool(want_ax), out)
+    numba.set_num_threads(max(1, min(int(threads), numba.config.NUMBA_NUM_THREADS)))
+    _windows(cmd, k0, x0, _params(batch), _flags(batch), float(dt), float(t0), int(substeps), (p.m, p.J, p.Fz, p.g),
+             bool(want_ax), out)
     return out

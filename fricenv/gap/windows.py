@@ -7,6 +7,7 @@ fitted by Gauss-Newton.
 
 from __future__ import annotations
 
+import multiprocessing
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -17,6 +18,7 @@ from fricenv.effects import registry
 from fricenv.effects.quarter_car import EffectSimulator, ModelBatch
 from fricenv.gap.config import DiagnoseConfig
 from fricenv.gap.params import ROAD_NAMES
+from fricenv.gap.pool import default_jobs
 from fricenv.gap.speed import filtered_transient_slip, reconstruct_speed
 from fricenv.gap.sensors import condition_channel
 from fricenv.logs import QuarterCarLog
@@ -71,6 +73,7 @@ class Data:
     counts: np.ndarray | None = None  # (windows,) residual samples with a fresh measurement per window
     sensors: dict | None = None  # channel -> ChannelCondition.summary() (missing, outliers, filtered, quantised)
     compiled: bool = True  # windows simulated by the compiled kernel (DiagnoseConfig.compiled)
+    threads: int = 1  # kernel threads in the main process (its cores idle outside the parallel candidate fits)
 
     @property
     def n(self) -> int:
@@ -141,7 +144,8 @@ def prepare(log: QuarterCarLog, p: qc.QuarterCarParams, cfg: DiagnoseConfig) -> 
                 v=cond["v"].filled if "v" in cond else None, a_x=cond["a_x"].filled if "a_x" in cond else None,
                 sigma=sigma, v_smooth=v_smooth, starts=starts, fold=fold, test=fold == 0, horizon=H,
                 free_end=free_end, p=p, substeps=cfg.substeps, meas=meas, counts=_window_counts(meas, starts, H),
-                sensors={c: k.summary() for c, k in cond.items()}, compiled=cfg.compiled)
+                sensors={c: k.summary() for c, k in cond.items()}, compiled=cfg.compiled,
+                threads=default_jobs(cfg.jobs))
 
 
 def model_batch(effects: Sequence[str], names: Sequence[str], X: np.ndarray, p: qc.QuarterCarParams) -> ModelBatch:
@@ -195,8 +199,10 @@ def _simulate_windows(batch: ModelBatch, d: Data, widx: np.ndarray, v0, w0, Ta0,
         from fricenv.effects import kernels
 
         if kernels.supported(full):
+            # a pool worker is one of the diagnosis' ``jobs`` processes: one thread there
+            threads = d.threads if multiprocessing.parent_process() is None else 1
             sim = kernels.simulate_windows(full, d.Tb, k0, v0.ravel(), w0.ravel(), Ta0, lt0, H, d.dt, d.t0,
-                                           d.substeps, d.p, want_ax=d.a_x is not None)
+                                           d.substeps, d.p, want_ax=d.a_x is not None, threads=threads)
             out = {"omega": sim[0], **({"v": sim[1]} if d.v is not None else {}),
                    **({"a_x": sim[2]} if d.a_x is not None else {})}
             return {k: v.reshape(K, W, reps, H) for k, v in out.items()}

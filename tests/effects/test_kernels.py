@@ -194,3 +194,12 @@ def test_window_residuals_of_the_compiled_and_numpy_paths_agree():
     numpy_path = window_residuals(effects, names, x, replace(d, compiled=False))
     np.testing.assert_allclose(compiled, numpy_path, rtol=0, atol=1e-9 * np.max(np.abs(numpy_path)))
     assert d.compiled and DiagnoseConfig().compiled
+
+
+def test_the_thread_count_does_not_change_the_windows():
+    batch = _batch(["brake_lag", "relaxation_length", "drag"], 120, seed=13)
+    cmd = _commands(6)
+    k0, v0, w0 = _starts(batch, 7)
+    one = kernels.simulate_windows(batch, cmd, k0, v0, w0, None, None, H, DT, T0, SUBSTEPS, P, threads=1)
+    two = kernels.simulate_windows(batch, cmd, k0, v0, w0, None, None, H, DT, T0, SUBSTEPS, P, threads=2)
+    assert np.array_equal(one, two) and np.all(np.isfinite(one))
