@@ -18,6 +18,7 @@ says so and the caller keeps the numpy simulator. numba is imported by this modu
 
 from __future__ import annotations
 
+import os
 import types
 
 import numba
@@ -42,6 +43,10 @@ _PITCH_ZETA = 0.4
 # the numpy error model: a float division by zero gives inf or NaN as in numpy (no Python exception check per
 # division, which also costs a branch in every division of the hot loop)
 _jit = numba.njit(cache=True, error_model="numpy")
+# numba's own thread pool, which survives a fork: the gap tool forks its worker processes after the main process
+# ran kernels in threads (GNU OpenMP, numba's first choice here, aborts a forked child that uses it)
+if "NUMBA_THREADING_LAYER" not in os.environ:
+    numba.config.THREADING_LAYER = "workqueue"
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")
