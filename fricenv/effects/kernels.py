@@ -88,26 +88,31 @@ _REFINE_MIN_STEP = qc.REFINE_MIN_STEP
 
 
 @_jit
-def _plant_substep(v, w, Tb, B, C, E, th, s1, h, r, m, J, Fz):
-    """One substep of :func:`quarter_car.step` for one car (``substeps=1``), the refinement included; ``s1`` is
-    ``mu(1)`` at ``theta = 1`` (the sliding friction per unit peak factor)."""
-    road = (B, C, E, Fz * th, Fz * th * C * B, 1.0 - E, h * Fz * (th * s1) / m)
+def _substep_constants(h, r, m, J):
+    """:func:`quarter_car_fast.substep_constants` for rolling radius ``r`` (the same expressions)."""
     hg = h * _GAMMA
-    k = (r, hg / m, hg * r * r / J, hg * r / J, h / m, h * r / J, h / J)
+    return (r, hg / m, hg * r * r / J, hg * r / J, h / m, h * r / J, h / J)
+
+
+@_jit
+def _plant_substep(v, w, Tb, B, C, E, th, s1, h, k, m, J, Fz):
+    """One substep of :func:`quarter_car.step` for one car (``substeps=1``), the refinement included; ``s1`` is
+    ``mu(1)`` at ``theta = 1`` (the sliding friction per unit peak factor), ``k`` from :func:`_substep_constants`
+    for ``h``."""
+    road = (B, C, E, Fz * th, Fz * th * C * B, 1.0 - E, h * Fz * (th * s1) / m)
     v_new, w_new, broken = _ros2(v, w, Tb, road, k)
     if not broken or h <= _REFINE_MIN_STEP:
         return v_new, w_new
-    return _refined(v, w, Tb, B, C, E, th, s1, h / _REFINE_PARTS, r, m, J, Fz)
+    return _refined(v, w, Tb, B, C, E, th, s1, h / _REFINE_PARTS, k[0], m, J, Fz)
 
 
 @_jit
 def _refined(v, w, Tb, B, C, E, th, s1, h, r, m, J, Fz):
     """:func:`quarter_car.refine_where_unphysical`: :data:`REFINE_PARTS` substeps of ``h``, each refined again
     while longer than ``REFINE_MIN_STEP`` (bounded recursion)."""
+    k = _substep_constants(h, r, m, J)
     for _ in range(_REFINE_PARTS):
         road = (B, C, E, Fz * th, Fz * th * C * B, 1.0 - E, h * Fz * (th * s1) / m)
-        hg = h * _GAMMA
-        k = (r, hg / m, hg * r * r / J, hg * r / J, h / m, h * r / J, h / J)
         v_new, w_new, broken = _ros2(v, w, Tb, road, k)
         if broken and h > _REFINE_MIN_STEP:
             v_new, w_new = _refined(v, w, Tb, B, C, E, th, s1, h / _REFINE_PARTS, r, m, J, Fz)
@@ -168,7 +173,7 @@ def _applied(cmd, k, j, par, Ta, energy, keep, spread, dt, substeps, flags):
 
 
 @_jit
-def _sample(cmd, k, par, x, keep, spread, s1, dt, t0, substeps, flags, consts):
+def _sample(cmd, k, par, x, keep, spread, s1, ks, dt, t0, substeps, flags, consts):
     """Advance one element by one sample (EffectSimulator.step); ``x`` = (v, w, Ta, lam_t, energy, pitch, rate)."""
     m, J, Fz, g = consts
     v, w, Ta, lt, energy, pitch, rate = x
@@ -187,7 +192,7 @@ def _sample(cmd, k, par, x, keep, spread, s1, dt, t0, substeps, flags, consts):
         else:
             if flags[6]:
                 v = max(v - 0.5 * h * _drag(v, par[11], par[12]) / m, 0.0)
-            v, w = _plant_substep(v, w, torque, par[0], par[1], par[2], th, s1, h, par[8], m, J, Fz)
+            v, w = _plant_substep(v, w, torque, par[0], par[1], par[2], th, s1, h, ks, m, J, Fz)
             if flags[6]:
                 v = max(v - 0.5 * h * _drag(v, par[11], par[12]) / m, 0.0)
         if flags[2]:
@@ -210,6 +215,7 @@ def _window(i, cmd, k0, x0, par, flags, dt, t0, substeps, consts, want_ax, out):
         e = np.exp(-h / p[4])
         keep, spread = e, p[4] / h * (1.0 - e)
     s1 = _mf(1.0, p[0], p[1], p[2], 1.0)
+    ks = _substep_constants(h, p[8], consts[0], consts[1])
     x = (x0[i, 0], x0[i, 1], x0[i, 2], x0[i, 3], 0.0, 0.0, 0.0)
     k = k0[i]
     H = out.shape[2]
@@ -220,7 +226,7 @@ def _window(i, cmd, k0, x0, par, flags, dt, t0, substeps, consts, want_ax, out):
             F = _tire_force(p, t0 + k * dt, h, x[0], x[1], x[3], x[5], flags, Fz)
             out[2, i, jj] = -(F + _drag(x[0], p[11], p[12])) / m
         if jj < H - 1:
-            x = _sample(cmd, k, p, x, keep, spread, s1, dt, t0, substeps, flags, consts)
+            x = _sample(cmd, k, p, x, keep, spread, s1, ks, dt, t0, substeps, flags, consts)
             k += 1
 
 

@@ -109,7 +109,8 @@ def test_compiled_windows_take_the_lag_state_and_transient_slip_given():
 def _scalar_step(v, w, Tb, road, h, r):
     B, C, E, th = road
     s1 = float(magic_formula(1.0, B, C, E, 1.0))
-    return kernels._plant_substep(v, w, Tb, B, C, E, th, s1, h, r, P.m, P.J, P.Fz)
+    return kernels._plant_substep(v, w, Tb, B, C, E, th, s1, h, kernels._substep_constants(h, r, P.m, P.J), P.m,
+                                  P.J, P.Fz)
 
 
 def test_compiled_substep_equals_quarter_car_step_with_lock_ups_and_refinements():
