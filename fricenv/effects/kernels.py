@@ -294,7 +294,8 @@ def supported(batch: ModelBatch) -> bool:
 
 def simulate_windows(batch: ModelBatch, commands: np.ndarray, k0: np.ndarray, v0: np.ndarray, w0: np.ndarray,
                      Ta0: np.ndarray | None, lt0: np.ndarray | None, horizon: int, dt: float, t0: float,
-                     substeps: int, p: qc.QuarterCarParams, want_ax: bool = True, threads: int = 1) -> np.ndarray:
+                     substeps: int, p: qc.QuarterCarParams, want_ax: bool = True, threads: int = 1,
+                     repeat: int = 1) -> np.ndarray:
     """Every element of ``batch`` simulated ``horizon`` samples from its own start, as ``EffectSimulator`` (preset
     shared command log, ``reset(v0, w0, k0, Ta0, lt0)``, then ``step()`` between samples) does.
 
@@ -307,18 +308,20 @@ def simulate_windows(batch: ModelBatch, commands: np.ndarray, k0: np.ndarray, v0
     :param dt: sample time [s]; :param t0: log time of sample 0 [s]; :param substeps: physics substeps per sample.
     :param p: quarter-car parameters; :param want_ax: also compute the acceleration (else that row is left 0).
     :param threads: threads sharing the elements (at most numba's thread count).
+    :param repeat: each element of ``batch`` stands for this many consecutive windows (``batch.repeat(repeat)``
+        without building it); the other arguments have ``len(batch) * repeat`` entries.
     :return: (3, n, horizon): omega, v and a_x at the sample times.
     """
     cmd = np.ascontiguousarray(commands, dtype=float)
-    n = len(batch)
+    n = len(batch) * int(repeat)
     k0 = np.ascontiguousarray(np.broadcast_to(k0, (n,)), dtype=np.int64)
     v0 = np.broadcast_to(np.asarray(v0, dtype=float), (n,))
     w0 = np.broadcast_to(np.asarray(w0, dtype=float), (n,))
     Ta0 = cmd[np.clip(k0, 0, len(cmd) - 1)] if Ta0 is None else np.broadcast_to(Ta0, (n,))
-    lt0 = longitudinal_slip(v0, w0, batch.r_eff) if lt0 is None else np.broadcast_to(lt0, (n,))
+    lt0 = longitudinal_slip(v0, w0, np.repeat(batch.r_eff, repeat)) if lt0 is None else np.broadcast_to(lt0, (n,))
     x0 = np.ascontiguousarray(np.column_stack([v0, w0, Ta0, lt0]), dtype=float)
     out = np.zeros((3, n, int(horizon)))
     numba.set_num_threads(max(1, min(int(threads), numba.config.NUMBA_NUM_THREADS)))
-    _windows(cmd, k0, x0, _params(batch), _flags(batch), float(dt), float(t0), int(substeps), (p.m, p.J, p.Fz, p.g),
+    _windows(cmd, k0, x0, np.repeat(_params(batch), repeat, axis=0), _flags(batch), float(dt), float(t0), int(substeps), (p.m, p.J, p.Fz, p.g),
              bool(want_ax), out)
     return out

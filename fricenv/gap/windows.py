@@ -191,21 +191,22 @@ def _simulate_windows(batch: ModelBatch, d: Data, widx: np.ndarray, v0, w0, Ta0,
     effect with Python hooks; else the numpy :class:`EffectSimulator`, sample by sample.
     """
     K, W, H = len(batch), len(widx), d.horizon
-    full = batch.repeat(W * reps)
     k0 = np.tile(np.repeat(d.starts[widx], reps), K)
     Ta0 = None if Ta0 is None else Ta0.ravel()
     lt0 = None if lt0 is None else lt0.ravel()
     if d.compiled:
         from fricenv.effects import kernels
 
-        if kernels.supported(full):
+        if kernels.supported(batch):
             # a pool worker is one of the diagnosis' ``jobs`` processes: one thread there
             threads = d.threads if multiprocessing.parent_process() is None else 1
-            sim = kernels.simulate_windows(full, d.Tb, k0, v0.ravel(), w0.ravel(), Ta0, lt0, H, d.dt, d.t0,
-                                           d.substeps, d.p, want_ax=d.a_x is not None, threads=threads)
+            sim = kernels.simulate_windows(batch, d.Tb, k0, v0.ravel(), w0.ravel(), Ta0, lt0, H, d.dt, d.t0,
+                                           d.substeps, d.p, want_ax=d.a_x is not None, threads=threads,
+                                           repeat=W * reps)
             out = {"omega": sim[0], **({"v": sim[1]} if d.v is not None else {}),
                    **({"a_x": sim[2]} if d.a_x is not None else {})}
             return {k: v.reshape(K, W, reps, H) for k, v in out.items()}
+    full = batch.repeat(W * reps)
     sim = EffectSimulator(full, d.dt, d.n, d.p, d.substeps, d.t0, commands=d.Tb)
     sim.reset(v0.ravel(), w0.ravel(), k0=k0, Ta=Ta0, lam_t=lt0)
     out = {"omega": np.empty((K * W * reps, H))}

@@ -204,3 +204,13 @@ def test_the_thread_count_does_not_change_the_windows():
     one = kernels.simulate_windows(batch, cmd, k0, v0, w0, None, None, H, DT, T0, SUBSTEPS, P, threads=1)
     two = kernels.simulate_windows(batch, cmd, k0, v0, w0, None, None, H, DT, T0, SUBSTEPS, P, threads=2)
     assert np.array_equal(one, two) and np.all(np.isfinite(one))
+
+
+def test_repeat_stands_for_the_repeated_batch():
+    batch = _batch(["brake_delay", "mu_change", "radius_error"], 30, seed=14)
+    full = batch.repeat(4)
+    cmd = _commands(7)
+    k0, v0, w0 = _starts(full, 8)
+    expected = kernels.simulate_windows(full, cmd, k0, v0, w0, None, None, H, DT, T0, SUBSTEPS, P)
+    out = kernels.simulate_windows(batch, cmd, k0, v0, w0, None, None, H, DT, T0, SUBSTEPS, P, repeat=4)
+    assert np.array_equal(out, expected) and out.shape == (3, 120, H)
