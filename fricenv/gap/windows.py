@@ -19,8 +19,8 @@ from fricenv.effects.quarter_car import EffectSimulator, ModelBatch
 from fricenv.gap.config import DiagnoseConfig
 from fricenv.gap.params import ROAD_NAMES
 from fricenv.gap.pool import default_jobs
-from fricenv.gap.speed import filtered_transient_slip, reconstruct_speed
 from fricenv.gap.sensors import condition_channel
+from fricenv.gap.speed import filtered_transient_slip, reconstruct_speed
 from fricenv.logs import QuarterCarLog
 from fricenv.plants import quarter_car as qc
 from fricenv.plants.tire import longitudinal_slip
