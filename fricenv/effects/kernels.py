@@ -286,6 +286,40 @@ def _flags(b: ModelBatch) -> np.ndarray:
                      np.any(b.c0 != 0.0) or np.any(b.c2 != 0.0)], dtype=np.bool_)
 
 
+def _guard_cache() -> None:
+    """Drop the on-disk compiled code when a module whose functions or constants it compiled in has changed.
+
+    numba checks a cached function against its own source file only: an edit of the Magic Formula or of the ROS2
+    substep in another module would otherwise leave the old formula compiled in. The dependencies' sources are
+    hashed next to the cache; a different hash flushes this module's cached functions once (they recompile).
+    """
+    import hashlib
+    import sys
+
+    modules = [sys.modules[m] for m in ("fricenv.plants.tire", "fricenv.plants.quarter_car",
+                                        "fricenv.plants.quarter_car_fast", "fricenv.effects.relaxation",
+                                        "fricenv.effects.library")]
+    digest = hashlib.sha256(b"".join(open(m.__file__, "rb").read() for m in modules)).hexdigest()
+    cached = [f for f in globals().values() if isinstance(f, numba.core.registry.CPUDispatcher)
+              and getattr(f, "_cache", None) is not None and f._cache.__class__.__name__ == "FunctionCache"]
+    if not cached:
+        return
+    stamp = os.path.join(cached[0]._cache.cache_path, "kernels.deps")
+    try:
+        with open(stamp) as fh:
+            if fh.read() == digest:
+                return
+    except OSError:
+        pass
+    for f in cached:
+        f._cache.flush()
+    try:
+        with open(stamp, "w") as fh:
+            fh.write(digest)
+    except OSError:  # a read-only install: numba then caches elsewhere or not at all
+        pass
+
+
 def supported(batch: ModelBatch) -> bool:
     """Whether :func:`simulate_windows` can run ``batch``: no plug-in effect with Python hooks switched on."""
     return not any(not e.builtin and e.param_names[0] in batch.extra and (e.torque is not None or e.theta is not None)
@@ -325,3 +359,6 @@ def simulate_windows(batch: ModelBatch, commands: np.ndarray, k0: np.ndarray, v0
     _windows(cmd, k0, x0, np.repeat(_params(batch), repeat, axis=0), _flags(batch), float(dt), float(t0), int(substeps), (p.m, p.J, p.Fz, p.g),
              bool(want_ax), out)
     return out
+
+
+_guard_cache()

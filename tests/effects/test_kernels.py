@@ -214,3 +214,24 @@ def test_repeat_stands_for_the_repeated_batch():
     expected = kernels.simulate_windows(full, cmd, k0, v0, w0, None, None, H, DT, T0, SUBSTEPS, P)
     out = kernels.simulate_windows(batch, cmd, k0, v0, w0, None, None, H, DT, T0, SUBSTEPS, P, repeat=4)
     assert np.array_equal(out, expected) and out.shape == (3, 120, H)
+
+
+def test_a_changed_dependency_flushes_the_compiled_cache(monkeypatch, tmp_path):
+    """numba checks only kernels.py's own source: a different hash of the compiled-in modules must flush."""
+    import os
+
+    import numba
+
+    flushed = []
+    monkeypatch.setattr(numba.core.caching.Cache, "flush", lambda self: flushed.append(self))
+    stamp = os.path.join(kernels._windows._cache.cache_path, "kernels.deps")
+    with open(stamp) as fh:
+        digest = fh.read()
+    kernels._guard_cache()
+    assert flushed == []  # unchanged dependencies: the cache is kept
+    with open(stamp, "w") as fh:
+        fh.write("an older formula")
+    kernels._guard_cache()
+    assert len(flushed) >= 5  # every cached kernel function
+    with open(stamp) as fh:
+        assert fh.read() == digest
