@@ -24,6 +24,7 @@ import types
 import numba
 import numpy as np
 
+from fricenv.effects import quarter_car as sim
 from fricenv.effects import registry
 from fricenv.effects.batch import ModelBatch
 from fricenv.effects.library import drag_force
@@ -37,9 +38,8 @@ __all__ = ["PARAM_COLUMNS", "actuator_run", "simulate_windows", "supported"]
 # Columns of the per-element parameter matrix the kernel reads.
 PARAM_COLUMNS = ("B", "C", "E", "theta", "tau", "delay", "gain", "sigma", "r_eff", "t_change", "theta_after", "c0",
                  "c2", "fade", "load", "slide")
-_INDEX_EPS = 1e-9  # as EffectSimulator's delay index guard
-_PITCH_OMEGA = 2.0 * np.pi * 1.5  # as EffectSimulator's pitch mode [rad/s]
-_PITCH_ZETA = 0.4
+_INDEX_EPS = sim._INDEX_EPS  # EffectSimulator's delay index guard
+_PITCH_OMEGA, _PITCH_ZETA = sim._PITCH_OMEGA, sim._PITCH_ZETA  # EffectSimulator's pitch mode
 # the numpy error model: a float division by zero gives inf or NaN as in numpy (no Python exception check per
 # division, which also costs a branch in every division of the hot loop)
 _jit = numba.njit(cache=True, error_model="numpy")
@@ -61,10 +61,12 @@ _NP.__dict__.update({k: getattr(np, k) for k in ("arctan", "sin", "cos", "exp", 
 _NP.where = _where
 
 
-def _compile(func, seen: dict | None = None):
+_COMPILED: dict = {}  # Python function -> its compiled copy
+
+
+def _compile(func, seen: dict = _COMPILED):
     """numba-compile ``func`` and, first, every plain Python function of fricenv it calls, rebound in a copy of its
     globals (with :data:`_NP` for numpy), so that the library's own numpy formulas run compiled on floats."""
-    seen = {} if seen is None else seen
     if func in seen:
         return seen[func]
     deps = {"np": _NP} if "np" in func.__code__.co_names else {}
