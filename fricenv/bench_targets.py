@@ -309,36 +309,50 @@ def _speed_reconstruction_ms(log) -> tuple[float, float]:
     return out[0], out[1]
 
 
-def bench_gap(args: argparse.Namespace) -> dict[str, Any]:
-    """Wall seconds to diagnose one 5 s log on 2 cores (all channels, and t, T_b, omega only), and ms per speed
-    reconstruction (the no-``v`` logs' inner loop) against its sample-by-sample reference."""
+GAP_PATHS = {"compiled": True, "numpy": False}  # window simulators timed in the same run (DiagnoseConfig.compiled)
+
+
+def _diagnose_seconds(log, compiled: bool) -> float:
     import warnings
 
     from fricenv.gap.diagnose import DiagnoseConfig, diagnose
 
-    seconds: dict[str, list[float]] = {"all_channels": [], "required_only": []}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        t = time.perf_counter()
+        diagnose(log, cfg=DiagnoseConfig(jobs=GAP_JOBS, compiled=compiled))
+        return time.perf_counter() - t
+
+
+def bench_gap(args: argparse.Namespace) -> dict[str, Any]:
+    """Wall seconds to diagnose one 5 s log on 2 cores (all channels, and t, T_b, omega only) with the compiled
+    window simulator and with the numpy one (the path before issue 18) in the same run, interleaved, and their
+    ratio; ms per speed reconstruction (the no-``v`` logs' inner loop) against its sample-by-sample reference."""
+    channels = ("all_channels", "required_only")
+    seconds = {path: {key: [] for key in channels} for path in GAP_PATHS}
     newton, sequential = [], []
     for k in range(args.repeats):
-        for key, times in seconds.items():
+        for key in channels:
             log = _gap_log(args.seed + k, key == "all_channels")
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore", RuntimeWarning)
-                t = time.perf_counter()
-                diagnose(log, cfg=DiagnoseConfig(jobs=GAP_JOBS))
-                times.append(time.perf_counter() - t)
+            for path, compiled in GAP_PATHS.items():
+                seconds[path][key].append(_diagnose_seconds(log, compiled))
         a, b = _speed_reconstruction_ms(_gap_log(args.seed + k, False))
         newton.append(a)
         sequential.append(b)
-    out = {"gap_diagnose_seconds": {key: statistics.median(v) for key, v in seconds.items()},
-           "gap_diagnose_seconds_all": seconds,
+    med = {path: {key: statistics.median(v) for key, v in by.items()} for path, by in seconds.items()}
+    out = {"gap_diagnose_seconds": med["compiled"], "gap_diagnose_seconds_numpy": med["numpy"],
+           "gap_speedup": {key: med["numpy"][key] / med["compiled"][key] for key in channels},
+           "gap_diagnose_seconds_all": seconds["compiled"], "gap_diagnose_seconds_numpy_all": seconds["numpy"],
            "speed_reconstruction_ms": {"newton": statistics.median(newton),
                                        "sequential": statistics.median(sequential)}}
     out["speed_reconstruction_ms"]["ratio"] = out["speed_reconstruction_ms"]["sequential"] / \
         out["speed_reconstruction_ms"]["newton"]
-    s, r = out["gap_diagnose_seconds"], out["speed_reconstruction_ms"]
-    print(f"gap: one 5 s log diagnosed in {s['all_channels']:.1f} s with all channels, {s['required_only']:.1f} s "
-          f"with t, T_b, omega only ({GAP_JOBS} processes, median of {args.repeats}); speed reconstruction "
-          f"{r['newton']:.2f} ms per call, sample-by-sample {r['sequential']:.2f} ms ({r['ratio']:.1f}x)")
+    s, o, x, r = med["compiled"], med["numpy"], out["gap_speedup"], out["speed_reconstruction_ms"]
+    print(f"gap: one 5 s log diagnosed in {s['all_channels']:.1f} s with all channels (numpy path "
+          f"{o['all_channels']:.1f} s, {x['all_channels']:.1f}x), {s['required_only']:.1f} s with t, T_b, omega only "
+          f"(numpy path {o['required_only']:.1f} s, {x['required_only']:.1f}x) ({GAP_JOBS} processes, median of "
+          f"{args.repeats}); speed reconstruction {r['newton']:.2f} ms per call, sample-by-sample "
+          f"{r['sequential']:.2f} ms ({r['ratio']:.1f}x)")
     return out
 
 

@@ -8,8 +8,9 @@ Targets (run one, or all when none is given):
   estimators  mean update time per estimator (estimators.bench), microseconds.
   ppo         a fixed SB3 PPO training slice on the vector env: steps/s and the share of time spent in the env.
   gap         one 5 s log diagnosed by `fricenv gap diagnose` on 2 cores, with all channels and with t, T_b, omega
-              only (wall seconds), and the speed reconstruction of the latter against its sample-by-sample
-              reference (ms per call). Not part of "all": about a minute per repeat.
+              only (wall seconds), with the compiled window simulator and with the numpy one (the path before
+              issue 18) in the same run, and their ratio; the speed reconstruction of the latter against its
+              sample-by-sample reference (ms per call). Not part of "all": about a minute per repeat.
   training    PPO training speed as `fricenv train` runs it (committed hyperparameters): env-steps/s without
               estimates, with the EKF/RLS and with the MHE in the same run, and the ratios to the first. Not part of
               "all": about a minute per repeat.
@@ -17,7 +18,8 @@ Targets (run one, or all when none is given):
 Every figure is a median over --repeats; ratios divide by Pendulum-v1 measured in the same run (a target that
 needs the reference measures it too). --json PATH writes single_steps_per_s, pendulum_steps_per_s,
 vector_steps_per_s {"1", "64", "1024"}, estimator_update_us {name: mean}, ppo_steps_per_s, ratio_to_pendulum
-(and gap_diagnose_seconds {all_channels, required_only}, speed_reconstruction_ms for the gap target).
+(and gap_diagnose_seconds {all_channels, required_only} of the compiled path, gap_diagnose_seconds_numpy of the
+numpy path, gap_speedup = numpy / compiled, speed_reconstruction_ms for the gap target).
 More targets plug in with one line in TARGETS (or fricenv.bench_targets.TARGETS).
 """
 

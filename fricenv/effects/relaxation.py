@@ -13,9 +13,9 @@ import numpy as np
 
 from fricenv.effects.library import drag_force
 from fricenv.plants import quarter_car as qc
-from fricenv.plants.tire import longitudinal_slip, magic_formula, magic_formula_dslip, slip_and_partials
+from fricenv.plants.tire import longitudinal_slip, magic_formula, magic_formula_and_dslip, slip_and_partials
 
-__all__ = ["RELAX_GAMMA", "relaxation_derivatives", "relaxation_step"]
+__all__ = ["RELAX_GAMMA", "relaxation_derivatives", "relaxation_rhs", "relaxation_step", "relaxation_step_elementwise"]
 
 # Rosenbrock gamma of the relaxation plant's steps: 1/2 (linearly implicit trapezoidal rule, A-stable, second
 # order) leaves the oscillatory mode of the transient slip and the wheel (about 25 Hz on dry asphalt at
@@ -37,19 +37,17 @@ def relaxation_derivatives(v, omega, lam_t, Tb, road, r, sigma, c0, c2, p: qc.Qu
     :param c2: air drag coefficient [N s^2/m^2]; :param p: quarter-car parameters (m, J, F_z).
     """
     road = np.asarray(road, dtype=float)
-    F = p.Fz * magic_formula(lam_t, road[..., 0], road[..., 1], road[..., 2], road[..., 3])
+    return relaxation_rhs(v, omega, lam_t, Tb, road[..., 0], road[..., 1], road[..., 2], road[..., 3], r, sigma, c0,
+                          c2, p.m, p.J, p.Fz)
+
+
+def relaxation_rhs(v, omega, lam_t, Tb, B, C, E, th, r, sigma, c0, c2, m: float, J: float, Fz: float):
+    """:func:`relaxation_derivatives` elementwise, on arrays or floats alike (numba compiles it for the window
+    kernels, :mod:`fricenv.effects.kernels`): the road as (B, C, E, theta), the plant as (m, J, F_z)."""
+    F = Fz * magic_formula(lam_t, B, C, E, th)
     drag = drag_force(v, c0, c2)
     lam = longitudinal_slip(v, omega, r)
-    return -(F + drag) / p.m, (r * F - Tb) / p.J, v * (lam - lam_t) / sigma
-
-
-def _solve_relax(m, b: np.ndarray) -> np.ndarray:
-    """Solve ``M k = b`` (b: (n, 3)) for the sparse ``M = [[m00, 0, m02], [0, 1, m12], [m20, m21, m22]]`` of
-    :func:`relaxation_step` by elimination onto the transient slip (no inverse formed; ``m00 >= 1``)."""
-    m00, m02, m12, m20, m21, m22 = m
-    b0, b1, b2 = b[:, 0], b[:, 1], b[:, 2]
-    k2 = (b2 - m20 * b0 / m00 - m21 * b1) / (m22 - m20 * m02 / m00 - m21 * m12)
-    return np.stack([(b0 - m02 * k2) / m00, b1 - m12 * k2, k2], axis=1)
+    return -(F + drag) / m, (r * F - Tb) / J, v * (lam - lam_t) / sigma
 
 
 def relaxation_step(v, omega, lam_t, Tb, road, h: float, r, sigma, c0, c2,
@@ -62,25 +60,35 @@ def relaxation_step(v, omega, lam_t, Tb, road, h: float, r, sigma, c0, c2,
     :return: (v, omega, lambda_t) after ``h``.
     """
     road = np.asarray(road, dtype=float)
-    B, C, E, th = road[..., 0], road[..., 1], road[..., 2], road[..., 3]
-    fz_dmu = p.Fz * magic_formula_dslip(lam_t, B, C, E, th)
+    return relaxation_step_elementwise(v, omega, lam_t, Tb, road[..., 0], road[..., 1], road[..., 2], road[..., 3],
+                                       h, r, sigma, c0, c2, p.m, p.J, p.Fz, gamma)
+
+
+def relaxation_step_elementwise(v, omega, lam_t, Tb, B, C, E, th, h: float, r, sigma, c0, c2, m: float, J: float,
+                                Fz: float, gamma: float):
+    """:func:`relaxation_step` elementwise, on arrays or floats alike (numba compiles it for the window kernels):
+    the one form of the step. Parameters as in :func:`relaxation_rhs`."""
+    fz_dmu = Fz * magic_formula_and_dslip(lam_t, B, C, E, th)[1]
     lam, dlam_dv, dlam_dw = slip_and_partials(v, omega, r)
     hg = h * gamma
-    # I - h gamma A; the Jacobian A has zeros at (0, 1), (1, 0), (1, 1), so M is sparse the same way
-    m00 = 1.0 - hg * np.where(v > 0.0, -2.0 * c2 * v / p.m, 0.0)
-    m02 = hg * fz_dmu / p.m
-    m12 = -hg * r * fz_dmu / p.J
+    # I - h gamma A; the Jacobian A has zeros at (0, 1), (1, 0), (1, 1), so M is sparse the same way:
+    # M = [[m00, 0, m02], [0, 1, m12], [m20, m21, m22]], solved by elimination onto the transient slip (m00 >= 1)
+    m00 = 1.0 - hg * np.where(v > 0.0, -2.0 * c2 * v / m, 0.0)
+    m02 = hg * fz_dmu / m
+    m12 = -hg * r * fz_dmu / J
     m20 = -hg * ((lam - lam_t) / sigma + v / sigma * dlam_dv)
     m21 = -hg * v / sigma * dlam_dw
     m22 = 1.0 + hg * v / sigma
-    m = (m00, m02, m12, m20, m21, m22)
-
-    def f(x):
-        return np.stack(relaxation_derivatives(x[:, 0], np.maximum(x[:, 1], 0.0), x[:, 2], Tb, road, r, sigma,
-                                               c0, c2, p), axis=1)
-
-    x = np.stack([v, omega, lam_t], axis=1)
-    k1 = _solve_relax(m, f(x))
-    k2 = _solve_relax(m, f(x + h * k1) - 2.0 * k1)
-    x = x + h * (1.5 * k1 + 0.5 * k2)
-    return np.maximum(x[:, 0], 0.0), np.maximum(x[:, 1], 0.0), np.clip(x[:, 2], -1.0, 1.0)
+    schur = m22 - m20 * m02 / m00 - m21 * m12
+    b0, b1, b2 = relaxation_rhs(v, np.maximum(omega, 0.0), lam_t, Tb, B, C, E, th, r, sigma, c0, c2, m, J, Fz)
+    k12 = (b2 - m20 * b0 / m00 - m21 * b1) / schur
+    k10, k11 = (b0 - m02 * k12) / m00, b1 - m12 * k12
+    b0, b1, b2 = relaxation_rhs(v + h * k10, np.maximum(omega + h * k11, 0.0), lam_t + h * k12, Tb, B, C, E, th, r,
+                                sigma, c0, c2, m, J, Fz)
+    b0, b1, b2 = b0 - 2.0 * k10, b1 - 2.0 * k11, b2 - 2.0 * k12
+    k22 = (b2 - m20 * b0 / m00 - m21 * b1) / schur
+    k20, k21 = (b0 - m02 * k22) / m00, b1 - m12 * k22
+    v_new = v + h * (1.5 * k10 + 0.5 * k20)
+    w_new = omega + h * (1.5 * k11 + 0.5 * k21)
+    lt_new = lam_t + h * (1.5 * k12 + 0.5 * k22)
+    return np.maximum(v_new, 0.0), np.maximum(w_new, 0.0), np.minimum(np.maximum(lt_new, -1.0), 1.0)

@@ -38,6 +38,9 @@ class DiagnoseConfig:
     drift_check: bool = True  # refit the verdict's model on each half of the log; a drift makes it unexplained
     drift_z: float = 3.0  # paired z of the early/late refit over the constant model for a drift (one test) [-]
     candidates: tuple[str, ...] = tuple(EFFECTS)  # effects to try
+    # Prediction windows simulated by the compiled (numba) kernel; False runs the numpy EffectSimulator path (the
+    # path before issue 18, kept to time the speed-up and to check the kernel against it)
+    compiled: bool = True
 
     def check(self) -> None:
         """Reject unknown candidates and losses (at diagnosis time: effects may be registered after import).

@@ -103,13 +103,19 @@ def least_squares_run(effects: Sequence[str], names: Sequence[str], x0: np.ndarr
         return cache[key]
 
     def jac(z):
-        # forward differences, stepping inwards at an upper bound; all perturbations in one batch
+        # forward differences, stepping inwards at an upper bound; all perturbations in one batch, with the
+        # residuals at z itself from the cache when scipy has just evaluated them (it almost always has)
         h = np.where(z + steps > hi[fidx], -steps, steps)
-        Z = [z] + [z + h[i] * np.eye(len(z))[i] for i in range(len(z))]
-        R = evaluate(Z)
+        Z = [z + h[i] * np.eye(len(z))[i] for i in range(len(z))]
+        key = z.tobytes()
+        if key in cache:
+            R0, R = cache[key], evaluate(Z)
+        else:
+            R = evaluate([z, *Z])
+            R0, R = R[0], R[1:]
         cache.clear()
-        cache[z.tobytes()] = R[0]
-        return ((R[1:] - R[0]) / h[:, None]).T
+        cache[key] = R0
+        return ((R - R0) / h[:, None]).T
 
     z0 = np.clip(x0[fidx], lo[fidx] + 1e-12, hi[fidx] - 1e-12)
     sol = least_squares(fun, z0, jac=jac, bounds=(lo[fidx], hi[fidx]),

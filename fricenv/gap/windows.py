@@ -7,6 +7,7 @@ fitted by Gauss-Newton.
 
 from __future__ import annotations
 
+import multiprocessing
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -17,8 +18,9 @@ from fricenv.effects import registry
 from fricenv.effects.quarter_car import EffectSimulator, ModelBatch
 from fricenv.gap.config import DiagnoseConfig
 from fricenv.gap.params import ROAD_NAMES
-from fricenv.gap.speed import filtered_transient_slip, reconstruct_speed
+from fricenv.gap.pool import default_jobs
 from fricenv.gap.sensors import condition_channel
+from fricenv.gap.speed import filtered_transient_slip, reconstruct_speed
 from fricenv.logs import QuarterCarLog
 from fricenv.plants import quarter_car as qc
 from fricenv.plants.tire import longitudinal_slip
@@ -70,6 +72,8 @@ class Data:
     meas: dict | None = None  # channel -> measured samples, NaN where missing, held or an outlier
     counts: np.ndarray | None = None  # (windows,) residual samples with a fresh measurement per window
     sensors: dict | None = None  # channel -> ChannelCondition.summary() (missing, outliers, filtered, quantised)
+    compiled: bool = True  # windows simulated by the compiled kernel (DiagnoseConfig.compiled)
+    threads: int = 1  # kernel threads in the main process (its cores idle outside the parallel candidate fits)
 
     @property
     def n(self) -> int:
@@ -140,7 +144,8 @@ def prepare(log: QuarterCarLog, p: qc.QuarterCarParams, cfg: DiagnoseConfig) -> 
                 v=cond["v"].filled if "v" in cond else None, a_x=cond["a_x"].filled if "a_x" in cond else None,
                 sigma=sigma, v_smooth=v_smooth, starts=starts, fold=fold, test=fold == 0, horizon=H,
                 free_end=free_end, p=p, substeps=cfg.substeps, meas=meas, counts=_window_counts(meas, starts, H),
-                sensors={c: k.summary() for c, k in cond.items()})
+                sensors={c: k.summary() for c, k in cond.items()}, compiled=cfg.compiled,
+                threads=default_jobs(cfg.jobs))
 
 
 def model_batch(effects: Sequence[str], names: Sequence[str], X: np.ndarray, p: qc.QuarterCarParams) -> ModelBatch:
@@ -162,9 +167,14 @@ def _effect_states(batch: ModelBatch, d: Data, vhat: np.ndarray):
     """Lag-filter output and transient slip (K, n) estimated from the command log and the measured slip."""
     Ta = None
     if np.any(batch.tau > 0):
-        sim = EffectSimulator(batch, d.dt, d.n, d.p, d.substeps, d.t0, commands=d.Tb)
-        sim.reset(vhat[:, 0], d.omega[0], k0=0, Ta=d.Tb[0])
-        Ta = sim.actuator_run(d.n)
+        if d.compiled and (np.any(batch.delay > 0) or np.any(batch.fade != 0)):
+            from fricenv.effects import kernels  # the lag alone runs as a linear filter, already fast
+
+            Ta = kernels.actuator_run(batch, d.Tb, 0, d.Tb[0], d.n, d.dt, d.substeps)
+        else:
+            sim = EffectSimulator(batch, d.dt, d.n, d.p, d.substeps, d.t0, commands=d.Tb)
+            sim.reset(vhat[:, 0], d.omega[0], k0=0, Ta=d.Tb[0])
+            Ta = sim.actuator_run(d.n)
     lt = None
     if RELAX_STATE_FROM_FILTER and np.any(batch.sigma > 0):
         lam = longitudinal_slip(vhat, d.omega[None, :], batch.r_eff[:, None])
@@ -177,13 +187,28 @@ def _simulate_windows(batch: ModelBatch, d: Data, widx: np.ndarray, v0, w0, Ta0,
     """Simulate the windows ``widx`` for every element of ``batch`` and ``reps`` wheel-speed starts each.
 
     v0, w0, Ta0, lt0 have shape (K, W, reps) (Ta0, lt0 may be None). Returns dict channel -> (K, W, reps, H).
+    The compiled kernel (:mod:`fricenv.effects.kernels`) runs them when ``d.compiled`` and the model has no plug-in
+    effect with Python hooks; else the numpy :class:`EffectSimulator`, sample by sample.
     """
     K, W, H = len(batch), len(widx), d.horizon
+    k0 = np.tile(np.repeat(d.starts[widx], reps), K)
+    Ta0 = None if Ta0 is None else Ta0.ravel()
+    lt0 = None if lt0 is None else lt0.ravel()
+    if d.compiled:
+        from fricenv.effects import kernels
+
+        if kernels.supported(batch):
+            # a pool worker is one of the diagnosis' ``jobs`` processes: one thread there
+            threads = d.threads if multiprocessing.parent_process() is None else 1
+            sim = kernels.simulate_windows(batch, d.Tb, k0, v0.ravel(), w0.ravel(), Ta0, lt0, H, d.dt, d.t0,
+                                           d.substeps, d.p, want_ax=d.a_x is not None, threads=threads,
+                                           repeat=W * reps)
+            out = {"omega": sim[0], **({"v": sim[1]} if d.v is not None else {}),
+                   **({"a_x": sim[2]} if d.a_x is not None else {})}
+            return {k: v.reshape(K, W, reps, H) for k, v in out.items()}
     full = batch.repeat(W * reps)
     sim = EffectSimulator(full, d.dt, d.n, d.p, d.substeps, d.t0, commands=d.Tb)
-    k0 = np.tile(np.repeat(d.starts[widx], reps), K)
-    sim.reset(v0.ravel(), w0.ravel(), k0=k0, Ta=None if Ta0 is None else Ta0.ravel(),
-              lam_t=None if lt0 is None else lt0.ravel())
+    sim.reset(v0.ravel(), w0.ravel(), k0=k0, Ta=Ta0, lam_t=lt0)
     out = {"omega": np.empty((K * W * reps, H))}
     if d.v is not None:
         out["v"] = np.empty_like(out["omega"])

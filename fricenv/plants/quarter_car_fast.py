@@ -35,10 +35,12 @@ import numpy as np
 from fricenv.plants import quarter_car as qc
 from fricenv.plants.tire import SLIP_SPEED_FLOOR, magic_formula
 
-__all__ = ["ROS2_GAMMA", "Ros2Batch", "make_scalar_substep", "ros2_substep_scalar", "scalar_road"]
+__all__ = ["ROS2_GAMMA", "Ros2Batch", "make_scalar_substep", "ros2_core", "ros2_substep_scalar", "scalar_road",
+           "substep_constants"]
 
 ROS2_GAMMA = float(qc.ROS2_GAMMA)  # quarter_car.step's constant (L-stable ROS2)
 _TINY = 1e-300  # guard of the lock-crossing interpolation, as in quarter_car._lock_event
+_INV_TOL = qc.INVARIANT_TOL  # relative tolerance of the braking-invariant check
 FULL_ARRAY_SHARE = 8  # lock events on more than 1/8 of the cars are computed on whole arrays
 
 
@@ -50,60 +52,76 @@ def scalar_road(B: float, C: float, E: float, theta: float, h: float,
     return (float(B), float(C), float(E), p.Fz * theta, p.Fz * theta * C * B, 1.0 - E, h * p.Fz * mu_slide / p.m)
 
 
+def substep_constants(h: float, p: qc.QuarterCarParams = qc.PAPER_PARAMS) -> tuple[float, ...]:
+    """The per-substep constants of :func:`ros2_core`: (r, gamma h/m, gamma h r^2/J, gamma h r/J, h/m, h r/J, h/J)."""
+    r, m, J = p.r, p.m, p.J
+    hg = h * ROS2_GAMMA
+    return (r, hg / m, hg * r * r / J, hg * r / J, h / m, h * r / J, h / J)
+
+
+def ros2_core(v: float, w: float, Tb: float, road: tuple, k: tuple) -> tuple[float, float, bool]:
+    """One ROS2 substep of eq. (1) for one car in floats, with the lock event and ``v >= 0``, WITHOUT the
+    refinement: returns (v, omega, broken), ``broken`` where :func:`quarter_car.braking_invariant_broken` holds
+    (the caller then redoes the substep in finer parts). ``road`` from :func:`scalar_road`, ``k`` from
+    :func:`substep_constants`. Plain ``math``, so that numba compiles this same function
+    (:mod:`fricenv.effects.kernels`): the one scalar form of the substep.
+    """
+    B, C, E, fz_theta, fz_theta_cb, one_minus_E, slide = road
+    r, hg_m, hg_r2_J, hg_r_J, h_m, h_r_J, h_J = k
+    # Point 1: force and slope (eq. (2), (3)).
+    wr = wr0 = w * r
+    vw = v if v >= wr else wr  # noqa: FURB136 (a builtin call costs more in this hot loop)
+    denom = vw if vw > SLIP_SPEED_FLOOR else SLIP_SPEED_FLOOR  # noqa: FURB136
+    bs = B * (v - wr) / denom
+    inner = bs - E * (bs - math.atan(bs))
+    ci = C * math.atan(inner)
+    P = fz_theta_cb * math.cos(ci) * (one_minus_E + E / (1.0 + bs * bs)) / (1.0 + inner * inner) / (denom * denom)
+    # a = dF/dv, b = -(dF/domega)/r: P times the slip partials' numerators (see the module docstring).
+    if denom <= SLIP_SPEED_FLOOR:
+        a = b = P * denom
+    elif v >= wr:
+        a, b = P * wr, P * denom
+    else:
+        a, b = P * denom, P * v
+    inv_det = 1.0 / (1.0 + hg_m * a + hg_r2_J * b)
+    HB = hg_r_J * b * Tb
+    F1s = (fz_theta * math.sin(ci) + HB) * inv_det
+    # Point 2: x + h k1, omega clipped at 0.
+    v2 = v - h_m * F1s
+    wr = w + h_r_J * F1s - h_J * Tb
+    wr = wr * r if wr > 0.0 else 0.0
+    vw = v2 if v2 >= wr else wr  # noqa: FURB136
+    denom = vw if vw > SLIP_SPEED_FLOOR else SLIP_SPEED_FLOOR  # noqa: FURB136
+    bs = B * (v2 - wr) / denom
+    F2 = fz_theta * math.sin(C * math.atan(bs - E * (bs - math.atan(bs))))
+    Y2 = 3.0 * F1s + (F2 - 2.0 * F1s - HB) * inv_det
+    v_new = v - 0.5 * h_m * Y2
+    w_new = w + 0.5 * h_r_J * Y2 - h_J * Tb
+    if w_new < 0.0:
+        # Lock event (quarter_car._lock_event): lock where omega crosses zero, slide at mu(1) for the rest.
+        frac = w / max(w - w_new, _TINY)
+        v_new = v + frac * (v_new - v) - (1.0 - frac) * slide
+        w_new = 0.0
+    v_new = max(v_new, 0.0)
+    tol = _INV_TOL * (1.0 + v)
+    broken = Tb >= 0.0 and wr0 <= v and (w_new * r > v_new + tol or v_new > v + tol)
+    return v_new, w_new, broken
+
+
 def make_scalar_substep(h: float, p: qc.QuarterCarParams = qc.PAPER_PARAMS):
     """A function ``substep(v, w, Tb, road) -> (v, omega)``: one ROS2 substep of ``h`` seconds for one car in
     Python floats, ``road`` from :func:`scalar_road`; equals ``quarter_car.step(v, w, Tb, road, h, p, 1)``.
 
-    The constants are bound in a closure so that the hot loop reads no attributes.
+    :func:`ros2_core` with the constants bound once; a substep that breaks the braking invariant is redone by the
+    reference, in finer parts.
     """
-    r, m, J = p.r, p.m, p.J
-    hg = h * ROS2_GAMMA
-    hg_m, hg_r2_J, hg_r_J = hg / m, hg * r * r / J, hg * r / J
-    h_m, h_r_J, h_J = h / m, h * r / J, h / J
-    floor = SLIP_SPEED_FLOOR
-    inv_tol = qc.INVARIANT_TOL
-    atan, sin, cos = math.atan, math.sin, math.cos
+    k = substep_constants(h, p)
+    core = ros2_core
 
     def substep(v: float, w: float, Tb: float, road: tuple[float, ...]) -> tuple[float, float]:
-        B, C, E, fz_theta, fz_theta_cb, one_minus_E, slide = road
-        # Point 1: force and slope (eq. (2), (3)).
-        wr = wr0 = w * r
-        vw = v if v >= wr else wr  # noqa: FURB136 (a builtin call costs more in this hot loop)
-        denom = vw if vw > floor else floor  # noqa: FURB136
-        bs = B * (v - wr) / denom
-        inner = bs - E * (bs - atan(bs))
-        ci = C * atan(inner)
-        P = fz_theta_cb * cos(ci) * (one_minus_E + E / (1.0 + bs * bs)) / (1.0 + inner * inner) / (denom * denom)
-        # a = dF/dv, b = -(dF/domega)/r: P times the slip partials' numerators (see the module docstring).
-        if denom <= floor:
-            a = b = P * denom
-        elif v >= wr:
-            a, b = P * wr, P * denom
-        else:
-            a, b = P * denom, P * v
-        inv_det = 1.0 / (1.0 + hg_m * a + hg_r2_J * b)
-        HB = hg_r_J * b * Tb
-        F1s = (fz_theta * sin(ci) + HB) * inv_det
-        # Point 2: x + h k1, omega clipped at 0.
-        v2 = v - h_m * F1s
-        wr = w + h_r_J * F1s - h_J * Tb
-        wr = wr * r if wr > 0.0 else 0.0
-        vw = v2 if v2 >= wr else wr  # noqa: FURB136
-        denom = vw if vw > floor else floor  # noqa: FURB136
-        bs = B * (v2 - wr) / denom
-        F2 = fz_theta * sin(C * atan(bs - E * (bs - atan(bs))))
-        Y2 = 3.0 * F1s + (F2 - 2.0 * F1s - HB) * inv_det
-        v_new = v - 0.5 * h_m * Y2
-        w_new = w + 0.5 * h_r_J * Y2 - h_J * Tb
-        if w_new < 0.0:
-            # Lock event (quarter_car._lock_event): lock where omega crosses zero, slide at mu(1) for the rest.
-            frac = w / max(w - w_new, _TINY)
-            v_new = v + frac * (v_new - v) - (1.0 - frac) * slide
-            w_new = 0.0
-        v_new = max(v_new, 0.0)
-        if Tb >= 0.0 and wr0 <= v and (w_new * r > v_new + inv_tol * (1.0 + v) or v_new > v + inv_tol * (1.0 + v)):
-            # quarter_car.braking_invariant_broken: redo this rare substep the reference way, in finer parts.
-            vf, wf = qc.step(np.array([v]), np.array([w]), np.array([Tb]), np.array([B, C, E, fz_theta / p.Fz]),
+        v_new, w_new, broken = core(v, w, Tb, road, k)
+        if broken:  # rare: redo this substep the reference way, in finer parts
+            vf, wf = qc.step(np.array([v]), np.array([w]), np.array([Tb]), np.array([*road[:3], road[3] / p.Fz]),
                              h, p, qc.REFINE_PARTS)
             return float(vf[0]), float(wf[0])
         return v_new, w_new
