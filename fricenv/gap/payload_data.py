@@ -44,6 +44,7 @@ class PayloadDiagnoseConfig:
     gap_none: float = 1.1  # nominal gap (noise units) below which the model fits within noise [-]
     max_delay_s: float = 0.25  # largest vision delay searched [s]
     max_rate: float = 0.05  # largest |calibration drift rate| searched [1/s]
+    max_wrench_lag_s: float = 0.05  # largest lag of a low-passed force-moment sensor fitted [s]
     joint: bool = True  # also fit the two best significant candidates together
     candidates: tuple[str, ...] = tuple(PAYLOAD_EFFECTS)  # effects to try
 
@@ -77,6 +78,7 @@ class PayloadData:
     S_known: np.ndarray
     p: pl.PayloadParams
     sensors: dict | None = None  # column -> missing share, outliers (:mod:`fricenv.gap.sensors`)
+    wrench_lag_max: float = 0.0  # largest lag fitted for a low-passed force-moment sensor (0: not filtered) [s]
 
     @property
     def n(self) -> int:
@@ -233,4 +235,5 @@ def prepare_payload(log: PayloadLog, S_known: np.ndarray, p: pl.PayloadParams, c
     block_test = (np.arange(nb) % cfg.test_every) == (cfg.test_every - 1)
     return PayloadData(t=t, dt=dt, w_hat=w_hat, theta_f=pose_f[:, 0], y=y, sos=sos, sigma=sigma, raw_noise=raw,
                        rho2=rho2, block=block, block_test=block_test, S_known=np.asarray(S_known, dtype=float), p=p,
-                       sensors=sensors)
+                       sensors=sensors,
+                       wrench_lag_max=cfg.max_wrench_lag_s if any(sensors[c]["filtered"] for c in WRENCH) else 0.0)
