@@ -207,7 +207,8 @@ def frame_times(t: np.ndarray, fresh: np.ndarray) -> np.ndarray | None:
     step, which a fast pose turns into an error far above the vision noise. A camera runs on its own clock,
     ``f_j = a + j T``: the frame numbers ``j`` are counted from the gaps between fresh rows in frame periods, ``T``
     and ``a`` fitted by least squares, and the clock is placed so that the middle 80 % of the ages spread evenly
-    over one log step. Returns the frame time of each fresh row (NaN elsewhere), or None where the fresh rows do not
+    over one log step; a fresh row off the clock (a frame held from before the log starts) is taken half a step
+    before its row. Returns the frame time of each fresh row (NaN elsewhere), or None where the fresh rows do not
     follow a clock (fewer than ``MIN_FRAMES``, a camera faster than half the log rate, or ages spread beyond
     ``MAX_AGE_SPREAD`` steps).
     """
@@ -220,17 +221,22 @@ def frame_times(t: np.ndarray, fresh: np.ndarray) -> np.ndarray | None:
     # frame numbers from the gaps (a frame shown late after a dropped row makes a gap of up to 1.65 periods), then
     # from the fitted clock itself, refitted each time
     j = np.concatenate([[0], np.cumsum(np.maximum(np.floor(np.diff(tr) / period + 0.35), 1))])
+    on = np.ones(rows.size, dtype=bool)  # rows on the clock (a frame held from before the log starts is not)
     for _ in range(3):
-        period, a = np.polyfit(j, tr, 1)
-        j = np.rint((tr - a - float(np.median(tr - a - period * j))) / period)
-        if np.any(np.diff(j) < 1):
-            return None
-    period, a = np.polyfit(j, tr, 1)
-    lo, hi = np.percentile(tr - (a + period * j), [10.0, 90.0])
+        period, a = np.polyfit(j[on], tr[on], 1)
+        j = np.rint((tr - a - float(np.median((tr - a - period * j)[on]))) / period)
+        on = np.concatenate([[True], np.diff(j) >= 1])
+    period, a = np.polyfit(j[on], tr[on], 1)
+    age = tr - (a + period * j)
+    lo, hi = np.percentile(age[on], [10.0, 90.0])
     if hi - lo > MAX_AGE_SPREAD * h:
         return None
+    on &= (age > lo - h) & (age < hi + h)
+    f = np.where(on, a + period * j + 0.5 * (lo + hi) - 0.5 * h, tr - 0.5 * h)
+    if np.any(np.diff(f) <= 0):
+        return None
     out = np.full(t.size, np.nan)
-    out[rows] = a + period * j + 0.5 * (lo + hi) - 0.5 * h
+    out[rows] = f
     return out
 
 
