@@ -108,26 +108,27 @@ def difference_ac(x: np.ndarray) -> float:
     return float(np.dot(d2[1:], d2[:-1]) / den) if den > 0 else -0.5
 
 
-def _trend_spikes(f: np.ndarray, noise: float) -> np.ndarray:
+def _trend_spikes(f: np.ndarray, floor: float) -> np.ndarray:
     """Isolated spikes on a fast trend (a tracked pose sampled by a slow camera moves far between frames, so its
     neighbours differ and a running median follows the trend). Each sample is compared with the cubic through its
     two neighbours on either side, ``(-f[i-2] + 4 f[i-1] + 4 f[i+1] - f[i+2]) / 6`` (a smooth signal leaves a 4th
     order residual): a spike ``e`` leaves ``e`` there and ``-2e/3`` at its neighbours, a step ``s`` leaves ``s/2``
     at the two samples either side of it. A spike is beyond ``OUTLIER_Z`` robust spreads and 1.3 times its
-    neighbours' residuals."""
+    neighbours' residuals. The spread is that of the cubic residual itself (at least ``floor``): a difference-based
+    noise level reads a fast trend's curvature as noise."""
     out = np.zeros(f.size, dtype=bool)
     if f.size < 7:
         return out
     r = np.zeros(f.size)
     r[2:-2] = f[2:-2] - (-f[:-4] + 4.0 * f[1:-3] + 4.0 * f[3:-1] - f[4:]) / 6.0
-    spread = max(noise * np.sqrt(1.0 + 34.0 / 36.0), 1.4826 * float(np.median(np.abs(r[2:-2]))))
+    spread = max(floor * np.sqrt(1.0 + 34.0 / 36.0), 1.4826 * float(np.median(np.abs(r[2:-2]))))
     a = np.abs(r)
     nb = np.maximum(np.r_[0.0, a[:-1]], np.r_[a[1:], 0.0])
     out[2:-2] = (a[2:-2] > OUTLIER_Z * spread) & (a[2:-2] > 1.3 * nb[2:-2])
     return out
 
 
-def _outliers(x: np.ndarray, noise: float) -> np.ndarray:
+def _outliers(x: np.ndarray, noise: float, floor: float) -> np.ndarray:
     """Indices of isolated spikes: far from the running median of their neighbours and from the mean of the two
     adjacent samples, while those two agree (a step or a lock-up moves its neighbours too), or off the local trend
     from both sides (:func:`_trend_spikes`). When more than ``OUTLIER_MAX_SHARE`` of the samples qualify, the
@@ -142,7 +143,7 @@ def _outliers(x: np.ndarray, noise: float) -> np.ndarray:
     mid[1:-1] = np.abs(f[1:-1] - 0.5 * (f[:-2] + f[2:]))
     agree = np.zeros(f.size, dtype=bool)
     agree[1:-1] = np.abs(f[2:] - f[:-2]) < 0.5 * mid[1:-1]
-    flag = ok & (((dev > OUTLIER_Z * spread) & (mid > OUTLIER_Z * spread) & agree) | _trend_spikes(f, noise))
+    flag = ok & (((dev > OUTLIER_Z * spread) & (mid > OUTLIER_Z * spread) & agree) | _trend_spikes(f, floor))
     if np.count_nonzero(flag) > OUTLIER_MAX_SHARE * f.size:
         return np.zeros(0, dtype=int)
     return np.flatnonzero(flag)
@@ -166,7 +167,7 @@ def condition_channel(x: np.ndarray, floor: float, quiet: int = 0, may_be_filter
     raw = estimate_noise(_fresh(x))
     noise = max(raw if np.isfinite(raw) else floor, floor, q / np.sqrt(12.0))
     fresh = np.flatnonzero(np.isfinite(x))
-    out = fresh[_outliers(x[fresh], noise)]  # on the fresh samples only: a held channel's frames are its samples
+    out = fresh[_outliers(x[fresh], noise, floor)]  # on the fresh samples only: a held channel's frames are its samples
     x[out] = np.nan
     if out.size:
         raw = estimate_noise(_fresh(x))
@@ -207,8 +208,8 @@ def frame_times(t: np.ndarray, fresh: np.ndarray) -> np.ndarray | None:
     step, which a fast pose turns into an error far above the vision noise. A camera runs on its own clock,
     ``f_j = a + j T``: the frame numbers ``j`` are counted from the gaps between fresh rows in frame periods, ``T``
     and ``a`` fitted by least squares, and the clock is placed so that the middle 80 % of the ages spread evenly
-    over one log step; a fresh row off the clock (a frame held from before the log starts) is taken half a step
-    before its row. Returns the frame time of each fresh row (NaN elsewhere), or None where the fresh rows do not
+    over one log step; a fresh row off the clock is taken half a step before its row, and the log's first row (a
+    frame taken before the log started) one period before the next frame. Returns the frame time of each fresh row (NaN elsewhere), or None where the fresh rows do not
     follow a clock (fewer than ``MIN_FRAMES``, a camera faster than half the log rate, or ages spread beyond
     ``MAX_AGE_SPREAD`` steps).
     """
@@ -216,6 +217,12 @@ def frame_times(t: np.ndarray, fresh: np.ndarray) -> np.ndarray | None:
     if rows.size < MIN_FRAMES or rows.size > 0.5 * t.size:
         return None
     h = float(np.median(np.diff(t)))
+    out = np.full(t.size, np.nan)
+    if rows[0] == 0:  # the first row shows a frame taken before the log started: one period before the next frame
+        clock = frame_times(t, np.r_[False, fresh[1:]])
+        if clock is not None:
+            clock[0] = min(t[0], clock[rows[1]] - (clock[rows[-1]] - clock[rows[1]]) / (rows.size - 2))
+        return clock
     tr = t[rows]
     period = (tr[-1] - tr[0]) / (rows.size - 1)
     # frame numbers from the gaps (a frame shown late after a dropped row makes a gap of up to 1.65 periods), then
@@ -235,7 +242,6 @@ def frame_times(t: np.ndarray, fresh: np.ndarray) -> np.ndarray | None:
     f = np.where(on, a + period * j + 0.5 * (lo + hi) - 0.5 * h, tr - 0.5 * h)
     if np.any(np.diff(f) <= 0):
         return None
-    out = np.full(t.size, np.nan)
     out[rows] = f
     return out
 
