@@ -37,6 +37,7 @@ MAX_CORRELATION_TIME = 50.0  # upper bound of the integrated autocorrelation tim
 FILTERED_MARGIN = 0.15  # lag-1 autocorrelation of k-th differences this far above white noise's: filtered [-]
 MIN_FRAMES = 10  # fresh frames a camera clock is fitted from [-]
 MAX_AGE_SPREAD = 1.5  # frame ages spread over at most this many log steps for a clock [-]
+MAX_LATE = 4.0  # a frame shown up to this many steps late is still on the clock (up to 3 dropped rows) [-]
 
 
 @dataclass
@@ -238,7 +239,7 @@ def frame_times(t: np.ndarray, fresh: np.ndarray) -> np.ndarray | None:
     lo, hi = np.percentile(age[on], [10.0, 90.0])
     if hi - lo > MAX_AGE_SPREAD * h:
         return None
-    on &= (age > lo - h) & (age < hi + h)
+    on &= (age > lo - h) & (age < hi + MAX_LATE * h)  # dropped rows before a frame's row show it later
     f = np.where(on, a + period * j + 0.5 * (lo + hi) - 0.5 * h, tr - 0.5 * h)
     if np.any(np.diff(f) <= 0):
         return None
