@@ -408,8 +408,6 @@ def measure(n: int, seed: int, jobs: int = 1, real: bool = False, combos: bool =
             columns: tuple | None = None) -> dict:
     """Draw ``n`` independent logs, diagnose each blind, and summarise (fricenv.gap.validate's summary format;
     with ``combos`` also the share of logs whose every effect is named)."""
-    from concurrent.futures import ProcessPoolExecutor
-
     from fricenv.gap.validate import summarize
 
     if n < 1:
@@ -418,11 +416,7 @@ def measure(n: int, seed: int, jobs: int = 1, real: bool = False, combos: bool =
         raise ValueError(f"jobs must be >= 1, got {jobs}")
     cases = draw_cases(n, seed, real, combos, columns)
     t0 = time.perf_counter()
-    if jobs > 1:
-        with ProcessPoolExecutor(max_workers=jobs) as pool:
-            results = list(pool.map(diagnose_case, cases))
-    else:
-        results = [diagnose_case(c) for c in cases]
+    results = pool_map(diagnose_case, cases, jobs)
     s = summarize(results)
     s.update(n=n, seed=seed, jobs=jobs, wall_seconds=time.perf_counter() - t0, source="tests.independent_sim",
              real=real, combos=combos, columns=None if columns is None else list(columns))
@@ -445,13 +439,29 @@ def format_rows(s: dict) -> str:
     return "\n".join(lines)
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    """Command line: ``python -m tests.independent_sim --n 45 --seed 7 --jobs 2 [--json P]``."""
-    ap = argparse.ArgumentParser(description="Measure the gap diagnosis on logs of an independent simulator.")
-    ap.add_argument("--n", type=int, default=45, help="number of logs")
-    ap.add_argument("--seed", type=int, default=7, help="seed of the draw")
+def measurement_parser(description: str, n: int, seed: int) -> argparse.ArgumentParser:
+    """The options every measurement command shares: ``--n``, ``--seed``, ``--jobs``, ``--json``."""
+    ap = argparse.ArgumentParser(description=description)
+    ap.add_argument("--n", type=int, default=n, help="number of logs")
+    ap.add_argument("--seed", type=int, default=seed, help="seed of the draw")
     ap.add_argument("--jobs", type=int, default=1, help="processes (one log each)")
     ap.add_argument("--json", default=None, help="write the summary and per-log results here")
+    return ap
+
+
+def pool_map(fn, tasks: list, jobs: int) -> list:
+    """``[fn(t) for t in tasks]``, in ``jobs`` processes when more than one (``fn`` must be importable)."""
+    from concurrent.futures import ProcessPoolExecutor
+
+    if jobs <= 1:
+        return [fn(t) for t in tasks]
+    with ProcessPoolExecutor(max_workers=jobs) as pool:
+        return list(pool.map(fn, tasks))
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Command line: ``python -m tests.independent_sim --n 45 --seed 7 --jobs 2 [--json P]``."""
+    ap = measurement_parser("Measure the gap diagnosis on logs of an independent simulator.", n=45, seed=7)
     ap.add_argument("--real", action="store_true",
                     help="write each log as a real-like export (tests/real_artifacts.py: 25-100 Hz, jittered epoch "
                          "stamps, km/h and kPa with a map, filtered a_x and v, quantised wheel speed, outliers) and "

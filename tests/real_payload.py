@@ -13,13 +13,13 @@ Measurement command::
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import os
 from collections.abc import Sequence
 
 import numpy as np
 
+from tests.independent_sim import measurement_parser, pool_map
 from tests.real_artifacts import PayloadArtifacts, real_like_payload, write_export
 
 __all__ = ["LOGGER_RATES", "SIM_DT", "measure_payload", "real_payload_row"]
@@ -53,18 +53,11 @@ def _task(args: tuple) -> dict:
 
 def measure_payload(n: int, seed: int, jobs: int = 1) -> dict:
     """Draw ``n`` payload validation cases, export each real-like, diagnose blind; the payload summary."""
-    from concurrent.futures import ProcessPoolExecutor
-
     from fricenv.gap.payload_validate import draw_payload_cases, summarize_payload
 
     cases = draw_payload_cases(n, seed)
     rates = np.random.default_rng([seed, 15]).uniform(*LOGGER_RATES, n)
-    tasks = list(zip(cases, (float(r) for r in rates)))
-    if jobs > 1:
-        with ProcessPoolExecutor(max_workers=jobs) as pool:
-            rows = list(pool.map(_task, tasks))
-    else:
-        rows = [_task(t) for t in tasks]
+    rows = pool_map(_task, list(zip(cases, (float(r) for r in rates))), jobs)
     s = summarize_payload(rows)
     s.update(seed=seed, source="tests.real_payload")
     return s
@@ -72,11 +65,7 @@ def measure_payload(n: int, seed: int, jobs: int = 1) -> dict:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Command line: ``python -m tests.real_payload --n 12 --seed 41 [--jobs 2] [--json P]``."""
-    ap = argparse.ArgumentParser(description="Measure the payload gap diagnosis on real-like rig exports.")
-    ap.add_argument("--n", type=int, default=12, help="number of logs")
-    ap.add_argument("--seed", type=int, default=41, help="seed of the draw")
-    ap.add_argument("--jobs", type=int, default=1, help="processes (one log each)")
-    ap.add_argument("--json", default=None, help="write the summary and per-log results here")
+    ap = measurement_parser("Measure the payload gap diagnosis on real-like rig exports.", n=12, seed=41)
     args = ap.parse_args(argv)
     if args.n < 1 or args.jobs < 1:
         ap.error("--n and --jobs must be >= 1")

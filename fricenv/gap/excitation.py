@@ -4,6 +4,8 @@ effect" where the log could not have shown one."""
 
 from __future__ import annotations
 
+from itertools import pairwise
+
 import numpy as np
 
 from fricenv.effects import registry
@@ -37,7 +39,7 @@ def torque_events(Tb: np.ndarray, dt: float) -> int:
     sign = np.where(np.abs(dT) > APPLY_RATE * tmax, np.sign(dT), 0.0).astype(int)
     cuts = np.flatnonzero(np.diff(np.concatenate([[0], sign, [0]])) != 0)
     events = 0
-    for a, b in zip(cuts[:-1], cuts[1:]):
+    for a, b in pairwise(cuts):
         change = abs(Tb[min(b, Tb.size - 1)] - Tb[max(a - 1, 0)])
         events += int(sign[a] != 0 and b - a >= MIN_EVENT_SAMPLES and change >= MIN_EVENT_CHANGE * tmax)
     return events

@@ -15,8 +15,8 @@ import os
 import tempfile
 import time
 import warnings
-from contextlib import nullcontext
 from collections.abc import Callable
+from contextlib import nullcontext
 from dataclasses import dataclass, fields
 
 import numpy as np
