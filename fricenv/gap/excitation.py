@@ -4,6 +4,8 @@ effect" where the log could not have shown one."""
 
 from __future__ import annotations
 
+from itertools import pairwise
+
 import numpy as np
 
 from fricenv.effects import registry
@@ -13,18 +15,34 @@ from fricenv.gap.stats import CandidateFit
 from fricenv.gap.windows import FREE_ROLL_TORQUE, Data, model_batch, speed_states
 from fricenv.plants.tire import MagicFormula, longitudinal_slip
 
-__all__ = ["NEAR_PEAK", "SLIP_TRANSIENT", "excitation", "untestable"]
+__all__ = ["NEAR_PEAK", "SLIP_TRANSIENT", "excitation", "torque_events", "untestable"]
 
 SLIP_TRANSIENT = 0.03  # slip change within one window that counts as a transient [-]
 NEAR_PEAK = 0.7  # slip above this share of the fitted road's peak slip counts as near the peak [-]
 MIN_EVENT_SAMPLES = 2  # samples of fast torque change that make one apply/release event [-]
+MIN_EVENT_CHANGE = 0.1  # torque change of one apply/release event, as a share of the largest |T_b| [-]
 
 
-def _events(fast: np.ndarray) -> int:
-    """Runs of at least ``MIN_EVENT_SAMPLES`` consecutive True samples."""
-    edges = np.diff(np.concatenate([[0], fast.astype(int), [0]]))
-    lengths = np.flatnonzero(edges == -1) - np.flatnonzero(edges == 1)
-    return int(np.count_nonzero(lengths >= MIN_EVENT_SAMPLES))
+def torque_events(Tb: np.ndarray, dt: float) -> int:
+    """Brake apply and release events of a logged torque: maximal runs of fast change (``|dT_b/dt|`` above
+    ``APPLY_RATE`` of the largest torque per second) in one direction, each at least
+    ``MIN_EVENT_SAMPLES`` samples long and moving the torque by ``MIN_EVENT_CHANGE`` of its largest value.
+
+    An apply followed at once by a release (an ABS cycle, with no hold between) is two events: the direction
+    change separates them. Counting runs of fast change regardless of direction made a whole ABS braking one event,
+    and counting only samples with braking torque cut a step from zero to one sample (no event). Noise cannot make
+    an event: it moves the torque by far less than ``MIN_EVENT_CHANGE``.
+    """
+    Tb = np.asarray(Tb, dtype=float)
+    tmax = max(float(np.max(np.abs(Tb))), 1e-9) if Tb.size else 1e-9
+    dT = np.gradient(Tb, dt) if Tb.size >= 2 else np.zeros_like(Tb)
+    sign = np.where(np.abs(dT) > APPLY_RATE * tmax, np.sign(dT), 0.0).astype(int)
+    cuts = np.flatnonzero(np.diff(np.concatenate([[0], sign, [0]])) != 0)
+    events = 0
+    for a, b in pairwise(cuts):
+        change = abs(Tb[min(b, Tb.size - 1)] - Tb[max(a - 1, 0)])
+        events += int(sign[a] != 0 and b - a >= MIN_EVENT_SAMPLES and change >= MIN_EVENT_CHANGE * tmax)
+    return events
 
 
 def excitation(nominal: CandidateFit, d: Data) -> Excitation:
@@ -34,17 +52,18 @@ def excitation(nominal: CandidateFit, d: Data) -> Excitation:
     lam = np.clip(longitudinal_slip(vhat, d.omega, d.p.r), -1.0, 1.0)
     tmax = max(float(np.max(np.abs(d.Tb))), 1e-9)
     braking = np.abs(d.Tb) > FREE_ROLL_TORQUE * tmax
-    fast = braking & (np.abs(np.gradient(d.Tb, d.dt)) > APPLY_RATE * tmax)
     braking_w = np.any(braking[rows], axis=1)
     lam_w = lam[rows]
     transient = braking_w & (np.ptp(lam_w, axis=1) > SLIP_TRANSIENT)
     peak = MagicFormula(**nominal.road()).peak_slip
     near = braking_w & (np.max(lam_w, axis=1) > NEAR_PEAK * peak)
-    half = len(d.starts) // 2
+    # halves of the braking (not of the log: the free-rolling start would fill most of the early half of a short log)
+    brake_idx = np.flatnonzero(braking_w)
+    half = int(brake_idx[brake_idx.size // 2]) if brake_idx.size else len(d.starts) // 2
     v_brake = vhat[braking]
     k = int(np.max(d.fold)) + 1
     return Excitation(has_v=d.v is not None, has_a_x=d.a_x is not None, braking_windows=int(np.sum(braking_w)),
-                      torque_transients=_events(fast), slip_transient_windows=int(np.sum(transient)),
+                      torque_transients=torque_events(d.Tb, d.dt), slip_transient_windows=int(np.sum(transient)),
                       near_peak_early=int(np.sum(near[:half])), near_peak_late=int(np.sum(near[half:])),
                       speed_range=float(np.ptp(v_brake)) if v_brake.size else 0.0,
                       training_windows=int(min(np.sum(d.fold != j) for j in range(k))))

@@ -4,14 +4,14 @@ channels' noise, and the train / held-out blocks (see :mod:`fricenv.gap.payload_
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.interpolate import CubicSpline
 from scipy.signal import butter, sosfilt, sosfiltfilt
 
 from fricenv.effects.payload import PAYLOAD_EFFECTS
-from fricenv.gap.sensors import condition_channel
+from fricenv.gap.sensors import band_noise, condition_channel, frame_times, looks_filtered
 from fricenv.gap.stats import estimate_noise
 from fricenv.logs import PayloadLog
 from fricenv.plants import payload as pl
@@ -26,6 +26,7 @@ NOISE_FLOOR = 1e-9  # smallest accepted raw noise std (SI) [-]
 NUMEROV = np.array([1.0, 10.0, 1.0]) / 12.0  # 3-tap weights matching the second difference's triangle kernel
 REL_NOISE_FLOOR = 1e-3  # smallest residual noise std as a share of the channel's RMS acceleration signal [-]
 MIN_BLOCKS = 4  # a log must have at least this many scored blocks
+FILTER_BAND = 2.0  # a filtered channel's noise density is read from this many times the diagnosis cut-off up [-]
 
 
 @dataclass(frozen=True)
@@ -43,6 +44,7 @@ class PayloadDiagnoseConfig:
     gap_none: float = 1.1  # nominal gap (noise units) below which the model fits within noise [-]
     max_delay_s: float = 0.25  # largest vision delay searched [s]
     max_rate: float = 0.05  # largest |calibration drift rate| searched [1/s]
+    max_wrench_lag_s: float = 0.05  # largest lag of a low-passed force-moment sensor fitted [s]
     joint: bool = True  # also fit the two best significant candidates together
     candidates: tuple[str, ...] = tuple(PAYLOAD_EFFECTS)  # effects to try
 
@@ -76,6 +78,7 @@ class PayloadData:
     S_known: np.ndarray
     p: pl.PayloadParams
     sensors: dict | None = None  # column -> missing share, outliers (:mod:`fricenv.gap.sensors`)
+    wrench_lag_max: float = 0.0  # largest lag fitted for a low-passed force-moment sensor (0: not filtered) [s]
 
     @property
     def n(self) -> int:
@@ -136,13 +139,27 @@ def _zero_filtfilt(sos: np.ndarray, x: np.ndarray) -> np.ndarray:
     return sosfilt(sos, y[::-1], axis=0)[::-1]
 
 
-def _conditioned_columns(log: PayloadLog) -> tuple[dict, dict, dict]:
+def _pose_clock(log: PayloadLog) -> np.ndarray | None:
+    """Frame times of the pose's fresh rows when the pose is held between the frames of a slower camera
+    (:func:`fricenv.gap.sensors.frame_times`), else None."""
+    fresh = np.zeros(len(log.t), dtype=bool)
+    for c in CHANNELS:
+        fresh |= np.isfinite(np.asarray(getattr(log, c), dtype=float))
+    return None if fresh.all() else frame_times(np.asarray(log.t, dtype=float), fresh)
+
+
+def _conditioned_columns(log: PayloadLog, filter_band_hz: float) -> tuple[dict, dict, dict]:
     """Every column with its missing (held) samples and outliers filled by a cubic spline through the fresh ones
     (:mod:`fricenv.gap.sensors`), its raw noise std and its sensor summary. An orientation logged wrapped into
-    (-pi, pi] is unwrapped first (the rotation per sample is far below pi). A channel with fresh samples only at a
-    share ``s`` of the rows (a slower camera) carries, per row of the uniform grid, white noise of ``1 / sqrt(s)``
-    times its own: the same noise power spread over the log's faster rate (what the low-pass sees)."""
+    (-pi, pi] is unwrapped first (the rotation per sample is far below pi). A held pose is splined through its
+    frames at their capture times (:func:`_pose_clock`), not at the rows where they show. A channel with fresh
+    samples only at a share ``s`` of the rows (a slower camera) carries, per row of the uniform grid, white noise of
+    ``1 / sqrt(s)`` times its own: the same noise power spread over the log's faster rate (what the low-pass sees).
+    A low-passed force-moment channel (:func:`looks_filtered`) takes its noise from its spectral density in
+    ``[filter_band_hz, 2 filter_band_hz]`` (:func:`band_noise`), where a difference-based estimate sees almost none."""
     cols, raw, sensors = {}, {}, {}
+    clock = _pose_clock(log)
+    idx = np.arange(len(log.t))
     for c in CHANNELS + WRENCH:
         x = np.asarray(getattr(log, c), dtype=float)
         if c == "theta":
@@ -151,15 +168,23 @@ def _conditioned_columns(log: PayloadLog) -> tuple[dict, dict, dict]:
             x[ok] = np.unwrap(x[ok])
         cond = condition_channel(x, NOISE_FLOOR, may_be_filtered=False)
         fresh = np.isfinite(cond.values)
-        idx = np.arange(x.size)
+        at = clock if c in CHANNELS and clock is not None else idx * log.dt + float(log.t[0])
         if np.count_nonzero(fresh) >= 4 and not fresh.all():
-            cols[c] = CubicSpline(idx[fresh], cond.values[fresh])(idx)
+            cols[c] = CubicSpline(at[fresh], cond.values[fresh])(np.asarray(log.t, dtype=float))
         else:
             cols[c] = cond.filled
         share = max(float(np.mean(fresh)), 1e-3)
         noise = estimate_noise(cond.values[fresh], order=NOISE_DIFF_ORDER) if fresh.any() else float("nan")
-        raw[c] = max(noise if np.isfinite(noise) else NOISE_FLOOR, NOISE_FLOOR) / np.sqrt(share)
-        sensors[c] = cond.summary()
+        noise = max(noise if np.isfinite(noise) else NOISE_FLOOR, NOISE_FLOOR)
+        filtered = c in WRENCH and looks_filtered(cond.values)
+        if filtered:
+            band = band_noise(cond.values, 1.0 / log.dt, filter_band_hz)
+            noise = max(noise, band if np.isfinite(band) else 0.0)
+        raw[c] = noise / np.sqrt(share)
+        sensors[c] = replace(cond, noise=noise, filtered=filtered).summary()
+        if c in CHANNELS and clock is not None:
+            sensors[c]["frame_rate_hz"] = float((np.count_nonzero(np.isfinite(clock)) - 1)
+                                                / (np.nanmax(clock) - np.nanmin(clock)))
     return cols, raw, sensors
 
 
@@ -172,7 +197,7 @@ def prepare_payload(log: PayloadLog, S_known: np.ndarray, p: pl.PayloadParams, c
         raise ValueError(f"{log.source}: sample time {dt:g} s too coarse for the {cfg.cutoff_hz:g} Hz filter "
                          f"(need a sample rate above {cfg.cutoff_hz / 0.4:g} Hz)")
     sos = butter(cfg.filter_order, cfg.cutoff_hz, fs=fs, output="sos")
-    cols, raw, sensors = _conditioned_columns(log)
+    cols, raw, sensors = _conditioned_columns(log, FILTER_BAND * cfg.cutoff_hz)
     w_hat = np.column_stack([cols[c] for c in WRENCH])
     pose = np.column_stack([cols[c] for c in CHANNELS])
     pose_f = sosfiltfilt(sos, pose, axis=0)
@@ -210,4 +235,5 @@ def prepare_payload(log: PayloadLog, S_known: np.ndarray, p: pl.PayloadParams, c
     block_test = (np.arange(nb) % cfg.test_every) == (cfg.test_every - 1)
     return PayloadData(t=t, dt=dt, w_hat=w_hat, theta_f=pose_f[:, 0], y=y, sos=sos, sigma=sigma, raw_noise=raw,
                        rho2=rho2, block=block, block_test=block_test, S_known=np.asarray(S_known, dtype=float), p=p,
-                       sensors=sensors)
+                       sensors=sensors,
+                       wrench_lag_max=cfg.max_wrench_lag_s if any(sensors[c]["filtered"] for c in WRENCH) else 0.0)

@@ -94,6 +94,7 @@ class PayloadCandidate:
     penalised: float = 0.0  # held-out MSE + ranking penalty
     z: float = 0.0
     seconds: float = 0.0
+    shift: float = 0.0  # fitted pose-wrench shift [s]: a vision delay (> 0) or a filtered sensor's lag (< 0)
 
     def effect_params(self) -> dict:
         return dict(self.params)
@@ -135,7 +136,7 @@ class _Regressors:
 
 def _regressors(d: PayloadData, delay: float, effects: Sequence[str]) -> _Regressors:
     w = d.w_hat
-    if delay > 0:
+    if delay != 0:
         w = np.column_stack([np.interp(d.t - delay, d.t, d.w_hat[:, k]) for k in range(3)])
     G = generalised_force_map(d.theta_f, d.p)
     n = d.n
@@ -206,8 +207,8 @@ def _n_params(effects: Sequence[str]) -> int:
     return sum({"wrench_offset": 3, "calibration_error": 9}.get(e, 1) for e in effects)
 
 
-def _fit(effects: Sequence[str], d: PayloadData, cfg: PayloadDiagnoseConfig) -> tuple[dict, np.ndarray]:
-    """Fit the effects on the training samples; returns (params, prediction on all samples)."""
+def _fit(effects: Sequence[str], d: PayloadData, cfg: PayloadDiagnoseConfig) -> tuple[dict, np.ndarray, float]:
+    """Fit the effects on the training samples; returns (params, prediction on all samples, pose-wrench shift [s])."""
     rows = d.train
 
     def regs(delay: float) -> _Regressors:
@@ -221,9 +222,11 @@ def _fit(effects: Sequence[str], d: PayloadData, cfg: PayloadDiagnoseConfig) -> 
                               options={"xatol": SEARCH_XTOL})
         return float(res.x), float(res.fun)
 
-    delay = 0.0
-    if "vision_delay" in effects:
-        grid = np.arange(0.0, cfg.max_delay_s + 1e-12, max(DELAY_GRID_STEP, d.dt))
+    # the shift between pose and wrench: a vision delay (pose late, > 0) and, with a low-passed force-moment sensor,
+    # the filter's lag (wrench late, < 0), a nuisance of every model
+    delay, lo, hi = 0.0, -d.wrench_lag_max, (cfg.max_delay_s if "vision_delay" in effects else 0.0)
+    if hi > lo:
+        grid = np.arange(lo, hi + 1e-12, max(DELAY_GRID_STEP, d.dt))
         costs = [best_rate(regs(g))[1] for g in grid]
         i = int(np.argmin(costs))
         lo, hi = grid[max(i - 1, 0)], grid[min(i + 1, len(grid) - 1)]
@@ -246,7 +249,7 @@ def _fit(effects: Sequence[str], d: PayloadData, cfg: PayloadDiagnoseConfig) -> 
             params["rate"] = rate
         elif e == "vision_delay":
             params["delay"] = delay
-    return params, pred
+    return params, pred, delay
 
 
 def _score(name: str, effects: Sequence[str], params: dict, pred: np.ndarray, d: PayloadData,
@@ -269,8 +272,10 @@ def fit_payload_candidate(effects: Sequence[str], d: PayloadData, cfg: PayloadDi
     """Fit a set of effects on the training blocks and score it on all blocks."""
     t0 = time.perf_counter()
     effects = list(effects)
-    params, pred = _fit(effects, d, cfg)
-    return _score("+".join(effects) if effects else "nominal", effects, params, pred, d, time.perf_counter() - t0)
+    params, pred, shift = _fit(effects, d, cfg)
+    fit = _score("+".join(effects) if effects else "nominal", effects, params, pred, d, time.perf_counter() - t0)
+    fit.shift = shift
+    return fit
 
 
 def improvement_z(base: PayloadCandidate, cand: PayloadCandidate, d: PayloadData) -> float:
@@ -389,6 +394,9 @@ def diagnose_payload(log: PayloadLog, S_known=pl.PAPER_S, p: pl.PayloadParams = 
                              "significant": bool(significant(f))} for f in fits},
     }
     where["sensors"] = d.sensors
+    if d.wrench_lag_max > 0:  # a low-passed force-moment sensor: its lag, fitted with the nominal model
+        for c in WRENCH:
+            where["sensors"][c]["lag_s"] = -nominal.shift
     where["not_testable"] = payload_untestable(d)
     if joint is not None:
         where["joint_fit"] = {"effects": joint.effect.split("+"), "params": joint.effect_params(),

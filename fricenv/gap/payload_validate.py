@@ -15,6 +15,7 @@ import os
 import tempfile
 import time
 import warnings
+from collections.abc import Callable
 from contextlib import nullcontext
 from dataclasses import dataclass, fields
 
@@ -29,8 +30,8 @@ from fricenv.logs import PayloadLog, read_log, write_log
 from fricenv.plants import payload as pl
 from fricenv.utils import as_generator
 
-__all__ = ["PAYLOAD_CATEGORIES", "PayloadCase", "draw_payload_case", "format_payload_summary", "run_payload_case",
-           "validate_payload"]
+__all__ = ["PAYLOAD_CATEGORIES", "PayloadCase", "draw_payload_case", "draw_payload_cases", "format_payload_summary", "run_payload_case",
+           "score_payload_case", "simulate_payload_case", "summarize_payload", "validate_payload"]
 
 NONE, OUT = "none", "out_of_library"
 PAYLOAD_CATEGORIES = tuple(PAYLOAD_EFFECTS) + (NONE, OUT)
@@ -79,6 +80,16 @@ def draw_payload_case(category: str, rng: np.random.Generator) -> PayloadCase:
                        float(DTS[int(rng.integers(len(DTS)))]), int(rng.integers(2**31)))
 
 
+def draw_payload_cases(n: int, seed=None) -> list[PayloadCase]:
+    """``n`` cases, the categories in turn, shuffled."""
+    if n < 1:
+        raise ValueError(f"n must be >= 1, got {n}")
+    rng = as_generator(seed)
+    cats = [PAYLOAD_CATEGORIES[i % len(PAYLOAD_CATEGORIES)] for i in range(n)]
+    rng.shuffle(cats)
+    return [draw_payload_case(c, rng) for c in cats]
+
+
 def _damped_log(case: PayloadCase, rng: np.random.Generator, wrench) -> PayloadLog:
     """The out-of-library stand-in: eq. (1) plus viscous damping, integrated by an adaptive RK (DOP853)."""
     p = pl.PAPER_PARAMS
@@ -108,9 +119,8 @@ def _errors(category: str, truth: dict, fitted: dict) -> tuple[float, dict]:
     return float(max(errs.values())), errs
 
 
-def run_payload_case(case: PayloadCase, cfg: PayloadDiagnoseConfig | None = None) -> dict:
-    """Simulate, write, re-read and diagnose one case blind; score it."""
-    cfg = cfg or PayloadDiagnoseConfig()
+def simulate_payload_case(case: PayloadCase) -> tuple[PayloadLog, dict]:
+    """The case's log (as simulated, before any file) and its true effect parameters."""
     rng = as_generator(case.seed)
     wrench = pl.multisine_wrench(case.wrench, rng)
     if case.damping is not None:
@@ -120,14 +130,20 @@ def run_payload_case(case: PayloadCase, cfg: PayloadDiagnoseConfig | None = None
     truth = {f.name: getattr(case.effects[0], f.name) for f in fields(case.effects[0])} if case.effects else {}
     if "S" in truth:
         truth["S"] = np.asarray(truth["S"]).tolist()
+    return log, truth
+
+
+def score_payload_case(case: PayloadCase, truth: dict, read: Callable[[str], PayloadLog],
+                       cfg: PayloadDiagnoseConfig | None = None) -> dict:
+    """Read a case's log with ``read(tmp_dir)`` (it writes the log there and reads it back), diagnose it blind and
+    score it: the result row of :func:`validate_payload` (a log the reader rejects counts as wrong)."""
+    cfg = cfg or PayloadDiagnoseConfig()
     expected = {NONE: "none", OUT: "unexplained"}.get(case.category, case.category)
     out = {"category": case.category, "expected": expected, "true_params": truth, "wrench": case.wrench,
            "dt": case.dt, "seed": case.seed, "damping": case.damping}
     try:
         with tempfile.TemporaryDirectory() as tmp:
-            path = os.path.join(tmp, "log.csv")
-            write_log(path, log, comments=("validation log",))
-            log = read_log(path, "payload")
+            log = read(tmp)
         t0 = time.perf_counter()
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
@@ -137,7 +153,8 @@ def run_payload_case(case: PayloadCase, cfg: PayloadDiagnoseConfig | None = None
         out.update(verdict="error", error=str(exc), right=False, seconds=0.0)
         return out
     out.update(verdict=dg.verdict, right=dg.verdict == expected, gap_before=dg.gap_before, gap_after=dg.gap_after,
-               params=dg.params, candidates=[c.effect for c in dg.candidates[:3]])
+               params=dg.params, candidates=[c.effect for c in dg.candidates[:3]],
+               not_testable=sorted(dg.where.get("not_testable", {})))
     if case.category in PAYLOAD_EFFECTS:
         out["ratio"] = dg.gap_after / dg.gap_before if dg.gap_before > 0 else float("nan")
         if out["right"]:
@@ -145,18 +162,32 @@ def run_payload_case(case: PayloadCase, cfg: PayloadDiagnoseConfig | None = None
     return out
 
 
+def run_payload_case(case: PayloadCase, cfg: PayloadDiagnoseConfig | None = None) -> dict:
+    """Simulate, write, re-read and diagnose one case blind; score it."""
+    log, truth = simulate_payload_case(case)
+
+    def read(tmp: str) -> PayloadLog:
+        path = os.path.join(tmp, "log.csv")
+        write_log(path, log, comments=("validation log",))
+        return read_log(path, "payload")
+
+    return score_payload_case(case, truth, read, cfg)
+
+
 def validate_payload(n: int, seed=None, show_progress: bool = True,
                      cfg: PayloadDiagnoseConfig | None = None) -> dict:
     """Draw ``n`` payload logs (categories in turn, shuffled), diagnose each blind, summarise."""
-    if n < 1:
-        raise ValueError(f"n must be >= 1, got {n}")
-    rng = as_generator(seed)
-    cats = [PAYLOAD_CATEGORIES[i % len(PAYLOAD_CATEGORIES)] for i in range(n)]
-    rng.shuffle(cats)
-    cases = [draw_payload_case(c, rng) for c in cats]
+    cases = draw_payload_cases(n, seed)
     t0 = time.perf_counter()
     with nullcontext() if show_progress else progress.use_sink(None):
         results = map_tasks(run_payload_case, [(c, cfg) for c in cases], 1, "validate payload")
+    s = summarize_payload(results)
+    s.update(n=n, seed=seed, wall_seconds=time.perf_counter() - t0)
+    return s
+
+
+def summarize_payload(results: list[dict]) -> dict:
+    """The headline figures and the confusion matrix of payload result rows (:func:`score_payload_case`)."""
     labels = list(PAYLOAD_EFFECTS) + ["none", "unexplained", "error"]
     conf = {c: {lab: 0 for lab in labels} for c in PAYLOAD_CATEGORIES}
     for r in results:
@@ -165,7 +196,7 @@ def validate_payload(n: int, seed=None, show_progress: bool = True,
     perr = np.array([r["param_error"] for r in results if "param_error" in r], dtype=float)
     secs = np.array([r["seconds"] for r in results])
     return {
-        "plant": "payload", "n": n, "seed": seed,
+        "plant": "payload", "n": len(results),
         "accuracy": float(np.mean([r["right"] for r in results])),
         "accuracy_by_category": {c: float(np.mean([r["right"] for r in results if r["category"] == c]))
                                  for c in PAYLOAD_CATEGORIES if any(r["category"] == c for r in results)},
@@ -175,7 +206,6 @@ def validate_payload(n: int, seed=None, show_progress: bool = True,
         "param_error_max": float(np.max(perr)) if perr.size else float("nan"),
         "confusion": conf,
         "seconds_per_log": {"median": float(np.median(secs)), "max": float(np.max(secs))},
-        "wall_seconds": time.perf_counter() - t0,
         "logs": results,
     }
 

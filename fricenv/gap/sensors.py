@@ -24,7 +24,8 @@ from scipy.ndimage import median_filter
 
 from fricenv.gap.stats import estimate_noise
 
-__all__ = ["FILTERED_AC", "OUTLIER_Z", "ChannelCondition", "condition_channel", "correlation_time", "fill_missing"]
+__all__ = ["FILTERED_AC", "OUTLIER_Z", "ChannelCondition", "band_noise", "condition_channel", "correlation_time",
+           "fill_missing", "frame_times", "looks_filtered"]
 
 OUTLIER_Z = 8.0  # distance from the running median beyond which an isolated sample is an outlier [noise std]
 OUTLIER_SPAN = 7  # running-median span [samples]
@@ -33,6 +34,10 @@ QUIET_MIN = 20  # samples of a quiet stretch (free rolling) that the filtering t
 FILTERED_AC = -0.35  # lag-1 autocorrelation of the first differences above which a channel looks filtered [-]
 QUANT_MIN_LEVELS = 3  # a grid needs at least this many distinct levels [-]
 MAX_CORRELATION_TIME = 50.0  # upper bound of the integrated autocorrelation time [samples]
+FILTERED_MARGIN = 0.15  # lag-1 autocorrelation of k-th differences this far above white noise's: filtered [-]
+MIN_FRAMES = 10  # fresh frames a camera clock is fitted from [-]
+MAX_AGE_SPREAD = 1.5  # frame ages spread over at most this many log steps for a clock [-]
+MAX_LATE = 4.0  # a frame shown up to this many steps late is still on the clock (up to 3 dropped rows) [-]
 
 
 @dataclass
@@ -104,10 +109,31 @@ def difference_ac(x: np.ndarray) -> float:
     return float(np.dot(d2[1:], d2[:-1]) / den) if den > 0 else -0.5
 
 
-def _outliers(x: np.ndarray, noise: float) -> np.ndarray:
+def _trend_spikes(f: np.ndarray, floor: float) -> np.ndarray:
+    """Isolated spikes on a fast trend (a tracked pose sampled by a slow camera moves far between frames, so its
+    neighbours differ and a running median follows the trend). Each sample is compared with the cubic through its
+    two neighbours on either side, ``(-f[i-2] + 4 f[i-1] + 4 f[i+1] - f[i+2]) / 6`` (a smooth signal leaves a 4th
+    order residual): a spike ``e`` leaves ``e`` there and ``-2e/3`` at its neighbours, a step ``s`` leaves ``s/2``
+    at the two samples either side of it. A spike is beyond ``OUTLIER_Z`` robust spreads and 1.3 times its
+    neighbours' residuals. The spread is that of the cubic residual itself (at least ``floor``): a difference-based
+    noise level reads a fast trend's curvature as noise."""
+    out = np.zeros(f.size, dtype=bool)
+    if f.size < 7:
+        return out
+    r = np.zeros(f.size)
+    r[2:-2] = f[2:-2] - (-f[:-4] + 4.0 * f[1:-3] + 4.0 * f[3:-1] - f[4:]) / 6.0
+    spread = max(floor * np.sqrt(1.0 + 34.0 / 36.0), 1.4826 * float(np.median(np.abs(r[2:-2]))))
+    a = np.abs(r)
+    nb = np.maximum(np.r_[0.0, a[:-1]], np.r_[a[1:], 0.0])
+    out[2:-2] = (a[2:-2] > OUTLIER_Z * spread) & (a[2:-2] > 1.3 * nb[2:-2])
+    return out
+
+
+def _outliers(x: np.ndarray, noise: float, floor: float) -> np.ndarray:
     """Indices of isolated spikes: far from the running median of their neighbours and from the mean of the two
-    adjacent samples, while those two agree (a step or a lock-up moves its neighbours too). When more than
-    ``OUTLIER_MAX_SHARE`` of the samples qualify, the channel is spiky by nature and nothing is flagged."""
+    adjacent samples, while those two agree (a step or a lock-up moves its neighbours too), or off the local trend
+    from both sides (:func:`_trend_spikes`). When more than ``OUTLIER_MAX_SHARE`` of the samples qualify, the
+    channel is spiky by nature and nothing is flagged."""
     ok = np.isfinite(x)
     if np.count_nonzero(ok) < OUTLIER_SPAN or not noise > 0:
         return np.zeros(0, dtype=int)
@@ -118,7 +144,7 @@ def _outliers(x: np.ndarray, noise: float) -> np.ndarray:
     mid[1:-1] = np.abs(f[1:-1] - 0.5 * (f[:-2] + f[2:]))
     agree = np.zeros(f.size, dtype=bool)
     agree[1:-1] = np.abs(f[2:] - f[:-2]) < 0.5 * mid[1:-1]
-    flag = ok & (dev > OUTLIER_Z * spread) & (mid > OUTLIER_Z * spread) & agree
+    flag = ok & (((dev > OUTLIER_Z * spread) & (mid > OUTLIER_Z * spread) & agree) | _trend_spikes(f, floor))
     if np.count_nonzero(flag) > OUTLIER_MAX_SHARE * f.size:
         return np.zeros(0, dtype=int)
     return np.flatnonzero(flag)
@@ -142,7 +168,7 @@ def condition_channel(x: np.ndarray, floor: float, quiet: int = 0, may_be_filter
     raw = estimate_noise(_fresh(x))
     noise = max(raw if np.isfinite(raw) else floor, floor, q / np.sqrt(12.0))
     fresh = np.flatnonzero(np.isfinite(x))
-    out = fresh[_outliers(x[fresh], noise)]  # on the fresh samples only: a held channel's frames are its samples
+    out = fresh[_outliers(x[fresh], noise, floor)]  # on the fresh samples only: a held channel's frames are its samples
     x[out] = np.nan
     if out.size:
         raw = estimate_noise(_fresh(x))
@@ -150,6 +176,75 @@ def condition_channel(x: np.ndarray, floor: float, quiet: int = 0, may_be_filter
     filtered = may_be_filtered and q == 0.0 and difference_ac(x[:quiet] if quiet >= QUIET_MIN else x) > FILTERED_AC
     return ChannelCondition(values=x, filled=fill_missing(x), noise=noise, missing=missing, outliers=out,
                             quant_step=q, filtered=filtered)
+
+
+def looks_filtered(x: np.ndarray, order: int = 2) -> bool:
+    """Whether a channel looks low-pass filtered: the lag-1 autocorrelation of its ``order``-th differences lies
+    ``FILTERED_MARGIN`` above white noise's ``-order / (order + 1)`` (a higher order suppresses a smooth signal that
+    would correlate first differences at a high rate)."""
+    dk = np.diff(_fresh(np.asarray(x, dtype=float)), order - 1) if order > 1 else _fresh(np.asarray(x, dtype=float))
+    return difference_ac(dk) > -order / (order + 1.0) + FILTERED_MARGIN
+
+
+def band_noise(x: np.ndarray, fs: float, f_lo: float) -> float:
+    """White-equivalent noise std of a low-passed channel: its noise power spectral density read in the band
+    ``[f_lo, 2 f_lo]`` (above the signal, below a sensor filter's cut-off; Welch median over the band), as the std of
+    white noise at rate ``fs`` with that density. A difference-based estimate reads the density near ``fs / 2``,
+    where the filter has removed it, and would be far too small."""
+    from scipy.signal import welch
+
+    y = fill_missing(x)
+    nper = int(min(y.size, max(64, 2 ** int(np.ceil(np.log2(4.0 * fs / f_lo))))))
+    f, pxx = welch(y, fs=fs, nperseg=nper, detrend="linear")
+    band = (f >= f_lo) & (f <= 2.0 * f_lo)
+    if not band.any():
+        return float("nan")
+    return float(np.sqrt(np.median(pxx[band]) * fs / 2.0))
+
+
+def frame_times(t: np.ndarray, fresh: np.ndarray) -> np.ndarray | None:
+    """Capture times of a slow camera's frames, from the rows where a fresh frame first shows (``fresh``).
+
+    A frame taken at ``f`` shows at the first row at or after it: its row is late by an age between 0 and one log
+    step, which a fast pose turns into an error far above the vision noise. A camera runs on its own clock,
+    ``f_j = a + j T``: the frame numbers ``j`` are counted from the gaps between fresh rows in frame periods, ``T``
+    and ``a`` fitted by least squares, and the clock is placed so that the middle 80 % of the ages spread evenly
+    over one log step; a fresh row off the clock is taken half a step before its row, and the log's first row (a
+    frame taken before the log started) one period before the next frame. Returns the frame time of each fresh row (NaN elsewhere), or None where the fresh rows do not
+    follow a clock (fewer than ``MIN_FRAMES``, a camera faster than half the log rate, or ages spread beyond
+    ``MAX_AGE_SPREAD`` steps).
+    """
+    rows = np.flatnonzero(fresh)
+    if rows.size < MIN_FRAMES or rows.size > 0.5 * t.size:
+        return None
+    h = float(np.median(np.diff(t)))
+    out = np.full(t.size, np.nan)
+    if rows[0] == 0:  # the first row shows a frame taken before the log started: one period before the next frame
+        clock = frame_times(t, np.r_[False, fresh[1:]])
+        if clock is not None:
+            clock[0] = min(t[0], clock[rows[1]] - (clock[rows[-1]] - clock[rows[1]]) / (rows.size - 2))
+        return clock
+    tr = t[rows]
+    period = (tr[-1] - tr[0]) / (rows.size - 1)
+    # frame numbers from the gaps (a frame shown late after a dropped row makes a gap of up to 1.65 periods), then
+    # from the fitted clock itself, refitted each time
+    j = np.concatenate([[0], np.cumsum(np.maximum(np.floor(np.diff(tr) / period + 0.35), 1))])
+    on = np.ones(rows.size, dtype=bool)  # rows on the clock (a frame held from before the log starts is not)
+    for _ in range(3):
+        period, a = np.polyfit(j[on], tr[on], 1)
+        j = np.rint((tr - a - float(np.median((tr - a - period * j)[on]))) / period)
+        on = np.concatenate([[True], np.diff(j) >= 1])
+    period, a = np.polyfit(j[on], tr[on], 1)
+    age = tr - (a + period * j)
+    lo, hi = np.percentile(age[on], [10.0, 90.0])
+    if hi - lo > MAX_AGE_SPREAD * h:
+        return None
+    on &= (age > lo - h) & (age < hi + MAX_LATE * h)  # dropped rows before a frame's row show it later
+    f = np.where(on, a + period * j + 0.5 * (lo + hi) - 0.5 * h, tr - 0.5 * h)
+    if np.any(np.diff(f) <= 0):
+        return None
+    out[rows] = f
+    return out
 
 
 def correlation_time(r: np.ndarray) -> float:

@@ -337,11 +337,17 @@ def _check_values(path: Path, cls: type, cols: dict[str, np.ndarray], lines: np.
             del cols[name]
 
 
-def _mark_held(cols: dict[str, np.ndarray], step: float) -> None:
-    """Held samples (:func:`fricenv.logs.resample.held_mask`) become NaN, in every channel but t, T_b and omega."""
+def _mark_held(cols: dict[str, np.ndarray], step: float) -> tuple[str, ...]:
+    """Held samples (:func:`fricenv.logs.resample.held_mask`) become NaN, in every channel but t, T_b and omega.
+    Returns the channels that had held samples (a slower sensor)."""
+    slow = []
     for name, x in cols.items():
         if name not in ("t", *_HOLD, *_FILLED):
-            cols[name] = np.where(rs.held_mask(x, step), np.nan, x)
+            held = rs.held_mask(x, step)
+            cols[name] = np.where(held, np.nan, x)
+            if held.any():
+                slow.append(name)
+    return tuple(slow)
 
 
 def read_log(path: str | os.PathLike, plant: str = "quarter-car",
@@ -363,9 +369,9 @@ def read_log(path: str | os.PathLike, plant: str = "quarter-car",
     _check_values(path, cls, cols, lines)
     grid = _check_time(path, cols["t"], lines)
     _PLANT_CHECKS[plant](path, cols, lines)  # on the values as logged, held ones included
-    _mark_held(cols, grid.median_step if grid is not None else float(np.median(np.diff(cols["t"]))))
+    slow = _mark_held(cols, grid.median_step if grid is not None else float(np.median(np.diff(cols["t"]))))
     if grid is not None:
-        cols = rs.resample(cols["t"], cols, grid, hold=_HOLD)
+        cols = rs.resample(cols["t"], cols, grid, hold=_HOLD, keep=slow)
     notes = {"comments": tuple(comments) + tuple(c for c in added if c not in comments), "source": str(path),
              "resampled": None if grid is None else grid.summary(),
              "missing": {name: float(np.mean(np.isnan(x))) for name, x in cols.items() if name != "t"}}

@@ -15,7 +15,9 @@ missing where either of its neighbouring rows is.
 Held-sample rule. In a channel that changes at least ``MIN_CHANGES`` times, a row whose value equals exactly the
 previous row's is a held sample (a slower sensor repeating its last value), unless the value is exactly 0 (a wheel
 or a car at rest, a sensor's floor) or the run it belongs to lasts longer than ``MAX_HOLD_S`` (a genuinely constant
-reading). Held samples become NaN: missing, not measured.
+reading). Held samples become NaN: missing, not measured. When the log is resampled, a channel with held samples
+keeps each fresh sample's value at its row's grid point (no interpolation: the neighbouring fresh samples are other
+frames, rows away) and its other grid points are missing.
 """
 
 from __future__ import annotations
@@ -111,16 +113,22 @@ def _step_problem(dt: float, h0: float, ratio: float) -> str:
             f"{MAX_JITTER:.0%} of the step; resample the log to a uniform step")
 
 
-def resample(t: np.ndarray, cols: dict[str, np.ndarray], grid: Grid, hold: tuple[str, ...] = ("T_b",)
-             ) -> dict[str, np.ndarray]:
+def resample(t: np.ndarray, cols: dict[str, np.ndarray], grid: Grid, hold: tuple[str, ...] = ("T_b",),
+             keep: tuple[str, ...] = ()) -> dict[str, np.ndarray]:
     """Every channel of ``cols`` (rows at stamps ``t``) on ``grid`` (see the module docstring); ``t`` included.
 
     :param hold: channels resampled by zero-order hold (commanded values); the others are interpolated linearly.
+    :param keep: channels whose present samples keep their own value at their row's grid point (a slower sensor
+        with held samples: its fresh sample is a frame taken some time before the row's stamp anyway, and
+        interpolating towards the next frame, rows away, would mix two frames); the other points are missing.
     """
     times = grid.times(float(t[0]))
     out: dict[str, np.ndarray] = {"t": times}
     for name, x in cols.items():
-        if name != "t":
+        if name in keep:
+            out[name] = np.full(grid.size, np.nan)
+            out[name][grid.index] = x
+        elif name != "t":
             out[name] = _held_on_grid(x, grid) if name in hold else _interp_on_grid(t, x, times, grid)
     return out
 

@@ -206,3 +206,22 @@ def test_diagnose_with_a_map_reads_the_export_and_keeps_the_converted_log(tmp_pa
     assert (out / "report.json").is_file()
     log = read_log(out / "log.contract.csv")
     assert log.torque_from_pressure and abs(1.0 / log.dt - 50.0) < 1.0
+
+
+def test_a_resampled_held_channel_keeps_its_fresh_samples_unmixed(tmp_path):
+    """Jittered stamps (so the log is resampled) and a held 30 Hz pose: each fresh frame keeps exactly the value it
+    was logged with, at its row's grid point (interpolating towards the next frame, rows away, would mix two)."""
+    rng = np.random.default_rng(12)
+    n = 200
+    t = np.arange(n) * H + rng.uniform(-0.05, 0.05, n) * H
+    t[0] = 0.0
+    fine = np.arange(0, n * H + 0.1, 1e-3)
+    held = {k: held_camera(fine, s * fine + 0.1, t, 30.0, 0.004) for k, s in (("theta", 0.3), ("X", 0.2), ("Y", -0.1))}
+    rows = np.column_stack([t, rng.normal(0, 1, n), rng.normal(0, 1, n), rng.normal(0, 1, n),
+                            held["theta"], held["X"], held["Y"]])
+    log = read_log(_write(tmp_path, "t,M,f_x,f_y,theta,X,Y", rows), "payload")
+    assert log.resampled is not None and len(log) == n
+    for name in ("theta", "X", "Y"):
+        fresh = np.r_[True, held[name][1:] != held[name][:-1]]
+        np.testing.assert_array_equal(np.isnan(getattr(log, name)), ~fresh)
+        np.testing.assert_array_equal(getattr(log, name)[fresh], held[name][fresh])
