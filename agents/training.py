@@ -240,6 +240,45 @@ def _make_model(algo: str, cfg: PPOConfig | SACConfig, venv, tb: str | None, see
                policy_kwargs=policy_kwargs, tensorboard_log=tb, seed=seed, verbose=verbose, device="cpu")
 
 
+def make_training_model(env: str, estimator: str, algo: str, cfg: PPOConfig | SACConfig, seed: int,
+                        vec: str = "native", env_kwargs: dict | None = None, frame_stack: int = 0,
+                        tb: str | None = None, verbose: int = 0):
+    """The SB3 model of a training run on its normalised vector env (the training curriculum): what
+    :func:`train` learns with, and what ``fricenv tune`` scores.
+
+    :param env: ``braking`` or ``payload``.
+    :param estimator: estimator appended to the observation.
+    :param algo: ``ppo`` or ``sac``.
+    :param cfg: hyperparameters.
+    :param seed: seed of the run; env ``i`` is seeded ``seed * SEED_STRIDE + i``.
+    :param vec: ``native``, ``dummy`` or ``subproc`` (see :func:`train`).
+    :param env_kwargs: extra env arguments.
+    :param frame_stack: k > 0: the last k observations (``VecFrameStack``); 0: none.
+    :param tb: TensorBoard directory or None.
+    :param verbose: SB3 verbosity.
+    """
+    from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecNormalize
+
+    if not isinstance(frame_stack, int) or frame_stack < 0:
+        raise ValueError(f"frame_stack must be an int >= 0 (0: none), got {frame_stack!r}")
+    if vec == "native":
+        from fricenv.envs.sb3_vec import make_sb3_vec_env
+
+        venv = make_sb3_vec_env(cfg.n_envs, seed=seed * SEED_STRIDE, estimator=estimator,
+                                scenarios=ScenarioSampler(), **(env_kwargs or {}))
+    else:
+        fns = [make_env_fn(env, estimator, rank=i, training=True, env_kwargs=env_kwargs)
+               for i in range(cfg.n_envs)]
+        venv = SubprocVecEnv(fns) if vec == "subproc" else DummyVecEnv(fns)
+        venv.seed(seed * SEED_STRIDE)
+    if frame_stack:
+        from stable_baselines3.common.vec_env import VecFrameStack
+
+        venv = VecFrameStack(venv, frame_stack)
+    venv = VecNormalize(venv, norm_obs=cfg.norm_obs, norm_reward=cfg.norm_reward, gamma=cfg.gamma)
+    return _make_model(algo, cfg, venv, tb, seed, verbose)
+
+
 def train(out: str | Path, env: str = "braking", estimator: str = "none", algo: str = "ppo", steps: int = 200_000,
           seed: int = 0, config: PPOConfig | SACConfig | None = None, vec: str = "auto",
           progress_bar: bool = True, checkpoint_every: int = CHECKPOINT_EVERY,
@@ -265,7 +304,6 @@ def train(out: str | Path, env: str = "braking", estimator: str = "none", algo: 
     """
     import torch
     from stable_baselines3.common.callbacks import CheckpointCallback
-    from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecNormalize
 
     cfg = _checked_config(env, estimator, algo, steps, vec, config)
     torch.set_num_threads(1)
@@ -274,25 +312,9 @@ def train(out: str | Path, env: str = "braking", estimator: str = "none", algo: 
 
     if vec == "auto":
         vec = "native" if native_vec_available(env, estimator) else "dummy"
-    if vec == "native":
-        from fricenv.envs.sb3_vec import make_sb3_vec_env
-
-        venv = make_sb3_vec_env(cfg.n_envs, seed=seed * SEED_STRIDE, estimator=estimator,
-                                scenarios=ScenarioSampler(), **(env_kwargs or {}))
-    else:
-        fns = [make_env_fn(env, estimator, rank=i, training=True, env_kwargs=env_kwargs)
-               for i in range(cfg.n_envs)]
-        venv = SubprocVecEnv(fns) if vec == "subproc" else DummyVecEnv(fns)
-        venv.seed(seed * SEED_STRIDE)
-    if not isinstance(frame_stack, int) or frame_stack < 0:
-        raise ValueError(f"frame_stack must be an int >= 0 (0: none), got {frame_stack!r}")
-    if frame_stack:
-        from stable_baselines3.common.vec_env import VecFrameStack
-
-        venv = VecFrameStack(venv, frame_stack)
-    venv = VecNormalize(venv, norm_obs=cfg.norm_obs, norm_reward=cfg.norm_reward, gamma=cfg.gamma)
     tb = _tensorboard_dir(out)
-    model = _make_model(algo, cfg, venv, tb, seed, verbose)
+    model = make_training_model(env, estimator, algo, cfg, seed, vec, env_kwargs, frame_stack, tb, verbose)
+    venv = model.get_env()
     callbacks = []
     if checkpoint_every > 0:
         callbacks.append(CheckpointCallback(save_freq=max(checkpoint_every // cfg.n_envs, 1),

@@ -275,20 +275,10 @@ def seed_split(settings: TuneSettings) -> dict[str, Any]:
 # -------------------------------------------------------------------------------------------------- objective
 def _model(algo: str, cfg, estimator: str, seed: int):
     """An SB3 model on the training curriculum, as :func:`agents.training.train` builds it (no files)."""
-    from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
+    from agents.training import make_training_model, native_vec_available
 
-    from agents.training import ScenarioSampler, _make_model, make_env_fn, native_vec_available
-
-    if native_vec_available("braking", estimator):
-        from fricenv.envs.sb3_vec import make_sb3_vec_env
-
-        venv = make_sb3_vec_env(cfg.n_envs, seed=seed * SEED_STRIDE, estimator=estimator,
-                                scenarios=ScenarioSampler())
-    else:
-        venv = DummyVecEnv([make_env_fn("braking", estimator, rank=i) for i in range(cfg.n_envs)])
-        venv.seed(seed * SEED_STRIDE)
-    venv = VecNormalize(venv, norm_obs=cfg.norm_obs, norm_reward=cfg.norm_reward, gamma=cfg.gamma)
-    return _make_model(algo, cfg, venv, None, seed, 0)
+    vec = "native" if native_vec_available("braking", estimator) else "dummy"
+    return make_training_model("braking", estimator, algo, cfg, seed, vec)
 
 
 def _score(model, algo: str, settings: TuneSettings) -> tuple[float, int, int]:

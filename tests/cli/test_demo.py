@@ -60,5 +60,8 @@ def test_bench_gap_writes_diagnosis_seconds_and_speed_reconstruction(tmp_path):
     data = json.loads(out_json.read_text())
     assert set(data["gap_diagnose_seconds"]) == {"all_channels", "required_only"}
     assert all(s > 0 for s in data["gap_diagnose_seconds"].values())
+    assert set(data["gap_diagnose_seconds_numpy"]) == {"all_channels", "required_only"}
+    assert data["gap_speedup"]["all_channels"] == pytest.approx(
+        data["gap_diagnose_seconds_numpy"]["all_channels"] / data["gap_diagnose_seconds"]["all_channels"])
     ms = data["speed_reconstruction_ms"]
     assert ms["newton"] > 0 and ms["ratio"] == pytest.approx(ms["sequential"] / ms["newton"])
