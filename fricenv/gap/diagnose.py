@@ -73,7 +73,7 @@ from fricenv.gap.excitation import excitation, untestable
 from fricenv.gap.fitting import distinct_starts, fit_nominal, refine_noise, score
 from fricenv.gap.localise import localise, tests_table
 from fricenv.gap.params import ROAD_NAMES, param_names, road_of
-from fricenv.gap.pool import default_jobs
+from fricenv.gap.pool import default_jobs, map_tasks, shared_pool
 from fricenv.gap.selection import forward_select, split_params
 from fricenv.gap.stats import (
     TRIM_SHARE,
@@ -188,8 +188,9 @@ def _candidates(nominal_folds: list[CandidateFit], folds: list[Data], d: Data, c
     tasks = [([c], nf.road_x(), f, cfg, None) for c in cfg.candidates for f, nf in zip(folds, nominal_folds)]
     per_fold = run_fits(tasks, jobs)
     k = len(folds)
-    nominal_folds = [nested_nominal(nf, per_fold[j::k], f, cfg)
-                     for j, (f, nf) in enumerate(zip(folds, nominal_folds))]
+    nominal_folds = map_tasks(nested_nominal, [(nf, per_fold[j::k], f, cfg)
+                                               for j, (f, nf) in enumerate(zip(folds, nominal_folds))], jobs,
+                              "refit the nominal model")
     nominal = cross_fitted(nominal_folds, d)
     fits = [cross_fitted(per_fold[i * k:(i + 1) * k], d) for i in range(len(cfg.candidates))]
     for f in fits:
@@ -248,7 +249,7 @@ def diagnose(log: QuarterCarLog, p: qc.QuarterCarParams = qc.PAPER_PARAMS,
     folds = [fold_data(d, j) for j in range(int(cfg.folds))]
     jobs = default_jobs(cfg.jobs)
     expected = {e: why for attr, (e, why) in EXPECTED_EFFECTS.items() if getattr(log, attr, False)}
-    with warnings.catch_warnings():
+    with warnings.catch_warnings(), shared_pool(jobs):  # one start of the worker processes for every map below
         warnings.simplefilter("ignore", RuntimeWarning)
         nominal_folds = _calibrate(folds, cfg)
         not_testable = untestable(cfg.candidates, excitation(nominal_folds[0], d))
