@@ -12,7 +12,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from fricenv.effects.kernels import _compile
+from fricenv.effects.kernels import _compile, _guard_cache
 from fricenv.gap import speed
 from fricenv.plants.tire import SLIP_SPEED_FLOOR, magic_formula_and_dslip, slip_and_partials
 
@@ -23,7 +23,7 @@ _mu_dslip = _compile(magic_formula_and_dslip)
 _lag_decay = _compile(speed.slip_lag_decay)
 
 
-@numba.njit(cache=False, error_model="numpy")
+@numba.njit(cache=True, error_model="numpy")
 def _recursion(omega, r, c0, c2, B, C, E, theta, relax, dt_over_sigma, Fz, m, dt, out):
     """``out[:, k + 1] = Phi_k(out[:, k])`` (:meth:`fricenv.gap.speed._SpeedModel.step`) from ``out[:, 0]``, the
     transient slip starting from rest; per-element arrays (K,), ``theta`` (K, n)."""
@@ -63,3 +63,6 @@ def sequential_speed(model, v0: np.ndarray) -> np.ndarray:
     return _recursion(np.ascontiguousarray(model.omega, dtype=float), col(model.r), col(model.c0), col(model.c2),
                       B, C, E, theta, np.ascontiguousarray(np.broadcast_to(model.relax, (K, 1))[:, 0]),
                       col(model.dt_over_sigma), float(model.p.Fz), float(model.p.m), float(model.dt), out)
+
+
+_guard_cache(globals(), ("fricenv.gap.speed",))  # the cache compiled in the slip, Magic Formula and lag formulas
