@@ -26,7 +26,7 @@ from contextlib import contextmanager
 from fricenv import progress
 from fricenv.errors import InvalidInputError
 
-__all__ = ["RAY_AUTO", "default_jobs", "imap_tasks", "map_tasks", "ray_session", "shared_pool"]
+__all__ = ["RAY_AUTO", "default_jobs", "imap_tasks", "map_tasks", "ray_session", "shared_pool", "start_tasks"]
 
 RAY_AUTO = "auto"  # --ray value: join a running Ray instance or cluster, else start one in this process
 WAIT_S = 0.5  # longest wait on Ray between checks for an interrupt [s]
@@ -281,3 +281,32 @@ def map_tasks(fn: Callable, tasks: Sequence[tuple], jobs: int, label: str, ray: 
     for i, result in imap_tasks(fn, tasks, jobs, label, ray):
         out[i] = result
     return out
+
+
+def start_tasks(fn: Callable, tasks: Sequence[tuple], jobs: int, label: str) -> Callable[[], list]:
+    """Start ``[fn(*t) for t in tasks]`` now, in the workers of an open :func:`shared_pool`, so that this process can
+    do other work meanwhile; returns ``collect()``, which waits and returns the results in task order. Without a
+    shared pool (or with ``jobs <= 1``) the tasks run in ``collect()`` through :func:`map_tasks`.
+
+    :param fn: a picklable function; :param tasks: its argument tuples; :param jobs: processes; :param label: progress
+        label of the wait.
+    """
+    pool = _shared()
+    if pool is None or jobs <= 1 or len(tasks) <= 1:
+        return lambda: map_tasks(fn, tasks, jobs, label)
+    futures = [pool.submit(_worker, (fn, t)) for t in tasks]
+
+    def collect() -> list:
+        try:
+            with progress.task(label, total=len(futures)) as advance:
+                out = []
+                for f in futures:
+                    out.append(f.result())
+                    advance()
+                return out
+        except BaseException:  # the workers are stopped as in _local
+            _SHARED.pop("pool", None)
+            _terminate(pool)
+            raise
+
+    return collect
