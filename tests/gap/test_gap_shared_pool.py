@@ -5,10 +5,11 @@ import os
 import signal
 import threading
 import time
+from pathlib import Path
 
 import pytest
 
-from fricenv.gap.pool import map_tasks, shared_pool
+from fricenv.gap.pool import map_tasks, shared_pool, start_tasks
 
 
 def _pid_after(pause: float) -> int:
@@ -60,3 +61,27 @@ def test_interrupt_inside_a_shared_pool_ends_its_workers():
         assert map_tasks(_square, [(4,), (5,)], 2, "after") == [16, 25]  # a fresh pool: the shared one is closed
     time.sleep(0.2)
     assert not any(_alive(pid) for pid in set(pids))
+
+
+def _write_pid(path: str) -> int:
+    Path(path).write_text(str(os.getpid()))
+    return os.getpid()
+
+
+def test_started_tasks_run_before_collect_and_come_back_in_order(tmp_path):
+    paths = [str(tmp_path / f"pid{i}") for i in range(3)]
+    with shared_pool(2):
+        collect = start_tasks(_write_pid, [(p,) for p in paths], 2, "started")
+        deadline = time.monotonic() + 60.0  # a generous bound: the tasks only need to start
+        while not all(os.path.exists(p) and os.path.getsize(p) for p in paths) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        ran_before_collect = all(os.path.exists(p) for p in paths)
+        pids = collect()
+    assert ran_before_collect  # started in the workers while this process did something else
+    assert pids == [int(Path(p).read_text()) for p in paths]  # in task order
+    assert os.getpid() not in pids
+
+
+def test_started_tasks_without_a_shared_pool_run_on_collect():
+    collect = start_tasks(_square, [(3,), (1,), (2,)], 2, "squares")
+    assert collect() == [9, 1, 4]
