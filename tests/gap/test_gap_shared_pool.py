@@ -11,6 +11,8 @@ import pytest
 
 from fricenv.gap.pool import map_tasks, shared_pool, start_tasks
 
+from .test_gap_pool import _alive
+
 
 def _pid_after(pause: float) -> int:
     time.sleep(pause)
@@ -19,14 +21,6 @@ def _pid_after(pause: float) -> int:
 
 def _square(x: int) -> int:
     return x * x
-
-
-def _alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    return True
 
 
 def test_maps_in_a_shared_pool_reuse_its_two_workers():
