@@ -288,25 +288,30 @@ def _flags(b: ModelBatch) -> np.ndarray:
                      np.any(b.c0 != 0.0) or np.any(b.c2 != 0.0)], dtype=np.bool_)
 
 
-def _guard_cache() -> None:
+def _guard_cache(namespace: dict | None = None, extra_modules: tuple[str, ...] = ()) -> None:
     """Drop the on-disk compiled code when a module whose functions or constants it compiled in has changed.
 
     numba checks a cached function against its own source file only: an edit of the Magic Formula or of the ROS2
     substep in another module would otherwise leave the old formula compiled in. The dependencies' sources are
     hashed next to the cache; a different hash flushes this module's cached functions once (they recompile).
+
+    :param namespace: the globals of the module whose cached functions are guarded (default: this module's).
+    :param extra_modules: further modules they compile in (imported names).
     """
     import hashlib
+    import pathlib
     import sys
 
     modules = [sys.modules[m] for m in ("fricenv.plants.tire", "fricenv.plants.quarter_car",
                                         "fricenv.plants.quarter_car_fast", "fricenv.effects.relaxation",
-                                        "fricenv.effects.library")]
-    digest = hashlib.sha256(b"".join(open(m.__file__, "rb").read() for m in modules)).hexdigest()
-    cached = [f for f in globals().values() if isinstance(f, numba.core.registry.CPUDispatcher)
+                                        "fricenv.effects.library", *extra_modules)]
+    digest = hashlib.sha256(b"".join(pathlib.Path(m.__file__).read_bytes() for m in modules)).hexdigest()
+    namespace = globals() if namespace is None else namespace
+    cached = [f for f in namespace.values() if isinstance(f, numba.core.registry.CPUDispatcher)
               and getattr(f, "_cache", None) is not None and f._cache.__class__.__name__ == "FunctionCache"]
     if not cached:
         return
-    stamp = os.path.join(cached[0]._cache.cache_path, "kernels.deps")
+    stamp = os.path.join(cached[0]._cache.cache_path, namespace["__name__"].rsplit(".", 1)[-1] + ".deps")
     try:
         with open(stamp) as fh:
             if fh.read() == digest:

@@ -4,7 +4,7 @@ processes, and tested against the nominal model on held-out windows."""
 from __future__ import annotations
 
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
@@ -13,11 +13,11 @@ from fricenv.gap.changepoint import fit_change_point
 from fricenv.gap.config import DiagnoseConfig
 from fricenv.gap.fitting import effect_start_matrix, fit, score
 from fricenv.gap.params import ROAD_NAMES, param_names
-from fricenv.gap.pool import map_tasks
+from fricenv.gap.pool import start_tasks
 from fricenv.gap.stats import CandidateFit, improvement_z, paired_t, paired_z
 from fricenv.gap.windows import Data, window_nuisances
 
-__all__ = ["FIT_STRATEGIES", "fit_candidate", "nested_nominal", "run_fits", "test_against"]
+__all__ = ["FIT_STRATEGIES", "fit_candidate", "nested_nominal", "run_fits", "start_fits", "test_against"]
 
 
 def _least_squares(effects: Sequence[str], road: np.ndarray, d: Data, cfg: DiagnoseConfig,
@@ -48,15 +48,29 @@ def _fit_cost(effects: Sequence[str], d: Data) -> int:
     fitted = len(ROAD_NAMES) + sum(len(registry.get(e).param_names) for e in effects)
     if len(effects) == 1:
         fitted -= len(registry.get(effects[0]).searched)
-    return (fitted + 1) * (1 + window_nuisances(effects, d))
+    # a change-point fit searches its switching time, then refits once more per start (measured: twice the time)
+    searched = 2 if len(effects) == 1 and registry.get(effects[0]).fit == "change_point" else 1
+    return (fitted + 1) * (1 + window_nuisances(effects, d)) * searched
+
+
+def start_fits(tasks: list, jobs: int, label: str = "fit candidates") -> Callable[[], list]:
+    """Start candidate fits (:func:`fit_candidate` argument tuples) in the worker processes
+    (:func:`fricenv.gap.pool.start_tasks`), the longest first, which keeps the workers busy; returns ``collect()``,
+    which gives the results in task order."""
+    order = sorted(range(len(tasks)), key=lambda i: -_fit_cost(tasks[i][0], tasks[i][2]))
+    collect = start_tasks(fit_candidate, [tasks[i] for i in order], jobs, label)
+
+    def in_task_order() -> list:
+        done = dict(zip(order, collect()))
+        return [done[i] for i in range(len(tasks))]
+
+    return in_task_order
 
 
 def run_fits(tasks: list, jobs: int, label: str = "fit candidates") -> list:
-    """Candidate fits (:func:`fit_candidate` argument tuples), in worker processes when there are several; the
-    longest fits go first, which keeps the workers busy. Results in task order."""
-    order = sorted(range(len(tasks)), key=lambda i: -_fit_cost(tasks[i][0], tasks[i][2]))
-    done = dict(zip(order, map_tasks(fit_candidate, [tasks[i] for i in order], jobs, label)))
-    return [done[i] for i in range(len(tasks))]
+    """Candidate fits (:func:`fit_candidate` argument tuples), in worker processes when there are several, the
+    longest first; results in task order."""
+    return start_fits(tasks, jobs, label)()
 
 
 def nested_nominal(nominal: CandidateFit, fits: Sequence[CandidateFit], d: Data, cfg: DiagnoseConfig) \

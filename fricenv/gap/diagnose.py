@@ -65,7 +65,7 @@ import warnings
 from dataclasses import dataclass, field, replace
 
 from fricenv import progress
-from fricenv.gap.candidates import fit_candidate, nested_nominal, run_fits, test_against
+from fricenv.gap.candidates import fit_candidate, nested_nominal, run_fits, start_fits, test_against
 from fricenv.gap.changepoint import change_point_starts
 from fricenv.gap.config import DEFAULT_CONFIG, FIT_LOSSES, DiagnoseConfig
 from fricenv.gap.drift import drift_test, fit_time_split
@@ -73,7 +73,7 @@ from fricenv.gap.excitation import excitation, untestable
 from fricenv.gap.fitting import distinct_starts, fit_nominal, refine_noise, score
 from fricenv.gap.localise import localise, tests_table
 from fricenv.gap.params import ROAD_NAMES, param_names, road_of
-from fricenv.gap.pool import default_jobs
+from fricenv.gap.pool import default_jobs, map_tasks, shared_pool
 from fricenv.gap.selection import forward_select, split_params
 from fricenv.gap.stats import (
     TRIM_SHARE,
@@ -167,31 +167,42 @@ class _Selection:
     residuals: dict = field(default_factory=dict)
 
 
-def _calibrate(folds: list[Data], cfg: DiagnoseConfig) -> list[CandidateFit]:
-    """The nominal road fitted per fold; the first fold's fit also refines the noise levels the folds share."""
+def _calibrate_and_fit(folds: list[Data], d: Data, cfg: DiagnoseConfig, jobs: int):
+    """The nominal road fitted per fold (the first fold's fit also refines the noise levels the folds share), and
+    every testable candidate fitted per fold; a fold's candidate fits start in the worker processes as soon as its
+    nominal fit is done, while this process calibrates the next fold.
+
+    :return: (nominal fits per fold, candidate fits per fold in ``candidates`` order, the effects not testable).
+    """
     with progress.task("calibrate the nominal model", total=len(folds)) as advance:
         first = fit_nominal(folds[0], cfg)
         refine_noise(first, folds[0])  # the folds share the noise levels (one dict)
         nominal_folds = [score("nominal", [], first.names, first.x, folds[0], first.seconds)]
+        not_testable = untestable(cfg.candidates, excitation(nominal_folds[0], d))
+        candidates = [c for c in cfg.candidates if c not in not_testable]
+        run_cfg = replace(cfg, candidates=tuple(candidates))
+        pending = [start_fits([([c], nominal_folds[0].road_x(), folds[0], run_cfg, None) for c in candidates], jobs)]
         advance()
         for f in folds[1:]:
             nominal_folds.append(fit_nominal(f, cfg))
+            pending.append(start_fits([([c], nominal_folds[-1].road_x(), f, run_cfg, None) for c in candidates],
+                                      jobs))
             advance()
-    return nominal_folds
+    return nominal_folds, [collect() for collect in pending], not_testable
 
 
-def _candidates(nominal_folds: list[CandidateFit], folds: list[Data], d: Data, cfg: DiagnoseConfig, jobs: int):
-    """Every candidate fitted per fold and cross-fitted; the nominal model refitted from the candidates' roads.
+def _candidates(nominal_folds: list[CandidateFit], per_fold: list[list], folds: list[Data], d: Data,
+                cfg: DiagnoseConfig, jobs: int):
+    """The candidates cross-fitted from their fits per fold (``per_fold[j][i]``: candidate i on fold j); the nominal
+    model refitted from the candidates' roads.
 
     :return: (cross-fitted nominal model, cross-fitted candidates in ``cfg.candidates`` order).
     """
-    tasks = [([c], nf.road_x(), f, cfg, None) for c in cfg.candidates for f, nf in zip(folds, nominal_folds)]
-    per_fold = run_fits(tasks, jobs)
-    k = len(folds)
-    nominal_folds = [nested_nominal(nf, per_fold[j::k], f, cfg)
-                     for j, (f, nf) in enumerate(zip(folds, nominal_folds))]
+    nominal_folds = map_tasks(nested_nominal, [(nf, fits, f, cfg)
+                                               for f, nf, fits in zip(folds, nominal_folds, per_fold)], jobs,
+                              "refit the nominal model")
     nominal = cross_fitted(nominal_folds, d)
-    fits = [cross_fitted(per_fold[i * k:(i + 1) * k], d) for i in range(len(cfg.candidates))]
+    fits = [cross_fitted([fold_fits[i] for fold_fits in per_fold], d) for i in range(len(cfg.candidates))]
     for f in fits:
         test_against(nominal, f, d)
     return nominal, fits
@@ -248,12 +259,11 @@ def diagnose(log: QuarterCarLog, p: qc.QuarterCarParams = qc.PAPER_PARAMS,
     folds = [fold_data(d, j) for j in range(int(cfg.folds))]
     jobs = default_jobs(cfg.jobs)
     expected = {e: why for attr, (e, why) in EXPECTED_EFFECTS.items() if getattr(log, attr, False)}
-    with warnings.catch_warnings():
+    with warnings.catch_warnings(), shared_pool(jobs):  # one start of the worker processes for every map below
         warnings.simplefilter("ignore", RuntimeWarning)
-        nominal_folds = _calibrate(folds, cfg)
-        not_testable = untestable(cfg.candidates, excitation(nominal_folds[0], d))
+        nominal_folds, per_fold, not_testable = _calibrate_and_fit(folds, d, cfg, jobs)
         run_cfg = replace(cfg, candidates=tuple(c for c in cfg.candidates if c not in not_testable))
-        nominal, fits = _candidates(nominal_folds, folds, d, run_cfg, jobs)
+        nominal, fits = _candidates(nominal_folds, per_fold, folds, d, run_cfg, jobs)
         s = _select(nominal, fits, folds, d, p, run_cfg, jobs)
         # each half needs training windows in every fold: at least ``folds`` windows per half
         if s.chosen is not None and cfg.drift_check and len(d.starts) >= 2 * int(cfg.folds):

@@ -26,10 +26,13 @@ from contextlib import contextmanager
 from fricenv import progress
 from fricenv.errors import InvalidInputError
 
-__all__ = ["RAY_AUTO", "default_jobs", "imap_tasks", "map_tasks", "ray_session"]
+__all__ = ["RAY_AUTO", "default_jobs", "imap_tasks", "map_tasks", "ray_session", "shared_pool", "start_tasks"]
 
 RAY_AUTO = "auto"  # --ray value: join a running Ray instance or cluster, else start one in this process
 WAIT_S = 0.5  # longest wait on Ray between checks for an interrupt [s]
+# The local pool that :func:`shared_pool` keeps open: (owner pid, executor); a forked child sees its parent's entry
+# and ignores it (the pid differs).
+_SHARED: dict = {}
 
 
 def default_jobs(jobs: int | None) -> int:
@@ -176,9 +179,37 @@ def _serial(fn: Callable, tasks: Sequence[tuple]) -> Iterator[tuple[int, object]
             yield i, fn(*t)
 
 
+@contextmanager
+def shared_pool(jobs: int):
+    """Keep ``jobs`` local worker processes for every :func:`map_tasks` / :func:`imap_tasks` of this process inside
+    the block (one start of the workers instead of one per map: a diagnosis maps its fits several times). Nested
+    blocks and ``jobs <= 1`` add nothing.
+
+    :param jobs: worker processes.
+    """
+    if jobs <= 1 or _shared() is not None:
+        yield
+        return
+    pool = ProcessPoolExecutor(max_workers=jobs)
+    _SHARED["pool"] = (os.getpid(), pool)
+    try:
+        yield
+    finally:
+        _SHARED.pop("pool", None)
+        pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _shared() -> ProcessPoolExecutor | None:
+    """This process's pool kept by :func:`shared_pool`, if any."""
+    pid, pool = _SHARED.get("pool", (None, None))
+    return pool if pid == os.getpid() else None
+
+
 def _local(fn: Callable, tasks: Sequence[tuple], jobs: int) -> Iterator[tuple[int, object]]:
-    """The tasks in ``jobs`` worker processes, as they complete; the workers terminated on any exit but the end."""
-    pool = ProcessPoolExecutor(max_workers=min(jobs, len(tasks)))
+    """The tasks in ``jobs`` worker processes (those of :func:`shared_pool` when one is open), as they complete; the
+    workers terminated on any exit but the end (a shared pool is then closed for the rest of its block)."""
+    shared = _shared()
+    pool = shared if shared is not None else ProcessPoolExecutor(max_workers=min(jobs, len(tasks)))
     try:
         index = {pool.submit(_worker, (fn, t)): i for i, t in enumerate(tasks)}
         pending = set(index)
@@ -187,9 +218,12 @@ def _local(fn: Callable, tasks: Sequence[tuple], jobs: int) -> Iterator[tuple[in
             for f in sorted(done, key=index.get):
                 yield index[f], f.result()
     except BaseException:  # includes GeneratorExit: the consumer stopped early
+        if shared is not None:
+            _SHARED.pop("pool", None)
         _terminate(pool)
         raise
-    pool.shutdown(wait=True)
+    if shared is None:
+        pool.shutdown(wait=True)
 
 
 def _on_ray(fn: Callable, tasks: Sequence[tuple], address: str) -> Iterator[tuple[int, object]]:
@@ -247,3 +281,32 @@ def map_tasks(fn: Callable, tasks: Sequence[tuple], jobs: int, label: str, ray: 
     for i, result in imap_tasks(fn, tasks, jobs, label, ray):
         out[i] = result
     return out
+
+
+def start_tasks(fn: Callable, tasks: Sequence[tuple], jobs: int, label: str) -> Callable[[], list]:
+    """Start ``[fn(*t) for t in tasks]`` now, in the workers of an open :func:`shared_pool`, so that this process can
+    do other work meanwhile; returns ``collect()``, which waits and returns the results in task order. Without a
+    shared pool (or with ``jobs <= 1``) the tasks run in ``collect()`` through :func:`map_tasks`.
+
+    :param fn: a picklable function; :param tasks: its argument tuples; :param jobs: processes; :param label: progress
+        label of the wait.
+    """
+    pool = _shared()
+    if pool is None or jobs <= 1 or len(tasks) <= 1:
+        return lambda: map_tasks(fn, tasks, jobs, label)
+    futures = [pool.submit(_worker, (fn, t)) for t in tasks]
+
+    def collect() -> list:
+        try:
+            with progress.task(label, total=len(futures)) as advance:
+                out = []
+                for f in futures:
+                    out.append(f.result())
+                    advance()
+                return out
+        except BaseException:  # the workers are stopped as in _local
+            _SHARED.pop("pool", None)
+            _terminate(pool)
+            raise
+
+    return collect

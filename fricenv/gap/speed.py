@@ -203,7 +203,7 @@ def _first_unconverged(R: np.ndarray) -> int:
 
 
 def reconstruct_speed(batch: ModelBatch, omega: np.ndarray, t0: float, dt: float, free_end: int,
-                      p: qc.QuarterCarParams) -> np.ndarray:
+                      p: qc.QuarterCarParams, compiled: bool = False) -> np.ndarray:
     """Speed (K, n) of every element of ``batch`` from the measured wheel speed ``omega`` (n,).
 
     :param batch: model parameters (road, rolling radius, drag, relaxation length, friction change).
@@ -212,10 +212,16 @@ def reconstruct_speed(batch: ModelBatch, omega: np.ndarray, t0: float, dt: float
     :param dt: sample period [s].
     :param free_end: first sample after the free-rolling start (the initial speed is taken before it).
     :param p: vehicle parameters.
+    :param compiled: run the recursion sample by sample in compiled code (:mod:`fricenv.gap.speed_kernel`) instead
+        of the numpy Newton solve; the two agree to the Newton tolerance.
     """
     model = _SpeedModel.of(batch, omega, t0, dt, p)
     K, n = len(batch), len(omega)
     v0 = _initial_speed(batch, omega, free_end)
+    if compiled:
+        from fricenv.gap.speed_kernel import sequential_speed  # numba only when asked for
+
+        return sequential_speed(model, v0)
     X = np.empty((K, n, 2))
     X[:, :, 0] = _envelope_guess(model)
     X[:, 0, 0] = v0

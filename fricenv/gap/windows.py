@@ -160,7 +160,7 @@ def speed_states(batch: ModelBatch, d: Data) -> np.ndarray:
     """Speed estimate (K, n) used to start the windows."""
     if d.v_smooth is not None:
         return np.broadcast_to(d.v_smooth, (len(batch), d.n))
-    return reconstruct_speed(batch, d.omega, d.t0, d.dt, d.free_end, d.p)
+    return reconstruct_speed(batch, d.omega, d.t0, d.dt, d.free_end, d.p, compiled=d.compiled)
 
 
 def _effect_states(batch: ModelBatch, d: Data, vhat: np.ndarray):
