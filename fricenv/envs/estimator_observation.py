@@ -74,7 +74,6 @@ __all__ = [
     "PayloadEstimatorObservation",
     "batched_names",
     "check_estimator_name",
-    "make_batched_estimator",
     "make_estimator",
 ]
 
@@ -116,26 +115,10 @@ def make_estimator(name: str, dt: float, params: QuarterCarParams) -> Estimator 
 
 
 def batched_names() -> tuple[str, ...]:
-    """Estimator names with a batched form: :data:`estimators.batched.BATCHED` and the batched MHE's
-    (:data:`estimators.mhe_batched.BATCHED_MHE`)."""
+    """Estimator names with a batched form (:data:`estimators.batched.BATCHED`: the EKF/RLS variants and the MHE)."""
     from estimators.batched import BATCHED
-    from estimators.mhe_batched import BATCHED_MHE
 
-    return tuple(dict.fromkeys([*BATCHED, *BATCHED_MHE]))
-
-
-def make_batched_estimator(name: str, n: int, params: QuarterCarParams, dt: float):
-    """The batched estimator of registry entry ``name`` for ``n`` sub-envs (None if it has none), from
-    :func:`estimators.batched.make_batched` (the batched EKF/RLS and MHE).
-
-    :param name: registry name.
-    :param n: number of sub-envs.
-    :param params: the env's vehicle parameters.
-    :param dt: sample time [s].
-    """
-    from estimators.batched import make_batched
-
-    return make_batched(name, n, params, dt)
+    return tuple(BATCHED)
 
 
 def _reset(est: Estimator, v0: float) -> Estimate:
@@ -320,8 +303,8 @@ class EstimatorObservation(gym.Wrapper):
 # ---------------------------------------------------------------------------------------------- vector env
 class BatchedEstimatorObservation(VectorWrapper):
     """:class:`EstimatorObservation` for the native vector env: one batched estimator
-    (:mod:`estimators.batched`, :mod:`estimators.mhe_batched`) updates every sub-env in one numpy call, with the single wrapper's layout and
-    timing, in every autoreset mode (an autoreset restarts that sub-env's estimator from its new wheel speed; in
+    (:mod:`estimators.batched`, :mod:`estimators.mhe_batched`) updates every sub-env in one numpy call, with the
+    single wrapper's layout and timing, in every autoreset mode (an autoreset restarts that sub-env's estimator from its new wheel speed; in
     ``SAME_STEP`` mode ``final_obs`` carries the last update). Sub-env ``i`` equals an :class:`EstimatorObservation`
     fed the same observations (tests/test_batched_vector.py).
 
@@ -332,10 +315,12 @@ class BatchedEstimatorObservation(VectorWrapper):
 
     def __init__(self, env, estimator: str = "ekf-rls"):
         super().__init__(env)
+        from estimators.batched import make_batched
+
         check_estimator_name(estimator)
         cfg = env.config
         self.estimator_name = estimator
-        self.batched = make_batched_estimator(estimator, env.num_envs, cfg.params, cfg.dt)
+        self.batched = make_batched(estimator, env.num_envs, cfg.params, cfg.dt)
         if self.batched is None:
             raise ValueError(f"estimator {estimator!r} has no batched form; batched: {', '.join(batched_names())} "
                              f"(use make_vec's SyncVectorEnv fallback for the others)")

@@ -172,7 +172,8 @@ def _calibrate_and_fit(folds: list[Data], d: Data, cfg: DiagnoseConfig, jobs: in
     every testable candidate fitted per fold; a fold's candidate fits start in the worker processes as soon as its
     nominal fit is done, while this process calibrates the next fold.
 
-    :return: (nominal fits per fold, candidate fits per fold in ``candidates`` order, the effects not testable).
+    :return: (nominal fits per fold, candidate fits per fold, the effects not testable, the config with the
+        testable candidates only, in whose ``candidates`` order the fits are).
     """
     with progress.task("calibrate the nominal model", total=len(folds)) as advance:
         first = fit_nominal(folds[0], cfg)
@@ -188,7 +189,7 @@ def _calibrate_and_fit(folds: list[Data], d: Data, cfg: DiagnoseConfig, jobs: in
             pending.append(start_fits([([c], nominal_folds[-1].road_x(), f, run_cfg, None) for c in candidates],
                                       jobs))
             advance()
-    return nominal_folds, [collect() for collect in pending], not_testable
+    return nominal_folds, [collect() for collect in pending], not_testable, run_cfg
 
 
 def _candidates(nominal_folds: list[CandidateFit], per_fold: list[list], folds: list[Data], d: Data,
@@ -261,8 +262,7 @@ def diagnose(log: QuarterCarLog, p: qc.QuarterCarParams = qc.PAPER_PARAMS,
     expected = {e: why for attr, (e, why) in EXPECTED_EFFECTS.items() if getattr(log, attr, False)}
     with warnings.catch_warnings(), shared_pool(jobs):  # one start of the worker processes for every map below
         warnings.simplefilter("ignore", RuntimeWarning)
-        nominal_folds, per_fold, not_testable = _calibrate_and_fit(folds, d, cfg, jobs)
-        run_cfg = replace(cfg, candidates=tuple(c for c in cfg.candidates if c not in not_testable))
+        nominal_folds, per_fold, not_testable, run_cfg = _calibrate_and_fit(folds, d, cfg, jobs)
         nominal, fits = _candidates(nominal_folds, per_fold, folds, d, run_cfg, jobs)
         s = _select(nominal, fits, folds, d, p, run_cfg, jobs)
         # each half needs training windows in every fold: at least ``folds`` windows per half
