@@ -271,6 +271,7 @@ def diagnose(log: QuarterCarLog, p: qc.QuarterCarParams = qc.PAPER_PARAMS,
         whole, steps = _forward(s, nominal, folds, d, p, cfg, jobs, tuple(expected))
     where = _where(nominal, s, d, cfg)
     where["not_testable"] = not_testable
+    where["detectable"] = not_testable.detectable  # issue 15: smallest significant size per effect (excitation.py)
     where["sensors"] = d.sensors
     where["forward_selection"] = steps
     effects = [] if whole is None else _order(split_params(whole), expected)

@@ -1,21 +1,26 @@
 """What a quarter-car log excites (issue 15 item 3): the :class:`fricenv.effects.registry.Excitation` of a log and
-the candidates it cannot test, by each effect's registry rule, so that a verdict of ``none`` is not read as "no
-effect" where the log could not have shown one."""
+the candidates it cannot test, by each effect's registry rule and by the size it would need to show above the noise
+(:mod:`fricenv.gap.detectability`), so that a verdict of ``none`` is not read as "no effect" where the log could not
+have shown one."""
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field
 from itertools import pairwise
 
 import numpy as np
 
 from fricenv.effects import registry
 from fricenv.effects.registry import Excitation
+from fricenv.gap.config import DEFAULT_CONFIG
+from fricenv.gap.detectability import detectability
 from fricenv.gap.localise import APPLY_RATE
 from fricenv.gap.stats import CandidateFit
 from fricenv.gap.windows import FREE_ROLL_TORQUE, Data, model_batch, speed_states
 from fricenv.plants.tire import MagicFormula, longitudinal_slip
 
-__all__ = ["NEAR_PEAK", "SLIP_TRANSIENT", "excitation", "torque_events", "untestable"]
+__all__ = ["NEAR_PEAK", "SLIP_TRANSIENT", "LogExcitation", "NotTestable", "excitation", "torque_events",
+           "untestable"]
 
 SLIP_TRANSIENT = 0.03  # slip change within one window that counts as a transient [-]
 NEAR_PEAK = 0.7  # slip above this share of the fitted road's peak slip counts as near the peak [-]
@@ -45,8 +50,31 @@ def torque_events(Tb: np.ndarray, dt: float) -> int:
     return events
 
 
-def excitation(nominal: CandidateFit, d: Data) -> Excitation:
-    """The log's excitation, with the speed and slip of the calibrated nominal model."""
+@dataclass(frozen=True)
+class LogExcitation(Excitation):
+    """A log's :class:`Excitation` and, per effect the registry rules let through, its power analysis
+    (:class:`fricenv.gap.detectability.Detectability`)."""
+
+    detectable: dict = field(default_factory=dict)
+
+
+class NotTestable(dict):
+    """``{effect: reason}`` of the candidates a log cannot show; ``detectable`` holds, per analysed effect,
+    ``{param: smallest detectable |param - off|}`` (the report's ``where["detectable"]``)."""
+
+    detectable: dict
+
+    def __init__(self, reasons: dict, detectable: dict):
+        super().__init__(reasons)
+        self.detectable = detectable
+
+    def __reduce__(self):  # pickled for the worker processes like the plain dict it extends
+        return NotTestable, (dict(self), self.detectable)
+
+
+def excitation(nominal: CandidateFit, d: Data, sig_z: float = DEFAULT_CONFIG.sig_z) -> LogExcitation:
+    """The log's excitation, with the speed and slip of the calibrated nominal model, and the power analysis of the
+    effects its registry rules let through, at the verdict's significance threshold ``sig_z``."""
     rows = d.starts[:, None] + np.arange(d.horizon)[None, :]
     vhat = speed_states(model_batch([], nominal.names, nominal.x, d.p), d)[0]
     lam = np.clip(longitudinal_slip(vhat, d.omega, d.p.r), -1.0, 1.0)
@@ -62,18 +90,24 @@ def excitation(nominal: CandidateFit, d: Data) -> Excitation:
     half = int(brake_idx[brake_idx.size // 2]) if brake_idx.size else len(d.starts) // 2
     v_brake = vhat[braking]
     k = int(np.max(d.fold)) + 1
-    return Excitation(has_v=d.v is not None, has_a_x=d.a_x is not None, braking_windows=int(np.sum(braking_w)),
-                      torque_transients=torque_events(d.Tb, d.dt), slip_transient_windows=int(np.sum(transient)),
-                      near_peak_early=int(np.sum(near[:half])), near_peak_late=int(np.sum(near[half:])),
-                      speed_range=float(np.ptp(v_brake)) if v_brake.size else 0.0,
-                      training_windows=int(min(np.sum(d.fold != j) for j in range(k))))
+    x = Excitation(has_v=d.v is not None, has_a_x=d.a_x is not None, braking_windows=int(np.sum(braking_w)),
+                   torque_transients=torque_events(d.Tb, d.dt), slip_transient_windows=int(np.sum(transient)),
+                   near_peak_early=int(np.sum(near[:half])), near_peak_late=int(np.sum(near[half:])),
+                   speed_range=float(np.ptp(v_brake)) if v_brake.size else 0.0,
+                   training_windows=int(min(np.sum(d.fold != j) for j in range(k))))
+    excited = [e for e in registry.effects_in_library() if registry.get(e).testable(x) is None]
+    return LogExcitation(**vars(x), detectable=detectability(nominal, d, excited, sig_z))
 
 
-def untestable(effects, x: Excitation) -> dict[str, str]:
-    """The effects among ``effects`` the log cannot show, each with the reason (the registry's testability rule)."""
+def untestable(effects, x: Excitation) -> NotTestable:
+    """The effects among ``effects`` the log cannot show, each with the reason: the registry's testability rule,
+    then (a :class:`LogExcitation`) the power analysis, "below noise" when no plausible size would be significant."""
+    power = getattr(x, "detectable", {})
     out = {}
     for e in effects:
         reason = registry.get(e).testable(x)
+        if reason is None and e in power:
+            reason = power[e].reason()
         if reason is not None:
             out[e] = reason
-    return out
+    return NotTestable(out, {e: power[e].min_detectable for e in effects if e in power})
