@@ -15,8 +15,9 @@ without the soft cap the smallest detectable multiple would be
 
 it is solved with the cap (per window ``m soft_cap(s^2 S_w / m)``, ``m`` fresh samples) by bisection, and the smallest detectable deviation of each parameter is ``s_min |q - q_off|``. The probes are the extremes of
 the effect's validation draw (its registry ``draw``: the sizes the library claims as plausible), on either side.
-An effect whose ``s_min`` exceeds 1 for every probe cannot reach significance anywhere in its plausible range on
-this log: it is not testable, "below noise". The cost is one batch of window simulations per effect at the nominal
+The statistic's own noise is unit normal, so an effect is not testable, "below noise", only where even a draw
+``LUCK_Z`` standard deviations lucky would not reach the threshold at its plausible size (``s_min`` at ``z_sig -
+LUCK_Z`` above 1 for every probe: a chance below 2.5 %); the sizes reported are those detected half the time. The cost is one batch of window simulations per effect at the nominal
 fit (the windows the diagnosis already cut), no fit.
 """
 
@@ -27,13 +28,17 @@ from dataclasses import dataclass
 import numpy as np
 
 from fricenv.effects import registry
-from fricenv.gap.params import ROAD_NAMES, fd_steps, param_names
+from fricenv.gap.params import ROAD_BOUNDS, ROAD_NAMES, fd_steps, param_names
 from fricenv.gap.stats import CandidateFit, soft_cap, window_counts
+from fricenv.gap.verdict import RANGE_EDGE
 from fricenv.gap.windows import FREE_ROLL_TORQUE, Data, window_nuisances, window_residuals
 from fricenv.plants.tire import MagicFormula
 
 __all__ = ["DRAWS", "Detectability", "detectability", "plausible_probes", "road_jacobian"]
 
+# A test statistic's noise is unit normal: an effect is not testable only when even a draw this many standard
+# deviations lucky would not pass the threshold at its largest plausible size (a chance below 2.5 %) [-]
+LUCK_Z = 2.0
 DRAWS = 64  # validation draws whose extremes make the probes (a fixed generator: the same for every log) [-]
 DRAW_SEED = 15  # seed of those draws
 SCALE_RANGE = (1e-4, 1e3)  # multiples of a probe searched for the smallest detectable one [-]
@@ -44,7 +49,10 @@ BISECTIONS = 40  # bisection steps in log scale (relative precision about 1e-10)
 class Detectability:
     """One effect's power analysis on one log.
 
-    :param scale: ``s_min`` of (D1) for the best probe (<= 1: detectable within the plausible range).
+    :param scale: ``s_min`` of (D1) for the best probe: the multiple of the probe the test calls significant with
+        probability 1/2.
+    :param scale_lucky: the same at the threshold lowered by ``LUCK_Z``: the multiple below which the test passes with
+        probability below 2.5 % (> 1: not testable).
     :param min_detectable: per parameter, the smallest detectable ``|param - off|`` (a searched parameter, the
         change time, is left out: it places the effect rather than sizing it).
     :param plausible: per parameter, the probe's ``|param - off|`` (the largest plausible deviation).
@@ -52,13 +60,14 @@ class Detectability:
     """
 
     scale: float
+    scale_lucky: float
     min_detectable: dict
     plausible: dict
     off: dict
 
     @property
     def detectable(self) -> bool:
-        return bool(self.scale <= 1.0)
+        return bool(self.scale_lucky <= 1.0)
 
     def reason(self) -> str | None:
         """None when detectable, else "below noise: needs |param - off| >= X" for each sized parameter."""
@@ -66,7 +75,8 @@ class Detectability:
             return None
         need = " and ".join(f"|{k}{'' if self.off[k] == 0 else f' - {self.off[k]:.4g}'}| >= {v:.3g} (plausible "
                            f"up to {self.plausible[k]:.3g})" for k, v in self.min_detectable.items())
-        return f"below noise: needs {need}" + (" together" if len(self.min_detectable) > 1 else "")
+        return f"below noise: needs {need}" + (" together" if len(self.min_detectable) > 1 else "") + \
+            " (chance below 2.5 % at the plausible size)"
 
 
 def plausible_probes(effect: str, road: MagicFormula, p, t_mid: float) -> list[dict]:
@@ -86,12 +96,20 @@ def plausible_probes(effect: str, road: MagicFormula, p, t_mid: float) -> list[d
 
 def road_jacobian(nominal: CandidateFit, d: Data) -> tuple[np.ndarray, np.ndarray]:
     """The nominal model's normalised residuals on all windows (W, M) and their forward-difference Jacobian in the
-    road parameters, (W * M, 4)."""
+    road parameters that are free to move (W * M, <= 4; :func:`_at_bound`)."""
     h = fd_steps(ROAD_NAMES)
     X = np.vstack([nominal.x[None]] + [nominal.x + h[i] * np.eye(len(ROAD_NAMES))[i] for i in range(len(h))])
     r = window_residuals([], nominal.names, X, d)
     J = ((r[1:] - r[0][None]).reshape(len(h), -1) / h[:, None]).T
-    return r[0], J
+    return r[0], J[:, ~_at_bound(nominal.x[: len(ROAD_NAMES)])]
+
+
+def _at_bound(road: np.ndarray) -> np.ndarray:
+    """Road parameters within ``RANGE_EDGE`` of their range's ends: a fit cannot move them outwards, so the
+    projection leaves them out (it would credit the road with absorbing more than it can)."""
+    lo, hi = (np.array([ROAD_BOUNDS[k][i] for k in ROAD_NAMES]) for i in (0, 1))
+    tol = RANGE_EDGE * (hi - lo)
+    return (road <= lo + tol) | (road >= hi - tol)
 
 
 def _z(S_w: np.ndarray, m: np.ndarray, s: float, extra_states: int) -> float:
@@ -155,9 +173,10 @@ def detectability(nominal: CandidateFit, d: Data, effects, sig_z: float) -> dict
         r = window_residuals([e], param_names([e]), X, d)
         extra = window_nuisances([e], d) - window_nuisances([], d)
         scales = [_scale(r0 - r[i], J, counts, extra, sig_z) for i in range(len(probes))]
+        lucky = [_scale(r0 - r[i], J, counts, extra, sig_z - LUCK_Z) for i in range(len(probes))]
         best = int(np.argmin(scales))
         sized = [k for k in entry.param_names if k not in entry.searched]
         dev = {k: abs(probes[best][k] - off[k]) for k in sized}
-        out[e] = Detectability(scale=scales[best], min_detectable={k: scales[best] * v for k, v in dev.items()},
+        out[e] = Detectability(scale=scales[best], scale_lucky=min(lucky), min_detectable={k: scales[best] * v for k, v in dev.items()},
                                plausible=dev, off={k: off[k] for k in sized})
     return out

@@ -11,7 +11,7 @@ from scipy.interpolate import CubicSpline
 from scipy.signal import butter, sosfilt, sosfiltfilt
 
 from fricenv.effects.payload import PAYLOAD_EFFECTS
-from fricenv.gap.sensors import band_noise, condition_channel, frame_times, looks_filtered
+from fricenv.gap.sensors import band_noise, condition_channel, filter_lag, frame_times, looks_filtered
 from fricenv.gap.stats import estimate_noise
 from fricenv.logs import PayloadLog
 from fricenv.plants import payload as pl
@@ -79,6 +79,9 @@ class PayloadData:
     p: pl.PayloadParams
     sensors: dict | None = None  # column -> missing share, outliers (:mod:`fricenv.gap.sensors`)
     wrench_lag_max: float = 0.0  # largest lag fitted for a low-passed force-moment sensor (0: not filtered) [s]
+    # the low-passed force-moment sensor's lag read from its noise roll-off (sensors.filter_lag; None: not filtered,
+    # or no roll-off below the logger's Nyquist frequency) [s]
+    wrench_lag: float | None = None
 
     @property
     def n(self) -> int:
@@ -177,11 +180,15 @@ def _conditioned_columns(log: PayloadLog, filter_band_hz: float) -> tuple[dict, 
         noise = estimate_noise(cond.values[fresh], order=NOISE_DIFF_ORDER) if fresh.any() else float("nan")
         noise = max(noise if np.isfinite(noise) else NOISE_FLOOR, NOISE_FLOOR)
         filtered = c in WRENCH and looks_filtered(cond.values)
+        lag = None
         if filtered:
             band = band_noise(cond.values, 1.0 / log.dt, filter_band_hz)
             noise = max(noise, band if np.isfinite(band) else 0.0)
+            lag = filter_lag(cond.values, 1.0 / log.dt, filter_band_hz, filter_band_hz / FILTER_BAND)
         raw[c] = noise / np.sqrt(share)
         sensors[c] = replace(cond, noise=noise, filtered=filtered).summary()
+        if filtered and lag is not None:
+            sensors[c]["filter"] = lag  # lag_s, cutoff_hz, order of the sensor's own low-pass
         if c in CHANNELS and clock is not None:
             sensors[c]["frame_rate_hz"] = float((np.count_nonzero(np.isfinite(clock)) - 1)
                                                 / (np.nanmax(clock) - np.nanmin(clock)))
@@ -236,4 +243,12 @@ def prepare_payload(log: PayloadLog, S_known: np.ndarray, p: pl.PayloadParams, c
     return PayloadData(t=t, dt=dt, w_hat=w_hat, theta_f=pose_f[:, 0], y=y, sos=sos, sigma=sigma, raw_noise=raw,
                        rho2=rho2, block=block, block_test=block_test, S_known=np.asarray(S_known, dtype=float), p=p,
                        sensors=sensors,
-                       wrench_lag_max=cfg.max_wrench_lag_s if any(sensors[c]["filtered"] for c in WRENCH) else 0.0)
+                       wrench_lag_max=cfg.max_wrench_lag_s if any(sensors[c]["filtered"] for c in WRENCH) else 0.0,
+                       wrench_lag=_spectral_lag(sensors))
+
+
+def _spectral_lag(sensors: dict) -> float | None:
+    """The force-moment sensor's filter lag: the median over its filtered channels whose noise shows a roll-off
+    (one sensor, one filter), or None."""
+    lags = [sensors[c]["filter"]["lag_s"] for c in WRENCH if "filter" in sensors[c]]
+    return float(np.median(lags)) if lags else None

@@ -74,6 +74,9 @@ __all__ = [
 PENALTY_PER_PARAM = 2.0  # ranking penalty per fitted parameter, in units of 1/(effective training samples) [-]
 DELAY_GRID_STEP = 0.005  # delay grid step [s] before the bounded refinement
 SEARCH_XTOL = 1e-5  # tolerance of the bounded 1-D searches (s or 1/s)
+# Uncertainty of a force-moment filter's lag read from its noise roll-off: (share of the lag, floor [s]); every
+# model's pose-wrench shift may move this far from the lag, so a vision delay below it is not told from an error of it
+LAG_TOLERANCE = (0.1, 0.001)
 PARAM_KEYS = ("m", "I_G", "rho_x", "rho_y", "S")  # valid keys of --params
 
 
@@ -224,7 +227,7 @@ def _fit(effects: Sequence[str], d: PayloadData, cfg: PayloadDiagnoseConfig) -> 
 
     # the shift between pose and wrench: a vision delay (pose late, > 0) and, with a low-passed force-moment sensor,
     # the filter's lag (wrench late, < 0), a nuisance of every model
-    delay, lo, hi = 0.0, -d.wrench_lag_max, (cfg.max_delay_s if "vision_delay" in effects else 0.0)
+    delay, lo, hi = _shift_range(d, cfg, "vision_delay" in effects)
     if hi > lo:
         grid = np.arange(lo, hi + 1e-12, max(DELAY_GRID_STEP, d.dt))
         costs = [best_rate(regs(g))[1] for g in grid]
@@ -248,8 +251,19 @@ def _fit(effects: Sequence[str], d: PayloadData, cfg: PayloadDiagnoseConfig) -> 
         elif e == "calibration_drift":
             params["rate"] = rate
         elif e == "vision_delay":
-            params["delay"] = delay
+            params["delay"] = delay + (d.wrench_lag or 0.0)  # the camera's own delay: the net shift plus the lag
     return params, pred, delay
+
+
+def _shift_range(d: PayloadData, cfg: PayloadDiagnoseConfig, vision: bool) -> tuple[float, float, float]:
+    """(start, lower, upper) of the fitted pose-wrench shift [s]. With the force-moment sensor's lag ``L`` read from
+    its noise roll-off (``d.wrench_lag``), every model's shift is ``-L`` within ``LAG_TOLERANCE`` (its uncertainty),
+    and a vision delay adds up to ``max_delay_s`` on top: the delay is then the camera's own. Without it, a filtered
+    sensor's lag is fitted freely up to ``wrench_lag_max`` and a vision delay is net of it."""
+    if d.wrench_lag is None:
+        return 0.0, -d.wrench_lag_max, (cfg.max_delay_s if vision else 0.0)
+    tol = max(LAG_TOLERANCE[0] * d.wrench_lag, LAG_TOLERANCE[1])
+    return -d.wrench_lag, -d.wrench_lag - tol, (cfg.max_delay_s - d.wrench_lag if vision else -d.wrench_lag + tol)
 
 
 def _score(name: str, effects: Sequence[str], params: dict, pred: np.ndarray, d: PayloadData,
@@ -394,9 +408,10 @@ def diagnose_payload(log: PayloadLog, S_known=pl.PAPER_S, p: pl.PayloadParams = 
                              "significant": bool(significant(f))} for f in fits},
     }
     where["sensors"] = d.sensors
-    if d.wrench_lag_max > 0:  # a low-passed force-moment sensor: its lag, fitted with the nominal model
+    if d.wrench_lag_max > 0:  # a low-passed force-moment sensor: its lag, from its noise roll-off if it shows
         for c in WRENCH:
-            where["sensors"][c]["lag_s"] = -nominal.shift
+            where["sensors"][c]["lag_s"] = -nominal.shift if d.wrench_lag is None else d.wrench_lag
+            where["sensors"][c]["lag_fit_s"] = -nominal.shift  # the nominal model's shift (the motion's view)
     where["not_testable"] = payload_untestable(d)
     if joint is not None:
         where["joint_fit"] = {"effects": joint.effect.split("+"), "params": joint.effect_params(),

@@ -25,7 +25,7 @@ from scipy.ndimage import median_filter
 from fricenv.gap.stats import estimate_noise
 
 __all__ = ["FILTERED_AC", "OUTLIER_Z", "ChannelCondition", "band_noise", "condition_channel", "correlation_time",
-           "fill_missing", "frame_times", "looks_filtered"]
+           "fill_missing", "filter_lag", "frame_times", "looks_filtered"]
 
 OUTLIER_Z = 8.0  # distance from the running median beyond which an isolated sample is an outlier [noise std]
 OUTLIER_SPAN = 7  # running-median span [samples]
@@ -38,6 +38,10 @@ FILTERED_MARGIN = 0.15  # lag-1 autocorrelation of k-th differences this far abo
 MIN_FRAMES = 10  # fresh frames a camera clock is fitted from [-]
 MAX_AGE_SPREAD = 1.5  # frame ages spread over at most this many log steps for a clock [-]
 MAX_LATE = 4.0  # a frame shown up to this many steps late is still on the clock (up to 3 dropped rows) [-]
+LAG_ORDERS = (1, 2, 3, 4)  # Butterworth orders tried for a sensor filter's noise roll-off [-]
+LAG_TOP = 0.45  # the roll-off is read up to this share of the sample rate [-]
+LAG_ALIASES = 3  # spectral images folded back into the band (a filter ahead of a slower logger) [-]
+LAG_MIN_FIT = 0.5  # fitted roll-off must explain this share of the log-spectrum's variance in the band [-]
 
 
 @dataclass
@@ -262,3 +266,52 @@ def correlation_time(r: np.ndarray) -> float:
             break
         tau += 2.0 * rho
     return float(min(tau, MAX_CORRELATION_TIME))
+
+
+def _rolloff(f: np.ndarray, fc: float, order: int, fs: float) -> np.ndarray:
+    """Butterworth power response ``1 / (1 + (f / fc)^(2 n))`` with the images of ``LAG_ALIASES`` sample rates
+    folded back (the filter may run faster than the logger samples)."""
+    out = np.zeros_like(f)
+    for k in range(-LAG_ALIASES, LAG_ALIASES + 1):
+        out += 1.0 / (1.0 + (np.abs(f + k * fs) / fc) ** (2 * order))
+    return out
+
+
+def filter_lag(x: np.ndarray, fs: float, f_lo: float, f_use: float) -> dict | None:
+    """The lag of a low-pass sensor filter, from the roll-off of the channel's noise (issue 15: a filtered
+    force-moment sensor shifts the wrench against the pose like a vision delay, which the motion cannot tell apart).
+
+    The noise power spectral density (Welch) in ``[f_lo, LAG_TOP fs]``, above the signal, is fitted in log scale by a
+    white density times a Butterworth power response of order ``n`` in :data:`LAG_ORDERS` and cut-off ``fc``
+    (images folded back, :func:`_rolloff`). A sensor filter is causal and minimum-phase, so its magnitude fixes its
+    phase: the lag is the analog Butterworth's mean group delay over ``(0, f_use]`` (the band the diagnosis uses).
+
+    :return: ``{"lag_s", "cutoff_hz", "order"}``, or None when no roll-off shows in the band (the fit explains less
+        than ``LAG_MIN_FIT`` of the log-spectrum's variance, or the cut-off lies beyond the band's top).
+    """
+    from scipy.signal import butter, freqs, welch
+
+    y = fill_missing(np.asarray(x, dtype=float))
+    nper = int(min(y.size, max(64, 2 ** int(np.ceil(np.log2(4.0 * fs / f_lo))))))
+    f, pxx = welch(y, fs=fs, nperseg=nper, detrend="linear")
+    band = (f >= f_lo) & (f <= LAG_TOP * fs) & (pxx > 0)
+    if np.count_nonzero(band) < 6:
+        return None
+    fb, lp = f[band], np.log(pxx[band])
+    best = None
+    for order in LAG_ORDERS:
+        for fc in np.geomspace(0.5 * f_lo, fs, 200):
+            model = np.log(_rolloff(fb, fc, order, fs))
+            resid = lp - model - np.mean(lp - model)
+            cost = float(np.sum(resid**2))
+            if best is None or cost < best[0]:
+                best = (cost, fc, order)
+    cost, fc, order = best
+    explained = 1.0 - cost / max(float(np.sum((lp - lp.mean()) ** 2)), 1e-300)
+    if explained < LAG_MIN_FIT or fc > LAG_TOP * fs:
+        return None
+    b, a = butter(order, 2 * np.pi * fc, analog=True)
+    w = 2 * np.pi * np.linspace(0.0, f_use, 50)
+    _, h = freqs(b, a, worN=w)
+    lag = float(-(np.unwrap(np.angle(h))[-1] - np.angle(h[0])) / w[-1])  # mean group delay over (0, f_use]
+    return {"lag_s": lag, "cutoff_hz": float(fc), "order": int(order)}
