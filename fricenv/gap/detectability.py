@@ -73,10 +73,14 @@ class Detectability:
         """None when detectable, else "below noise: needs |param - off| >= X" for each sized parameter."""
         if self.detectable:
             return None
-        need = " and ".join(f"|{k}{'' if self.off[k] == 0 else f' - {self.off[k]:.4g}'}| >= {v:.3g} (plausible "
-                           f"up to {self.plausible[k]:.3g})" for k, v in self.min_detectable.items())
-        return f"below noise: needs {need}" + (" together" if len(self.min_detectable) > 1 else "") + \
-            " (chance below 2.5 % at the plausible size)"
+
+        def dev(k: str) -> str:
+            return f"|{k}{'' if self.off[k] == 0 else f' - {self.off[k]:.4g}'}|"
+
+        need = " and ".join(f"{dev(k)} >= {v:.3g}" for k, v in self.min_detectable.items())
+        most = ", ".join(f"{dev(k)} = {v:.3g}" for k, v in self.plausible.items())
+        return (f"below noise: needs {need}{' together' if len(self.min_detectable) > 1 else ''}; at the largest "
+                f"plausible size ({most}) the chance of a significant test is below 2.5 %")
 
 
 def plausible_probes(effect: str, road: MagicFormula, p, t_mid: float) -> list[dict]:
