@@ -76,7 +76,7 @@ DELAY_GRID_STEP = 0.005  # delay grid step [s] before the bounded refinement
 SEARCH_XTOL = 1e-5  # tolerance of the bounded 1-D searches (s or 1/s)
 # Uncertainty of a force-moment filter's lag read from its noise roll-off: (share of the lag, floor [s]); every
 # model's pose-wrench shift may move this far from the lag, so a vision delay below it is not told from an error of it
-LAG_TOLERANCE = (0.1, 0.001)
+LAG_TOLERANCE = (0.25, 0.002)
 PARAM_KEYS = ("m", "I_G", "rho_x", "rho_y", "S")  # valid keys of --params
 
 
