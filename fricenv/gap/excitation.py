@@ -23,7 +23,11 @@ __all__ = ["NEAR_PEAK", "SLIP_TRANSIENT", "LogExcitation", "NotTestable", "excit
            "untestable"]
 
 SLIP_TRANSIENT = 0.03  # slip change within one window that counts as a transient [-]
-NEAR_PEAK = 0.7  # slip above this share of the fitted road's peak slip counts as near the peak [-]
+# Near the friction peak: friction at or above this share of the fitted road's largest. In slip terms that is about
+# 0.7 times the peak slip on the dry, wet and ice presets (0.98, 0.965, 0.983 of the peak friction there); a share of
+# the peak SLIP meant nothing on a road whose curve rises to slip 1 (the snow preset: 95 % of its friction at slip
+# 0.1, its "peak" at 1), where a friction change was never testable [-]
+NEAR_PEAK = 0.965
 MIN_EVENT_SAMPLES = 2  # samples of fast torque change that make one apply/release event [-]
 MIN_EVENT_CHANGE = 0.1  # torque change of one apply/release event, as a share of the largest |T_b| [-]
 
@@ -83,8 +87,8 @@ def excitation(nominal: CandidateFit, d: Data, sig_z: float = DEFAULT_CONFIG.sig
     braking_w = np.any(braking[rows], axis=1)
     lam_w = lam[rows]
     transient = braking_w & (np.ptp(lam_w, axis=1) > SLIP_TRANSIENT)
-    peak = MagicFormula(**nominal.road()).peak_slip
-    near = braking_w & (np.max(lam_w, axis=1) > NEAR_PEAK * peak)
+    road = MagicFormula(**nominal.road())
+    near = braking_w & (np.max(road.mu(lam_w), axis=1) >= NEAR_PEAK * road.mu_max)
     # halves of the braking (not of the log: the free-rolling start would fill most of the early half of a short log)
     brake_idx = np.flatnonzero(braking_w)
     half = int(brake_idx[brake_idx.size // 2]) if brake_idx.size else len(d.starts) // 2
