@@ -107,6 +107,7 @@ def report_markdown(dg: Diagnosis, report: dict, images: Sequence[str] = (PLOT_T
         lines.append(f"| {c['effect']} | {params} | {c['gap_after']:.3f} | {t.get('robust_gap', float('nan')):.3f} "
                      f"| {c['score']:.3f} | {t.get('t_stat', float('nan')):.2f} | {t.get('z', float('nan')):.1f} | "
                      f"{t.get('z_paired', float('nan')):.1f} | {t.get('significant', False)} |")
+    lines += _testability_lines(w)
     if "joint_fit" in w:
         j = w["joint_fit"]
         lines += ["", f"Joint fit of {' + '.join(j['effects'])}: gap after {j['gap_after']:.3f}, params {j['params']}"]
@@ -129,6 +130,21 @@ def report_markdown(dg: Diagnosis, report: dict, images: Sequence[str] = (PLOT_T
                    "DiagnoseConfig.ratio_explained of the nominal one, or below gap_within_noise. The robust "
                    f"nominal gap is {w.get('robust_gap_before', float('nan')):.3f}."), ""]
     return "\n".join(lines + image_links(images))
+
+
+def _testability_lines(w: dict) -> list[str]:
+    """report.md lines on what the log cannot tell: the candidates not tested (with why) and the smallest size of
+    each tested one that would have passed the significance test (``where["detectable"]``)."""
+    lines = []
+    if w.get("not_testable"):
+        lines += ["", "Not testable on this log (not fitted; a verdict of `none` says nothing about them):", ""]
+        lines += [f"- `{e}`: {why}" for e, why in w["not_testable"].items()]
+    sizes = {e: v for e, v in w.get("detectable", {}).items() if e not in w.get("not_testable", {})}
+    if sizes:
+        lines += ["", "Smallest size each tested effect needed to show above this log's noise (detected half the "
+                      "time; a smaller one would pass unseen):", ""]
+        lines += [f"- `{e}`: " + ", ".join(f"|{k} - off| = {x:.3g}" for k, x in v.items()) for e, v in sizes.items()]
+    return lines
 
 
 def _plots(dg: Diagnosis, report: dict, tmpdir: Path) -> None:

@@ -125,3 +125,14 @@ def test_filter_lag_is_the_sensor_filters_group_delay(rate, cutoff, order):
 def test_filter_lag_of_white_noise_is_none():
     y = np.random.default_rng(2).standard_normal(4000)
     assert filter_lag(y, 100.0, 8.0, 4.0) is None
+
+
+def test_report_markdown_says_what_the_log_cannot_tell():
+    from fricenv.gap.report import _testability_lines
+
+    w = {"not_testable": {"brake_lag": "below noise: needs |tau| >= 0.2"},
+         "detectable": {"brake_lag": {"tau": 0.2}, "brake_gain": {"gain": 0.05}}}
+    text = "\n".join(_testability_lines(w))
+    assert "- `brake_lag`: below noise: needs |tau| >= 0.2" in text
+    assert "- `brake_gain`: |gain - off| = 0.05" in text and "tau - off" not in text  # untested: no size line
+    assert _testability_lines({}) == []
