@@ -13,12 +13,16 @@ without the soft cap the smallest detectable multiple would be
 
     s_min = (z_sig + sqrt(z_sig^2 + N dn)) / sqrt(S);                                         (D1)
 
-it is solved with the cap (per window ``m soft_cap(s^2 S_w / m)``, ``m`` fresh samples) by bisection, and the smallest detectable deviation of each parameter is ``s_min |q - q_off|``. The probes are the extremes of
-the effect's validation draw (its registry ``draw``: the sizes the library claims as plausible), on either side.
-The statistic's own noise is unit normal, so an effect is not testable, "below noise", only where even a draw
-``LUCK_Z`` standard deviations lucky would not reach the threshold at its plausible size (``s_min`` at ``z_sig -
-LUCK_Z`` above 1 for every probe: a chance below 2.5 %); the sizes reported are those detected half the time. The cost is one batch of window simulations per effect at the nominal
-fit (the windows the diagnosis already cut), no fit.
+it is solved with the cap (per window ``m soft_cap(s^2 S_w / m)``, ``m`` fresh samples) by bisection, and the
+smallest detectable deviation of each parameter is ``s_min |q - q_off|``. A road parameter at a bound of its range
+is left out of the projection (the fit cannot move it outwards). The probes are the extremes of the effect's
+validation draw (its registry ``draw``: the sizes the library claims as plausible), on either side. The statistic's
+own noise is unit normal, so an effect is not testable, "below noise", only where even a draw ``LUCK_Z`` standard
+deviations lucky would not reach the threshold at its plausible size (``s_min`` at ``z_sig - LUCK_Z`` above 1 for
+every probe: a chance below 2.5 %); the sizes reported are those detected half the time. The linearisation at the
+nominal road can under-rate an effect that the road absorbed nonlinearly (on the tuning logs it rated two effects
+below ``z_sig`` that the true model passed), hence the margin. The cost is one batch of window simulations per
+effect at the nominal fit (the windows the diagnosis already cut), no fit.
 """
 
 from __future__ import annotations

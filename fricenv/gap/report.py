@@ -141,8 +141,8 @@ def _testability_lines(w: dict) -> list[str]:
         lines += [f"- `{e}`: {why}" for e, why in w["not_testable"].items()]
     sizes = {e: v for e, v in w.get("detectable", {}).items() if e not in w.get("not_testable", {})}
     if sizes:
-        lines += ["", "Smallest size each tested effect needed to show above this log's noise (detected half the "
-                      "time; a smaller one would pass unseen):", ""]
+        lines += ["", ("Smallest size each tested effect needed to show above this log's noise (detected half "
+                       "the time; a smaller one would pass unseen):"), ""]
         lines += [f"- `{e}`: " + ", ".join(f"|{k} - off| = {x:.3g}" for k, x in v.items()) for e, v in sizes.items()]
     return lines
 
