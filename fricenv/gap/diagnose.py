@@ -74,7 +74,7 @@ from fricenv.gap.fitting import distinct_starts, fit_nominal, refine_noise, scor
 from fricenv.gap.localise import localise, tests_table
 from fricenv.gap.params import ROAD_NAMES, param_names, road_of
 from fricenv.gap.pool import default_jobs, map_tasks, shared_pool
-from fricenv.gap.selection import forward_pool, forward_select, split_params
+from fricenv.gap.selection import forward_select, split_params
 from fricenv.gap.stats import (
     TRIM_SHARE,
     WINDOW_MSE_CAP,
@@ -296,8 +296,7 @@ def _forward(s: _Selection, nominal: CandidateFit, folds: list[Data], d: Data, p
     if first is None:
         return None, []
     known = {frozenset(s.joint.effect.split("+")): s.joint} if s.joint is not None else {}
-    whole, steps = forward_select(first, forward_pool(s.fits, nominal, expected), nominal, folds, d, p, cfg, jobs,
-                                  expected, known)
+    whole, steps = forward_select(first, s.fits, nominal, folds, d, p, cfg, jobs, expected, known)
     if s.chosen is None and (whole is first or not explains(whole, nominal, cfg)):
         return None, steps
     return whole, steps

@@ -3,13 +3,14 @@
 After the best single effect (the verdict), the next candidate is added while the joint model beats the current set
 significantly on held-out data, up to ``MAX_EFFECTS``:
 
-- **Pool.** Every fitted single candidate whose held-out error is below the nominal model's (:func:`forward_pool`),
-  not only the significant ones: a second effect is often masked by the first one on its own (the first effect's
-  parameters and the road absorb part of it), or its single fit is stretched to a bound to imitate the first. An
-  expected effect (``brake_gain`` when the torque came from brake pressure) is always in the pool.
-- **Order.** Per step the ``TRIED_PER_STEP`` best of the pool by single held-out error are fitted jointly with the
-  set (an expected effect first); of those that pass the test, the one with the lowest joint held-out error is
-  added (the selection ranks by held-out gain over the set, not by single-fit rank).
+- **Pool.** Every fitted (testable) single candidate, not only the significant ones: a second effect is often
+  masked by the first one on its own (the first effect's parameters and the road absorb part of it), its single fit
+  may be stretched to a bound to imitate the first, or stuck in a local minimum worse than the nominal model (a
+  relaxation length fitted without the brake gain that shapes its transients). An expected effect (``brake_gain``
+  when the torque came from brake pressure) is tried first.
+- **Order.** Per step up to ``TRIED_PER_STEP`` candidates (all of the quarter car's others) are fitted jointly with
+  the set; of those that pass the test, the one with the lowest joint held-out error is added: the selection ranks
+  by held-out gain over the set, not by single-fit rank.
 - **Joint fit.** Started from the set's own parameters and the candidate's single fit (a single fit stretched to the
   far bound of its range is no start: the registry's start list is used instead), on top of the road starts.
 - **Test.** The joint model against the set: the paired held-out z of :func:`fricenv.gap.stats.paired_z` above
@@ -34,11 +35,10 @@ from fricenv.gap.verdict import at_range_edge
 from fricenv.gap.windows import Data
 from fricenv.plants import quarter_car as qc
 
-__all__ = ["MAX_EFFECTS", "TRIED_PER_STEP", "confounded", "effects_of", "forward_pool", "forward_select",
-           "split_params"]
+__all__ = ["MAX_EFFECTS", "TRIED_PER_STEP", "confounded", "effects_of", "forward_select", "split_params"]
 
 MAX_EFFECTS = 3  # largest selected set [-]
-TRIED_PER_STEP = 3  # candidates fitted jointly with the set per forward step (best single candidates first) [-]
+TRIED_PER_STEP = 6  # candidates fitted jointly with the set per forward step (expected, then best single first) [-]
 
 
 def effects_of(f: CandidateFit) -> list[str]:
@@ -51,18 +51,6 @@ def split_params(f: CandidateFit) -> list[dict]:
     allp = f.effect_params()
     return [{"effect": e, "params": {k: allp[k] for k in registry.get(e).param_names if k in allp}}
             for e in effects_of(f)]
-
-
-def forward_pool(fits: Sequence[CandidateFit], nominal: CandidateFit, expected: Sequence[str] = ()) \
-        -> list[CandidateFit]:
-    """The single candidates the forward selection may add: those whose nuisance-adjusted held-out error is below
-    the nominal model's, and the expected ones; in the order of ``fits``.
-
-    :param fits: the fitted single candidates (testable ones), best first.
-    :param nominal: the cross-fitted nominal model.
-    :param expected: effects the log's provenance predicts (always in the pool).
-    """
-    return [f for f in fits if f.adjusted_mse < nominal.adjusted_mse or f.effect in expected]
 
 
 def _seeds(current: CandidateFit, c: CandidateFit, p: qc.QuarterCarParams) -> dict:
@@ -109,7 +97,7 @@ def forward_select(first: CandidateFit, significant: Sequence[CandidateFit], nom
                    expected: Sequence[str] = (), known: dict | None = None) -> tuple[CandidateFit, list[dict]]:
     """The selected set, grown from ``first``.
 
-    :param significant: the single candidates the selection may add, best first (:func:`forward_pool`).
+    :param significant: the single candidates the selection may add (every fitted one), best first.
     :param expected: effects always tried first (a calibration the log's provenance predicts).
     :param known: sets already fitted (frozenset of effect names -> cross-fitted model), not refitted.
     :return: (the whole set's cross-fitted model, one record per step tried: the effect, its paired z over the

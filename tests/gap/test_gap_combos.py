@@ -73,12 +73,26 @@ def _fit(effect: str, resid: np.ndarray, x_effect: tuple = (), names_effect: tup
                         z_paired=z)
 
 
-def test_pool_holds_every_candidate_below_the_nominal_error_and_the_expected_ones():
-    nominal = SimpleNamespace(adjusted_mse=2.0)
-    fits = [SimpleNamespace(effect=e, adjusted_mse=m) for e, m in
-            (("drag", 1.2), ("radius_error", 1.99), ("brake_gain", 2.5), ("brake_lag", 2.1))]
-    pool = selection.forward_pool(fits, nominal, expected=("brake_gain",))
-    assert [f.effect for f in pool] == ["drag", "radius_error", "brake_gain"]  # brake_lag: worse, not expected
+def test_a_candidate_whose_single_fit_failed_is_still_tried_and_added(monkeypatch):
+    """relaxation_length alone fits worse than the nominal model (a local minimum: its transients need the brake
+    gain), but with the gain it closes the gap: the selection must try it, and add it over drag, which gains less."""
+    single_mse = {"brake_gain": 1.5, "drag": 1.9, "relaxation_length": 2.4}  # nominal: 2.0
+    joint_mse = {"brake_gain+drag": 1.45, "brake_gain+relaxation_length": 1.0}
+
+    def fake_extend(current, extra, folds, d, cfg, jobs, nominal, known):
+        names = ["+".join(selection.effects_of(current) + [c.effect]) for c in extra]
+        return [CandidateFit(effect=n, names=ROAD_NAMES, x=np.ones(4), train_mse=joint_mse.get(n, 1.5),
+                             test_mse=joint_mse.get(n, 1.5), window_mse=np.ones(4)) for n in names]
+
+    monkeypatch.setattr(selection, "_extend", fake_extend)
+    monkeypatch.setattr(selection, "paired_z", lambda a, b, d: 100.0 * (a.test_mse - b.test_mse))
+    monkeypatch.setattr(selection, "at_range_edge", lambda f, p: [])
+    singles = sorted((CandidateFit(effect=e, names=ROAD_NAMES, x=np.ones(4), train_mse=m, test_mse=m,
+                                   window_mse=np.ones(4)) for e, m in single_mse.items()), key=lambda f: f.test_mse)
+    whole, steps = selection.forward_select(singles[0], singles, singles[0], [None, None], None, None,
+                                            DiagnoseConfig(), 1)
+    assert selection.effects_of(whole) == ["brake_gain", "relaxation_length"]
+    assert {s["effect"] for s in steps} == {"drag", "relaxation_length"}  # both tried in the first step
 
 
 def test_a_single_fit_pressed_against_its_far_bound_does_not_seed_the_joint_fit():
