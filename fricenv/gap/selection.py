@@ -29,6 +29,7 @@ from collections.abc import Sequence
 from fricenv.effects import registry
 from fricenv.gap.candidates import run_fits, test_against
 from fricenv.gap.config import DiagnoseConfig
+from fricenv.gap.fitting import fit_context
 from fricenv.gap.params import road_of
 from fricenv.gap.stats import CandidateFit, cross_fitted, paired_z
 from fricenv.gap.verdict import at_range_edge
@@ -53,11 +54,12 @@ def split_params(f: CandidateFit) -> list[dict]:
             for e in effects_of(f)]
 
 
-def _seeds(current: CandidateFit, c: CandidateFit, p: qc.QuarterCarParams) -> dict:
+def _seeds(current: CandidateFit, c: CandidateFit, d: Data) -> dict:
     """Start values of the joint fit of ``current`` plus ``c``: the set's fitted parameters and ``c``'s single fit,
-    unless that is pressed against the far bound of its range (then the registry's start list serves)."""
+    unless that is pressed against the far bound of its range and the registry has a start list for ``c`` (an
+    effect fitted by its own search, such as a change point, has none: its single fit is its only start)."""
     seeds = {e["effect"]: e["params"] for e in split_params(current)}
-    if not at_range_edge(c, p):
+    if not at_range_edge(c, d.p) or not registry.get(c.effect).starts(fit_context(d)):
         seeds[c.effect] = c.effect_params()
     return seeds
 
@@ -69,7 +71,7 @@ def _extend(current: CandidateFit, extra: Sequence[CandidateFit], folds: list[Da
     base = effects_of(current)
     todo = [c for c in extra if frozenset(base + [c.effect]) not in known]
     roads = current.x_folds or (current.x,) * len(folds)
-    tasks = [(base + [c.effect], road_of(x), f, cfg, _seeds(current, c, d.p))
+    tasks = [(base + [c.effect], road_of(x), f, cfg, _seeds(current, c, d))
              for c in todo for f, x in zip(folds, roads)]
     fits = run_fits(tasks, jobs, "forward selection") if tasks else []
     k = len(folds)

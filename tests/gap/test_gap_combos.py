@@ -99,12 +99,17 @@ def test_a_single_fit_pressed_against_its_far_bound_does_not_seed_the_joint_fit(
     from fricenv.plants import quarter_car as qc
 
     rng = np.random.default_rng(0)
+    d = SimpleNamespace(p=qc.PAPER_PARAMS, v_smooth=None, free_end=0)
     current = _fit("drag", rng.normal(size=(4, 5)), (200.0, 0.3), ("c0", "c2"))
     stretched = _fit("brake_gain", rng.normal(size=(4, 5)), (0.3,), ("gain",))  # 0.3: the lower bound
     fine = _fit("brake_gain", rng.normal(size=(4, 5)), (0.8,), ("gain",))
-    assert selection._seeds(current, stretched, qc.PAPER_PARAMS) == {"drag": {"c0": 200.0, "c2": 0.3}}
-    assert selection._seeds(current, fine, qc.PAPER_PARAMS) == {"drag": {"c0": 200.0, "c2": 0.3},
-                                                                 "brake_gain": {"gain": 0.8}}
+    assert selection._seeds(current, stretched, d) == {"drag": {"c0": 200.0, "c2": 0.3}}  # registry starts
+    assert selection._seeds(current, fine, d) == {"drag": {"c0": 200.0, "c2": 0.3}, "brake_gain": {"gain": 0.8}}
+    # a change point has no registry start list: its single fit seeds the joint fit even at a bound (this used to
+    # give the joint fit no start at all, and the diagnosis crashed)
+    change = _fit("mu_change", rng.normal(size=(4, 5)), (2.0, 0.03), ("t_change", "theta_after"))
+    assert selection.at_range_edge(change, d.p) == ["theta_after"]
+    assert selection._seeds(current, change, d)["mu_change"] == {"t_change": 2.0, "theta_after": 0.03}
 
 
 def test_an_effect_with_the_sets_signature_is_reported_confounded():
