@@ -328,13 +328,14 @@ def diagnose_case(case: IndependentCase) -> dict:
 
 
 def _selection_figures(out: dict, case: IndependentCase, dg) -> None:
-    """What the forward selection made of the log: the named effects beyond the truth (``extra_named``), and on a
-    log with several effects whether all are named (``all_named``), all named or listed as not testable
-    (``named_or_untestable``), the pairs it reported as confounded and each named true effect's parameter error."""
+    """What the forward selection made of the log: the effects it added after the verdict that are not in the log
+    (``extra_named``; a wrong verdict is counted by the confusion matrix, not here), and on a log with several
+    effects whether all are named (``all_named``), all named or listed as not testable (``named_or_untestable``),
+    the pairs it reported as confounded and each named true effect's parameter error."""
     from fricenv.gap.validate import main_error
 
     true = {e.name: dict(e.params) for e in case.effects}
-    out["extra_named"] = [e for e in out["named"] if e in LIBRARY_EFFECTS and e not in true]
+    out["extra_named"] = [e for e in out["named"][1:] if e not in true]
     if len(case.effects) < 2:
         return
     out["all_named"] = set(true) <= set(out["named"])
@@ -481,7 +482,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     print(format_summary(s))
     print(f"right or untestable (none where the report lists the true effect as not testable): "
           f"{s['right_or_untestable']:.0%} of {args.n} logs")
-    print(f"logs naming an effect that is not in them: {s['extra_effect_share']:.0%}")
+    print(f"logs where the forward selection added an effect that is not in them: {s['extra_effect_share']:.0%}")
     if args.combos:
         print(f"every effect named: {s['all_effects_named']:.0%} of {args.n} logs; named or reported not testable: "
               f"{s['named_or_untestable']:.0%}; named true effects' main parameter within 15 %: "
