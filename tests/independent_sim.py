@@ -83,30 +83,10 @@ from tests.independent_model import (  # the physics; re-exported: tests and wor
 )
 from tests.real_artifacts import QuarterCarArtifacts, real_like_quarter_car, write_export
 
-__all__ = [
-    "CATEGORIES",
-    "DRIVERS",
-    "EFFECT_PARAMS",
-    "H_STEP",
-    "LIBRARY_EFFECTS",
-    "OUT_OF_LIBRARY_EFFECTS",
-    "ROADS",
-    "V_STOP",
-    "Effect",
-    "G",
-    "IndependentCase",
-    "Road",
-    "Vehicle",
-    "draw_independent_case",
-    "initial_state",
-    "integrate",
-    "make_model",
-    "measure",
-    "simulate_case",
-    "stopping_distance",
-    "write_independent_log",
-    "write_real_log",
-]
+__all__ = ["CATEGORIES", "DRIVERS", "EFFECT_PARAMS", "H_STEP", "LIBRARY_EFFECTS", "OUT_OF_LIBRARY_EFFECTS", "ROADS",
+           "V_STOP", "Effect", "G", "IndependentCase", "Road", "Vehicle", "draw_independent_case", "initial_state",
+           "integrate", "make_model", "measure", "simulate_case", "stopping_distance", "write_independent_log",
+           "write_real_log"]
 
 
 # ----------------------------------------------------------------------------------------------------- cases
@@ -341,11 +321,29 @@ def diagnose_case(case: IndependentCase) -> dict:
            "candidates": [c.effect for c in dg.candidates[:3]], "named": _named_effects(dg),
            "not_testable": sorted(dg.where.get("not_testable", {}))}
     out["right_or_untestable"] = right_or_untestable(out)
-    if len(case.effects) > 1:
-        out["all_named"] = {e.name for e in case.effects} <= set(out["named"])
+    _selection_figures(out, case, dg)
     if case.category in LIBRARY_EFFECTS:
         _effect_figures(out, case, dg)
     return out
+
+
+def _selection_figures(out: dict, case: IndependentCase, dg) -> None:
+    """What the forward selection made of the log: the effects it added after the verdict that are not in the log
+    (``extra_named``; a wrong verdict is counted by the confusion matrix, not here), and on a log with several
+    effects whether all are named (``all_named``), all named or listed as not testable (``named_or_untestable``),
+    the pairs it reported as confounded and each named true effect's parameter error."""
+    from fricenv.gap.validate import main_error
+
+    true = {e.name: dict(e.params) for e in case.effects}
+    out["extra_named"] = [e for e in out["named"][1:] if e not in true]
+    if len(case.effects) < 2:
+        return
+    out["all_named"] = set(true) <= set(out["named"])
+    out["named_or_untestable"] = set(true) <= set(out["named"]) | set(out["not_testable"])
+    out["confounded"] = [[s["effect"], *s["confounded_with"]] for s in dg.where.get("forward_selection", [])
+                         if s.get("confounded_with")]
+    fitted = {e["effect"]: e["params"] for e in dg.effects}
+    out["effect_errors"] = {e: main_error(e, true[e], fitted[e])[0] for e in true if e in fitted}
 
 
 def right_or_untestable(row: dict) -> bool:
@@ -421,8 +419,12 @@ def measure(n: int, seed: int, jobs: int = 1, real: bool = False, combos: bool =
     s.update(n=n, seed=seed, jobs=jobs, wall_seconds=time.perf_counter() - t0, source="tests.independent_sim",
              real=real, combos=combos, columns=None if columns is None else list(columns))
     s["right_or_untestable"] = float(np.mean([r.get("right_or_untestable", False) for r in results]))
+    s["extra_effect_share"] = float(np.mean([bool(r.get("extra_named")) for r in results]))
     if combos:
-        s["all_effects_named"] = float(np.mean([r.get("all_named", False) for r in results]))
+        errs = [v for r in results for v in r.get("effect_errors", {}).values()]
+        s.update(all_effects_named=float(np.mean([r.get("all_named", False) for r in results])),
+                 named_or_untestable=float(np.mean([r.get("named_or_untestable", False) for r in results])),
+                 named_effect_params_within_15pct=float(np.mean(np.array(errs) <= 0.15)) if errs else float("nan"))
     return s
 
 
@@ -480,8 +482,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     print(format_summary(s))
     print(f"right or untestable (none where the report lists the true effect as not testable): "
           f"{s['right_or_untestable']:.0%} of {args.n} logs")
+    print(f"logs where the forward selection added an effect that is not in them: {s['extra_effect_share']:.0%}")
     if args.combos:
-        print(f"every effect named: {s['all_effects_named']:.0%} of {args.n} logs")
+        print(f"every effect named: {s['all_effects_named']:.0%} of {args.n} logs; named or reported not testable: "
+              f"{s['named_or_untestable']:.0%}; named true effects' main parameter within 15 %: "
+              f"{s['named_effect_params_within_15pct']:.0%}")
     print(f"wall time: {s['wall_seconds']:.0f} s on {args.jobs} process(es)")
     if args.json:
         write_json(args.json, s)

@@ -297,7 +297,7 @@ def _forward(s: _Selection, nominal: CandidateFit, folds: list[Data], d: Data, p
     if first is None:
         return None, []
     known = {frozenset(s.joint.effect.split("+")): s.joint} if s.joint is not None else {}
-    whole, steps = forward_select(first, eligible, nominal, folds, d, p, cfg, jobs, expected, known)
+    whole, steps = forward_select(first, s.fits, nominal, folds, d, p, cfg, jobs, expected, known)
     if s.chosen is None and (whole is first or not explains(whole, nominal, cfg)):
         return None, steps
     return whole, steps

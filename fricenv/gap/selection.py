@@ -1,11 +1,25 @@
-"""Forward selection of several effects at once (issue 15 item 2).
+"""Forward selection of several effects at once (issue 15 item 3).
 
 After the best single effect (the verdict), the next candidate is added while the joint model beats the current set
-significantly on held-out data (:func:`fricenv.gap.stats.paired_z` of the larger set over the current one above
-``sig_z``, a lower nuisance-adjusted error, no parameter at the far edge of its range), up to ``MAX_EFFECTS``. Only
-significant single candidates are tried, the ``TRIED_PER_STEP`` best of them per step (CPU: each try is a joint
-least-squares fit per fold); an expected effect (``brake_gain`` when the torque came from brake pressure) is always
-tried.
+significantly on held-out data, up to ``MAX_EFFECTS``:
+
+- **Pool.** Every fitted (testable) single candidate, not only the significant ones: a second effect is often
+  masked by the first one on its own (the first effect's parameters and the road absorb part of it), its single fit
+  may be stretched to a bound to imitate the first, or stuck in a local minimum worse than the nominal model (a
+  relaxation length fitted without the brake gain that shapes its transients). An expected effect (``brake_gain``
+  when the torque came from brake pressure) is tried first.
+- **Order.** Per step up to ``TRIED_PER_STEP`` candidates (all of the quarter car's others) are fitted jointly with
+  the set; of those that pass the test, the one with the lowest joint held-out error is added: the selection ranks
+  by held-out gain over the set, not by single-fit rank.
+- **Joint fit.** Started from the set's own parameters and the candidate's single fit (a single fit stretched to the
+  far bound of its range is no start: the registry's start list is used instead), on top of the road starts.
+- **Test.** The joint model against the set: the paired held-out z of :func:`fricenv.gap.stats.paired_z` above
+  ``cfg.sig_z`` (the improvement on windows the fits did not see, over its spread under the measurement noise,
+  less what the extra per-window nuisance states win on pure noise), a lower nuisance-adjusted held-out error, and no
+  effect parameter at the far edge of its range.
+- **Confounded.** A candidate that is significant on its own against the nominal model, yet whose joint fit beats
+  neither the set nor the candidate alone significantly, carries the same signature as the set on this log: its
+  step says ``confounded_with`` (the set's effects) instead of naming it as absent.
 """
 
 from __future__ import annotations
@@ -15,16 +29,17 @@ from collections.abc import Sequence
 from fricenv.effects import registry
 from fricenv.gap.candidates import run_fits, test_against
 from fricenv.gap.config import DiagnoseConfig
+from fricenv.gap.fitting import fit_context
 from fricenv.gap.params import road_of
 from fricenv.gap.stats import CandidateFit, cross_fitted, paired_z
 from fricenv.gap.verdict import at_range_edge
 from fricenv.gap.windows import Data
 from fricenv.plants import quarter_car as qc
 
-__all__ = ["MAX_EFFECTS", "TRIED_PER_STEP", "effects_of", "forward_select", "split_params"]
+__all__ = ["MAX_EFFECTS", "TRIED_PER_STEP", "confounded", "effects_of", "forward_select", "split_params"]
 
 MAX_EFFECTS = 3  # largest selected set [-]
-TRIED_PER_STEP = 2  # candidates tried per forward step (best single candidates first) [-]
+TRIED_PER_STEP = 6  # candidates fitted jointly with the set per forward step (expected, then best single first) [-]
 
 
 def effects_of(f: CandidateFit) -> list[str]:
@@ -39,18 +54,25 @@ def split_params(f: CandidateFit) -> list[dict]:
             for e in effects_of(f)]
 
 
+def _seeds(current: CandidateFit, c: CandidateFit, d: Data) -> dict:
+    """Start values of the joint fit of ``current`` plus ``c``: the set's fitted parameters and ``c``'s single fit,
+    unless that is pressed against the far bound of its range and the registry has a start list for ``c`` (an
+    effect fitted by its own search, such as a change point, has none: its single fit is its only start)."""
+    seeds = {e["effect"]: e["params"] for e in split_params(current)}
+    if not at_range_edge(c, d.p) or not registry.get(c.effect).starts(fit_context(d)):
+        seeds[c.effect] = c.effect_params()
+    return seeds
+
+
 def _extend(current: CandidateFit, extra: Sequence[CandidateFit], folds: list[Data], d: Data, cfg: DiagnoseConfig,
             jobs: int, nominal: CandidateFit, known: dict) -> list[CandidateFit]:
-    """The current set plus each of ``extra``, fitted per fold (seeded from the fits so far) and cross-fitted; a set
+    """The current set plus each of ``extra``, fitted per fold (seeded by :func:`_seeds`) and cross-fitted; a set
     in ``known`` (frozenset of effect names -> cross-fitted model) is not refitted."""
     base = effects_of(current)
-    seeds = {e["effect"]: e["params"] for e in split_params(current)}
     todo = [c for c in extra if frozenset(base + [c.effect]) not in known]
-    tasks = []
-    for c in todo:
-        s = dict(seeds, **{c.effect: c.effect_params()})
-        roads = current.x_folds or (current.x,) * len(folds)
-        tasks += [(base + [c.effect], road_of(x), f, cfg, s) for f, x in zip(folds, roads)]
+    roads = current.x_folds or (current.x,) * len(folds)
+    tasks = [(base + [c.effect], road_of(x), f, cfg, _seeds(current, c, d))
+             for c in todo for f, x in zip(folds, roads)]
     fits = run_fits(tasks, jobs, "forward selection") if tasks else []
     k = len(folds)
     for i, c in enumerate(todo):
@@ -60,19 +82,31 @@ def _extend(current: CandidateFit, extra: Sequence[CandidateFit], folds: list[Da
     return [known[frozenset(base + [c.effect])] for c in extra]
 
 
+def confounded(current: CandidateFit, single: CandidateFit, joint: CandidateFit, d: Data,
+               cfg: DiagnoseConfig) -> list[str]:
+    """The set's effects ``single`` is confounded with on this log (empty if it is not): ``single`` beats the
+    nominal model significantly on its own, but the joint model beats neither the set nor ``single`` alone
+    significantly: the data show one signature that either explains."""
+    if single.z_paired <= cfg.sig_z:
+        return []
+    if paired_z(current, joint, d) > cfg.sig_z or paired_z(single, joint, d) > cfg.sig_z:
+        return []
+    return effects_of(current)
+
+
 def forward_select(first: CandidateFit, significant: Sequence[CandidateFit], nominal: CandidateFit,
                    folds: list[Data], d: Data, p: qc.QuarterCarParams, cfg: DiagnoseConfig, jobs: int,
                    expected: Sequence[str] = (), known: dict | None = None) -> tuple[CandidateFit, list[dict]]:
     """The selected set, grown from ``first``.
 
-    :param significant: the significant single candidates, best first.
+    :param significant: the single candidates the selection may add (every fitted one), best first.
     :param expected: effects always tried first (a calibration the log's provenance predicts).
     :param known: sets already fitted (frozenset of effect names -> cross-fitted model), not refitted.
     :return: (the whole set's cross-fitted model, one record per step tried: the effect, its paired z over the
-        set before it, and whether it was added).
+        set before it, whether it was added, and ``confounded_with`` where it applies).
     """
     current, steps, known = first, [], dict(known or {})
-    pool = [f for f in significant if f.effect != first.effect]
+    pool = [f for f in significant if f.effect not in effects_of(first)]
     while pool and len(effects_of(current)) < MAX_EFFECTS:
         pool.sort(key=lambda f: (f.effect not in expected, f.adjusted_mse))
         tried = pool[:TRIED_PER_STEP]
@@ -80,11 +114,17 @@ def forward_select(first: CandidateFit, significant: Sequence[CandidateFit], nom
         z = [paired_z(current, j, d) for j in joints]
         ok = [i for i, j in enumerate(joints) if z[i] > cfg.sig_z and j.adjusted_mse < current.adjusted_mse
               and not at_range_edge(j, p)]
-        steps += [{"effect": c.effect, "z_over_set": z[i], "added": False} for i, c in enumerate(tried)]
+        new = [{"effect": c.effect, "z_over_set": z[i], "added": False} for i, c in enumerate(tried)]
         if not ok:
+            for i, c in enumerate(tried):
+                with_ = confounded(current, c, joints[i], d, cfg)
+                if with_:
+                    new[i]["confounded_with"] = with_
+            steps += new
             break
         best = min(ok, key=lambda i: joints[i].adjusted_mse)
-        steps[len(steps) - len(tried) + best]["added"] = True
+        new[best]["added"] = True
+        steps += new
         current = joints[best]
         pool = [f for f in pool if f is not tried[best]]
     return current, steps

@@ -281,6 +281,30 @@ def test_combos_carry_several_effects():
     assert all(c.category == c.effects[0].name for c in cases)
 
 
+def test_selection_figures_of_a_combo_log():
+    """Both effects named with their errors; a third, untestable one still counts as named-or-untestable; an effect
+    the selection added that is not in the log is counted; a confounded step is listed."""
+    from types import SimpleNamespace
+
+    case = ind.draw_cases(len(ind.COMBOS), seed=4, combos=True)[0]
+    case = dataclasses.replace(case, effects=(ind.Effect("drag", {"c0": 200.0, "c2": 0.4}),
+                                              ind.Effect("relaxation_length", {"sigma": 0.4}),
+                                              ind.Effect("radius_error", {"r_eff": 0.335})))
+    dg = SimpleNamespace(effects=[{"effect": "drag", "params": {"c0": 220.0, "c2": 0.4}},
+                                  {"effect": "relaxation_length", "params": {"sigma": 0.5}},
+                                  {"effect": "brake_lag", "params": {"tau": 0.02}}],
+                         where={"forward_selection": [{"effect": "brake_gain", "z_over_set": 1.0, "added": False,
+                                                       "confounded_with": ["drag"]}]})
+    out = {"named": ["drag", "relaxation_length", "brake_lag"], "not_testable": ["radius_error"]}
+    ind._selection_figures(out, case, dg)
+    assert out["extra_named"] == ["brake_lag"]
+    assert not out["all_named"] and out["named_or_untestable"]
+    assert out["confounded"] == [["brake_gain", "drag"]]
+    assert out["effect_errors"]["relaxation_length"] == pytest.approx(0.25, abs=1e-12)
+    assert 0.0 < out["effect_errors"]["drag"] < 0.1  # the registry's figure: the drag force at 15 m/s
+    assert set(out["effect_errors"]) == {"drag", "relaxation_length"}
+
+
 def test_draws_cover_categories_and_stop_conditions():
     rng = np.random.default_rng(5)
     for cat in CATEGORIES:
