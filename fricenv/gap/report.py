@@ -139,6 +139,11 @@ def _testability_lines(w: dict) -> list[str]:
     if w.get("not_testable"):
         lines += ["", "Not testable on this log (not fitted; a verdict of `none` says nothing about them):", ""]
         lines += [f"- `{e}`: {why}" for e, why in w["not_testable"].items()]
+    confounded = [(st["effect"], st["confounded_with"]) for st in w.get("forward_selection", [])
+                  if st.get("confounded_with")]
+    if confounded:
+        lines += ["", "Confounded on this log (each explains the gap alone, neither adds to the other):", ""]
+        lines += [f"- `{e}` with " + ", ".join(f"`{x}`" for x in with_) for e, with_ in confounded]
     sizes = {e: v for e, v in w.get("detectable", {}).items() if e not in w.get("not_testable", {})}
     if sizes:
         lines += ["", ("Smallest size each tested effect needed to show above this log's noise (detected half "

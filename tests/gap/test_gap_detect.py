@@ -136,3 +136,12 @@ def test_report_markdown_says_what_the_log_cannot_tell():
     assert "- `brake_lag`: below noise: needs |tau| >= 0.2" in text
     assert "- `brake_gain`: |gain - off| = 0.05" in text and "tau - off" not in text  # untested: no size line
     assert _testability_lines({}) == []
+
+
+def test_report_markdown_names_confounded_effects():
+    from fricenv.gap.report import _testability_lines
+
+    w = {"forward_selection": [{"effect": "drag", "z_over_set": 1.2, "added": False, "confounded_with": ["brake_gain"]},
+                               {"effect": "brake_lag", "z_over_set": 0.3, "added": False}]}
+    text = "\n".join(_testability_lines(w))
+    assert "- `drag` with `brake_gain`" in text and "brake_lag" not in text
