@@ -123,7 +123,7 @@ class BatchedEkfRls:
         self.s_num, self.s_den, self.mu_peak = np.zeros(self.n), np.zeros(self.n), np.zeros(self.n)
         self.torque_prev = np.zeros(self.n)
         fit = c.shape_fit  # the curve-shape fit, step 6 (estimators.curve_shape), with the single one's bank
-        self.shape_fit = None if fit is None else ShapeFit(self.n, fit.bank, fit.params)
+        self.shape_fit = None if fit is None else ShapeFit(self.n, fit.bank, fit.params, fit.coupling)
         self.prior_peak_slip = single.prior_peak_slip
         self.last = {k: np.zeros(self.n) for k in self.names}
         self.reset()

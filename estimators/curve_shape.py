@@ -56,6 +56,9 @@ FAST_FORGETTING = 0.95  # lam of the fast copy of (S1) that detects friction jum
 JUMP_MIN_SAMPLES = 10.0  # forgotten count of the fast copy before it may detect a jump (it tends to 20) [-]
 JUMP_RATIO = 3.0  # a jump: the fast and slow theta of the winning shape differ by more than this factor [-]
 SPEED_FLOOR = 1.0  # floor of the speed in the slip-error weight [m/s]
+AMBIGUITY = 3.0  # a shape is plausible if its cost is within this many residual variances of the best [-]
+SPEED_BIAS_STEP = 0.1  # spacing of the candidate speed errors profiled out of the fit [m/s]
+SPEED_BIAS_MAX = 0.4  # largest candidate speed error (2.6 sigma of a reset from one noisy wheel speed) [m/s]
 
 
 @dataclass(frozen=True)
@@ -69,6 +72,15 @@ class ShapeFitParams:
     min_samples: float = MIN_SAMPLES  # forgotten sample count before the fit is used [-]
     fast_forgetting: float = FAST_FORGETTING  # lam of the jump detector's fast copy [-]
     jump_ratio: float = JUMP_RATIO  # fast / slow theta factor that is a jump [-]
+    bias_step: float = SPEED_BIAS_STEP  # spacing of the candidate speed errors [m/s]
+    bias_max: float = SPEED_BIAS_MAX  # largest candidate speed error; 0: none profiled [m/s]
+    ambiguity: float = AMBIGUITY  # cost margin, in units of the best fit's residual variance, of a plausible shape
+
+    @property
+    def biases(self) -> np.ndarray:
+        """The candidate speed errors b (M,): the speed in use minus the true one [m/s]."""
+        m = int(round(self.bias_max / self.bias_step))
+        return self.bias_step * np.arange(-m, m + 1)
 
     def __post_init__(self):
         for name in ("forgetting", "fast_forgetting"):
@@ -98,38 +110,48 @@ class ShapeBank:
         self.E = np.array([u.E for u in unit])
         self.g_max = np.array([u.mu_max for u in unit])
         self.peak_slip = np.array([u.peak_slip for u in unit])
+        # kept[i, j]: shape j's friction at shape i's peak slip, a share of its peak (the safest choice, (S4))
+        self.kept = self.g(np.tile(self.peak_slip, (1, 1)))[0][0].T
 
     def __len__(self) -> int:
         return len(self.names)
 
     def g(self, slip: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Normalized shapes and their slopes at ``slip`` (N,): two (N, K) arrays."""
-        s = np.asarray(slip, dtype=float)[:, None]
-        mu, dmu = magic_formula_and_dslip(s, self.B, self.C, self.E, 1.0)
-        return mu / self.g_max, dmu / self.g_max
+        """Normalized shapes and their slopes at ``slip`` (N, M): two (N, K, M) arrays."""
+        s = np.asarray(slip, dtype=float)[:, None, :]
+        B, C, E, g_max = (x[None, :, None] for x in (self.B, self.C, self.E, self.g_max))
+        mu, dmu = magic_formula_and_dslip(s, B, C, E, 1.0)
+        return mu / g_max, dmu / g_max
 
 
 DEFAULT_BANK = ShapeBank(tuple(ROADS.values()))
 
 
 class ShapeFit:
-    """State of eqs. (S1)-(S3) for N estimators over one bank (module docstring).
+    """State of eqs. (S1)-(S3) for N estimators over one bank and M candidate speed errors (module docstring).
 
     :param n: number of estimators (1 for the single estimator).
     :param bank: the candidate shapes.
     :param params: tuning.
     """
 
-    def __init__(self, n: int, bank: ShapeBank = DEFAULT_BANK, params: ShapeFitParams | None = None):
+    def __init__(self, n: int, bank: ShapeBank = DEFAULT_BANK, params: ShapeFitParams | None = None,
+                 coupling: float = 0.0):
         self.n, self.bank = int(n), bank
         self.params = params or ShapeFitParams()
-        k = len(bank)
-        self.a, self.b, self.c = np.zeros((self.n, k)), np.zeros((self.n, k)), np.zeros((self.n, k))
-        self.theta = np.zeros((self.n, k))
+        if not (np.isfinite(coupling) and 0.0 <= coupling < 0.5):
+            raise EstimatorConfigError(f"ShapeFit coupling must be in [0, 0.5), got {coupling!r}")
+        self.coupling = float(coupling)
+        self.biases = self.params.biases
+        shape = (self.n, len(bank), len(self.biases))
+        self.a, self.b, self.c = np.zeros(shape), np.zeros(shape), np.zeros(shape)
+        self.theta = np.zeros(shape)
         self.n_eff = np.zeros(self.n)
-        self.fast = [np.zeros((self.n, k)) for _ in range(3)]  # (a, b, c) of (S1) with the fast forgetting
+        self.fast = [np.zeros(shape) for _ in range(3)]  # (a, b, c) of (S1) with the fast forgetting
         self.n_fast = np.zeros(self.n)
+        self.cost = np.full(shape, np.inf)
         self._best = np.zeros(self.n, dtype=int)  # winning shape (S3), the prior 0 until informed
+        self._best_bias = np.zeros(self.n, dtype=int)  # its speed error
         self._informed = np.zeros(self.n, dtype=bool)  # n_eff has reached min_samples
         self.reset()
 
@@ -138,23 +160,29 @@ class ShapeFit:
         m = np.ones(self.n, dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
         for arr in (self.a, self.b, self.c, self.theta, *self.fast):
             arr[m] = 0.0
+        self.cost[m] = np.inf
         self.n_eff[m] = 0.0
         self.n_fast[m] = 0.0
         self._best[m] = 0
+        self._best_bias[m] = len(self.biases) // 2
         self._informed[m] = False
 
     def update(self, slip: np.ndarray, mu: np.ndarray, speed: np.ndarray, active: np.ndarray) -> None:
         """Score one sample per estimator: |slip|, friction in use, filtered speed [m/s], each (N,); estimators
         not ``active`` (skipped samples) are left as they are."""
         p = self.params
-        s, m = np.abs(slip), np.abs(mu)
+        s, m = np.abs(slip), np.abs(mu)[:, None, None]
         scored = active & (s > p.slip_min)
         if not scored.any():  # nothing to score: the sums, theta and the winner stay as they are
             return
-        g, dg = self.bank.g(np.where(scored, s, 1.0))
-        v = np.maximum(np.asarray(speed, dtype=float), SPEED_FLOOR)[:, None]
-        w = 1.0 / (p.sigma_mu**2 + (self.theta * dg * p.sigma_v / v) ** 2)
-        sc, terms = scored[:, None], (w * g * g, w * g * m[:, None], w * m[:, None] ** 2)
+        y = np.asarray(speed, dtype=float)[:, None]
+        kappa = self.coupling
+        wr = y * (1.0 - np.where(scored, s, 1.0)[:, None])  # the wheel's surface speed
+        v = np.maximum((y - self.biases - kappa * wr) / (1.0 - kappa), SPEED_FLOOR)  # (S0) (N, M)
+        s_b = np.clip((v - wr) / v, 0.0, 1.0)
+        g, dg = self.bank.g(s_b)
+        w = 1.0 / (p.sigma_mu**2 + (self.theta * dg * p.sigma_v / v[:, None, :]) ** 2)
+        sc, terms = scored[:, None, None], (w * g * g, w * g * m, w * m * m)
         self.a, self.b, self.c = (np.where(sc, p.forgetting * x + t, x)  # (S1)
                                   for x, t in zip((self.a, self.b, self.c), terms))
         self.fast = [np.where(sc, p.fast_forgetting * x + t, x) for x, t in zip(self.fast, terms)]
@@ -168,21 +196,32 @@ class ShapeFit:
         pos = self.a > 0
         den = np.where(pos, self.a, 1.0)
         self.theta = np.where(pos, self.b / den, 0.0)  # (S2)
-        cost = np.where(pos, self.c - self.b**2 / den, np.inf)  # (S3)
+        self.cost = np.where(pos, self.c - self.b**2 / den, np.inf)  # (S3)
         self._informed = self.n_eff >= self.params.min_samples
-        self._best = np.where(self._informed, np.argmin(cost, axis=1), 0)
+        flat = np.argmin(self.cost.reshape(self.n, -1), axis=1)
+        k, j = np.divmod(flat, len(self.biases))
+        self._fit = (k, j)
+        shape_cost = self.cost.min(axis=2)  # (N, K): each shape at its best speed error
+        best_cost = shape_cost[np.arange(self.n), k]
+        scale = np.maximum(best_cost / np.maximum(self.n_eff, 1.0), 1.0)
+        self._plausible = shape_cost <= best_cost[:, None] + self.params.ambiguity * scale[:, None]
+        worst = np.where(self._plausible[:, None, :], self.bank.kept[None], np.inf).min(axis=2)  # (S4)
+        safest = np.argmax(np.where(self._plausible, worst, -np.inf), axis=1)
+        self._best = np.where(self._informed, safest, 0)
+        self._best_bias = np.where(self._informed, np.argmin(self.cost[np.arange(self.n), self._best], axis=1),
+                                   len(self.biases) // 2)
 
     def _restart_on_jump(self) -> None:
         """A friction jump (the winning shape's theta over the last 0.2 s and over the whole memory differ by more
         than ``jump_ratio``): the memory restarts from the fast copy, i.e. from the data after the jump."""
-        rows, j = np.arange(self.n), self._best
-        fa, fb = self.fast[0][rows, j], self.fast[1][rows, j]
-        slow, fast = self.theta[rows, j], np.where(fa > 0, fb / np.where(fa > 0, fa, 1.0), 0.0)
+        rows, (k, j) = np.arange(self.n), self._fit
+        fa, fb = self.fast[0][rows, k, j], self.fast[1][rows, k, j]
+        slow, fast = self.theta[rows, k, j], np.where(fa > 0, fb / np.where(fa > 0, fa, 1.0), 0.0)
         ratio = self.params.jump_ratio
         jump = (self.n_fast >= JUMP_MIN_SAMPLES) & (slow > 0) & (fast > 0) \
             & ((fast > ratio * slow) | (slow > ratio * fast))
         if jump.any():
-            restart = jump[:, None]
+            restart = jump[:, None, None]
             self.a, self.b, self.c = (np.where(restart, f, x) for f, x in zip(self.fast, (self.a, self.b, self.c)))
             self.n_eff = np.where(jump, self.n_fast, self.n_eff)
             self._refresh()
@@ -191,7 +230,12 @@ class ShapeFit:
         """Index of the winning shape per estimator (N,), the prior (0) until the fit is used."""
         return self._best.copy()
 
+    def speed_error(self) -> np.ndarray:
+        """The winning candidate speed error per estimator (N,) [m/s], 0 until the fit is used."""
+        return self.biases[self._best_bias]
+
     def outputs(self) -> tuple[np.ndarray, np.ndarray]:
         """(peak slip, peak friction) per estimator, each (N,); the peak friction is NaN until the fit is used."""
-        j = self._best
-        return self.bank.peak_slip[j], np.where(self._informed, self.theta[np.arange(self.n), j], np.nan)
+        k, j = self._best, self._best_bias
+        theta = self.theta[np.arange(self.n), k, j]
+        return self.bank.peak_slip[k], np.where(self._informed, theta, np.nan)
