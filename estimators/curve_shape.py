@@ -79,7 +79,7 @@ class ShapeFitParams:
     @property
     def biases(self) -> np.ndarray:
         """The candidate speed errors b (M,): the speed in use minus the true one [m/s]."""
-        m = int(round(self.bias_max / self.bias_step))
+        m = round(self.bias_max / self.bias_step)
         return self.bias_step * np.arange(-m, m + 1)
 
     def __post_init__(self):
@@ -150,8 +150,8 @@ class ShapeFit:
         self.fast = [np.zeros(shape) for _ in range(3)]  # (a, b, c) of (S1) with the fast forgetting
         self.n_fast = np.zeros(self.n)
         self.cost = np.full(shape, np.inf)
-        self._best = np.zeros(self.n, dtype=int)  # winning shape (S3), the prior 0 until informed
-        self._best_bias = np.zeros(self.n, dtype=int)  # its speed error
+        self._best = np.zeros(self.n, dtype=np.int64)  # reported shape (S4), the prior 0 until informed
+        self._best_bias = np.zeros(self.n, dtype=np.int64)  # its speed error
         self._informed = np.zeros(self.n, dtype=bool)  # n_eff has reached min_samples
         self.reset()
 
@@ -169,62 +169,15 @@ class ShapeFit:
 
     def update(self, slip: np.ndarray, mu: np.ndarray, speed: np.ndarray, active: np.ndarray) -> None:
         """Score one sample per estimator: |slip|, friction in use, filtered speed [m/s], each (N,); estimators
-        not ``active`` (skipped samples) are left as they are."""
-        p = self.params
-        s, m = np.abs(slip), np.abs(mu)[:, None, None]
-        scored = active & (s > p.slip_min)
-        if not scored.any():  # nothing to score: the sums, theta and the winner stay as they are
-            return
-        y = np.asarray(speed, dtype=float)[:, None]
-        kappa = self.coupling
-        wr = y * (1.0 - np.where(scored, s, 1.0)[:, None])  # the wheel's surface speed
-        v = np.maximum((y - self.biases - kappa * wr) / (1.0 - kappa), SPEED_FLOOR)  # (S0) (N, M)
-        s_b = np.clip((v - wr) / v, 0.0, 1.0)
-        g, dg = self.bank.g(s_b)
-        w = 1.0 / (p.sigma_mu**2 + (self.theta * dg * p.sigma_v / v[:, None, :]) ** 2)
-        sc, terms = scored[:, None, None], (w * g * g, w * g * m, w * m * m)
-        self.a, self.b, self.c = (np.where(sc, p.forgetting * x + t, x)  # (S1)
-                                  for x, t in zip((self.a, self.b, self.c), terms))
-        self.fast = [np.where(sc, p.fast_forgetting * x + t, x) for x, t in zip(self.fast, terms)]
-        self.n_eff = np.where(scored, p.forgetting * self.n_eff + 1.0, self.n_eff)
-        self.n_fast = np.where(scored, p.fast_forgetting * self.n_fast + 1.0, self.n_fast)
-        self._refresh()
-        self._restart_on_jump()
-
-    def _refresh(self) -> None:
-        """theta (S2), the costs (S3) and the winner from the sums."""
-        pos = self.a > 0
-        den = np.where(pos, self.a, 1.0)
-        self.theta = np.where(pos, self.b / den, 0.0)  # (S2)
-        self.cost = np.where(pos, self.c - self.b**2 / den, np.inf)  # (S3)
-        self._informed = self.n_eff >= self.params.min_samples
-        flat = np.argmin(self.cost.reshape(self.n, -1), axis=1)
-        k, j = np.divmod(flat, len(self.biases))
-        self._fit = (k, j)
-        shape_cost = self.cost.min(axis=2)  # (N, K): each shape at its best speed error
-        best_cost = shape_cost[np.arange(self.n), k]
-        scale = np.maximum(best_cost / np.maximum(self.n_eff, 1.0), 1.0)
-        self._plausible = shape_cost <= best_cost[:, None] + self.params.ambiguity * scale[:, None]
-        worst = np.where(self._plausible[:, None, :], self.bank.kept[None], np.inf).min(axis=2)  # (S4)
-        safest = np.argmax(np.where(self._plausible, worst, -np.inf), axis=1)
-        self._best = np.where(self._informed, safest, 0)
-        self._best_bias = np.where(self._informed, np.argmin(self.cost[np.arange(self.n), self._best], axis=1),
-                                   len(self.biases) // 2)
-
-    def _restart_on_jump(self) -> None:
-        """A friction jump (the winning shape's theta over the last 0.2 s and over the whole memory differ by more
-        than ``jump_ratio``): the memory restarts from the fast copy, i.e. from the data after the jump."""
-        rows, (k, j) = np.arange(self.n), self._fit
-        fa, fb = self.fast[0][rows, k, j], self.fast[1][rows, k, j]
-        slow, fast = self.theta[rows, k, j], np.where(fa > 0, fb / np.where(fa > 0, fa, 1.0), 0.0)
-        ratio = self.params.jump_ratio
-        jump = (self.n_fast >= JUMP_MIN_SAMPLES) & (slow > 0) & (fast > 0) \
-            & ((fast > ratio * slow) | (slow > ratio * fast))
-        if jump.any():
-            restart = jump[:, None, None]
-            self.a, self.b, self.c = (np.where(restart, f, x) for f, x in zip(self.fast, (self.a, self.b, self.c)))
-            self.n_eff = np.where(jump, self.n_fast, self.n_eff)
-            self._refresh()
+        not ``active`` (skipped samples) or below ``slip_min`` are left as they are. One compiled call
+        (:func:`_kernel`) for the N estimators."""
+        p, bank = self.params, self.bank
+        tuning = np.array([p.forgetting, p.fast_forgetting, p.sigma_mu, p.sigma_v, p.slip_min, p.min_samples,
+                           p.jump_ratio, p.ambiguity, JUMP_MIN_SAMPLES, SPEED_FLOOR, self.coupling])
+        _kernel()(np.asarray(slip, dtype=float), np.asarray(mu, dtype=float), np.asarray(speed, dtype=float),
+                  np.asarray(active, dtype=bool), bank.B, bank.C, bank.E, bank.g_max, bank.kept, self.biases, tuning,
+                  self.a, self.b, self.c, *self.fast, self.theta, self.cost, self.n_eff, self.n_fast,
+                  self._best, self._best_bias, self._informed)
 
     def best(self) -> np.ndarray:
         """Index of the winning shape per estimator (N,), the prior (0) until the fit is used."""
@@ -239,3 +192,88 @@ class ShapeFit:
         k, j = self._best, self._best_bias
         theta = self.theta[np.arange(self.n), k, j]
         return self.bank.peak_slip[k], np.where(self._informed, theta, np.nan)
+
+
+def _refresh_row(i, a, b, c, theta, cost, n_eff, kept, tuning, best, best_bias, informed) -> tuple[int, int]:
+    """theta (S2), the costs (S3), the fit's winner and the reported shape (S4) of estimator ``i`` from its sums;
+    returns the winner (shape, speed error). Plain Python compiled by :func:`_kernel`."""
+    n_shapes, n_biases = a.shape[1], a.shape[2]
+    fit_k, fit_j, best_cost = 0, 0, np.inf
+    for k in range(n_shapes):
+        for j in range(n_biases):
+            pos = a[i, k, j] > 0
+            theta[i, k, j] = b[i, k, j] / a[i, k, j] if pos else 0.0  # (S2)
+            cost[i, k, j] = c[i, k, j] - b[i, k, j] ** 2 / a[i, k, j] if pos else np.inf  # (S3)
+            if cost[i, k, j] < best_cost:
+                fit_k, fit_j, best_cost = k, j, cost[i, k, j]
+    informed[i] = n_eff[i] >= tuning[5]
+    limit = best_cost + tuning[7] * max(best_cost / max(n_eff[i], 1.0), 1.0)
+    safest, safest_kept = 0, -np.inf
+    for k in range(n_shapes):  # (S4): the plausible shape whose peak keeps most friction on the worst plausible one
+        if cost[i, k].min() <= limit:
+            worst = np.inf
+            for j in range(n_shapes):
+                if cost[i, j].min() <= limit:
+                    worst = min(worst, kept[k, j])
+            if worst > safest_kept:
+                safest, safest_kept = k, worst
+    best[i] = safest if informed[i] else 0
+    best_bias[i] = np.argmin(cost[i, safest]) if informed[i] else n_biases // 2
+    return fit_k, fit_j
+
+
+def _update_rows(slip, mu, speed, active, B, C, E, g_max, kept, biases, tuning, a, b, c, fa, fb, fc, theta, cost,
+                 n_eff, n_fast, best, best_bias, informed) -> None:
+    """:meth:`ShapeFit.update` for every estimator, in place: (S0)-(S4) and the jump restart. ``tuning`` holds
+    (lam, fast lam, sigma_mu, sigma_v, slip_min, min_samples, jump_ratio, ambiguity, jump min samples, speed
+    floor, coupling). Plain Python compiled by :func:`_kernel`."""
+    lam, lam_fast, sigma_mu, sigma_v, slip_min = tuning[0], tuning[1], tuning[2], tuning[3], tuning[4]
+    ratio, floor, kappa = tuning[6], tuning[9], tuning[10]
+    for i in range(slip.shape[0]):
+        s, m = abs(slip[i]), abs(mu[i])
+        if not (active[i] and s > slip_min):
+            continue
+        wr = speed[i] * (1.0 - s)  # the wheel's surface speed
+        for j in range(biases.shape[0]):
+            v = max((speed[i] - biases[j] - kappa * wr) / (1.0 - kappa), floor)  # (S0)
+            s_b = min(max((v - wr) / v, 0.0), 1.0)
+            for k in range(B.shape[0]):
+                g, dg = magic_formula_and_dslip(s_b, B[k], C[k], E[k], 1.0)
+                g, dg = g / g_max[k], dg / g_max[k]
+                w = 1.0 / (sigma_mu**2 + (theta[i, k, j] * dg * sigma_v / v) ** 2)
+                ta, tb, tc = w * g * g, w * g * m, w * m * m
+                a[i, k, j], b[i, k, j], c[i, k, j] = (lam * a[i, k, j] + ta, lam * b[i, k, j] + tb,  # (S1)
+                                                      lam * c[i, k, j] + tc)
+                fa[i, k, j], fb[i, k, j], fc[i, k, j] = (lam_fast * fa[i, k, j] + ta, lam_fast * fb[i, k, j] + tb,
+                                                         lam_fast * fc[i, k, j] + tc)
+        n_eff[i] = lam * n_eff[i] + 1.0
+        n_fast[i] = lam_fast * n_fast[i] + 1.0
+        k, j = _refresh_row(i, a, b, c, theta, cost, n_eff, kept, tuning, best, best_bias, informed)
+        # a friction jump: the winner's theta over the fast memory and the whole memory differ by more than ratio
+        slow, fast = theta[i, k, j], fb[i, k, j] / fa[i, k, j] if fa[i, k, j] > 0 else 0.0
+        if n_fast[i] >= tuning[8] and slow > 0 and fast > 0 and (fast > ratio * slow or slow > ratio * fast):
+            a[i], b[i], c[i] = fa[i], fb[i], fc[i]  # the memory restarts from the data after the jump
+            n_eff[i] = n_fast[i]
+            _refresh_row(i, a, b, c, theta, cost, n_eff, kept, tuning, best, best_bias, informed)
+
+
+_COMPILED_KERNEL: list = []  # the compiled update, built on first use (numba is not imported with the module)
+
+
+def _kernel():
+    """:func:`_update_rows` compiled with numba (once per process), :func:`_refresh_row` and the library's Magic
+    Formula compiled into it (:func:`fricenv.effects.kernels._compile`)."""
+    if not _COMPILED_KERNEL:
+        import types
+
+        import numba
+
+        from fricenv.effects.kernels import _compile, _guard_cache
+
+        jit = numba.njit(cache=True, error_model="numpy")
+        deps = {"magic_formula_and_dslip": _compile(magic_formula_and_dslip)}
+        deps["_refresh_row"] = jit(types.FunctionType(_refresh_row.__code__, {**globals(), **deps}, "_refresh_row"))
+        rows = jit(types.FunctionType(_update_rows.__code__, {**globals(), **deps}, "_update_rows"))
+        _guard_cache({"__name__": __name__, "rows": rows, "refresh": deps["_refresh_row"]})  # tire.py compiled in
+        _COMPILED_KERNEL.append(rows)
+    return _COMPILED_KERNEL[0]
