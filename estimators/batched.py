@@ -263,8 +263,9 @@ class BatchedEkfRls:
         mu, peak_slip = self._shape(active, S, mu_util, self.core.mu_map.batch(self.k_s, s_bar))
         new = {"v": self.y, "slip": -S, "F_x": -F, "k_s": self.k_s, "mu": mu, "mu_peak": self.mu_peak,
                "mu_utilized": mu_util, "peak_slip": peak_slip}
+        every = active.all()
         for k, value in new.items():
-            self.last[k] = np.where(active, value, self.last[k])
+            self.last[k] = value.copy() if every else np.where(active, value, self.last[k])
         return {k: a.copy() for k, a in self.last.items()}, health
 
 

@@ -143,6 +143,10 @@ class ShapeFit:
             raise EstimatorConfigError(f"ShapeFit coupling must be in [0, 0.5), got {coupling!r}")
         self.coupling = float(coupling)
         self.biases = self.params.biases
+        p = self.params
+        self._tuning = np.array([p.forgetting, p.fast_forgetting, p.sigma_mu, p.sigma_v, p.slip_min, p.min_samples,
+                                 p.jump_ratio, p.ambiguity, JUMP_MIN_SAMPLES, SPEED_FLOOR, self.coupling])
+        self._rows = np.arange(self.n)
         shape = (self.n, len(bank), len(self.biases))
         self.a, self.b, self.c = np.zeros(shape), np.zeros(shape), np.zeros(shape)
         self.theta = np.zeros(shape)
@@ -171,12 +175,10 @@ class ShapeFit:
         """Score one sample per estimator: |slip|, friction in use, filtered speed [m/s], each (N,); estimators
         not ``active`` (skipped samples) or below ``slip_min`` are left as they are. One compiled call
         (:func:`_kernel`) for the N estimators."""
-        p, bank = self.params, self.bank
-        tuning = np.array([p.forgetting, p.fast_forgetting, p.sigma_mu, p.sigma_v, p.slip_min, p.min_samples,
-                           p.jump_ratio, p.ambiguity, JUMP_MIN_SAMPLES, SPEED_FLOOR, self.coupling])
+        bank = self.bank
         _kernel()(np.asarray(slip, dtype=float), np.asarray(mu, dtype=float), np.asarray(speed, dtype=float),
-                  np.asarray(active, dtype=bool), bank.B, bank.C, bank.E, bank.g_max, bank.kept, self.biases, tuning,
-                  self.a, self.b, self.c, *self.fast, self.theta, self.cost, self.n_eff, self.n_fast,
+                  np.asarray(active, dtype=bool), bank.B, bank.C, bank.E, bank.g_max, bank.kept, self.biases,
+                  self._tuning, self.a, self.b, self.c, *self.fast, self.theta, self.cost, self.n_eff, self.n_fast,
                   self._best, self._best_bias, self._informed)
 
     def best(self) -> np.ndarray:
@@ -190,7 +192,7 @@ class ShapeFit:
     def outputs(self) -> tuple[np.ndarray, np.ndarray]:
         """(peak slip, peak friction) per estimator, each (N,); the peak friction is NaN until the fit is used."""
         k, j = self._best, self._best_bias
-        theta = self.theta[np.arange(self.n), k, j]
+        theta = self.theta[self._rows, k, j]
         return self.bank.peak_slip[k], np.where(self._informed, theta, np.nan)
 
 
