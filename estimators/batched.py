@@ -214,6 +214,8 @@ class BatchedEkfRls:
         self.prior_peak_slip = single.prior_peak_slip
         self.last = {k: np.zeros(self.n) for k in self.names}
         self.reset()
+        nan = np.full(self.n, np.nan)  # an invalid sample changes no state: it loads the compiled steps now
+        self.update(nan, nan, nan)
 
     def reset(self, mask: np.ndarray | None = None, v0: np.ndarray | None = None) -> tuple[dict, np.ndarray]:
         """Reset the sub-envs in ``mask`` (all by default), from speeds ``v0`` (N,) if given (else the first
