@@ -69,20 +69,36 @@ def _gate_row(i, omega, torque_prev, gc, x, P, started, rejected) -> tuple[float
     return x0, _OUTLIER
 
 
-def _ekf_row(i, a_x, torque, S, k, x, P, H, A, Q) -> float:
+def _ekf_row(i, a_x, torque, S, k, x, P, H, A, Q, T, U) -> float:
     """Step 3, eqs. (7)-(8), for sub-env ``i``: a_x update (Joseph form), then the prediction; the updated force.
-    Plain Python compiled by :func:`_core_kernel`."""
+    ``T``, ``U``: (3, 3) scratch. Plain Python compiled by :func:`_core_kernel` (scalar loops: no allocation)."""
     R, m, R_w, I_w, C_s = k[12], k[4], k[1], k[5], k[6]
-    PH = P[i] @ H
-    K = PH / (PH @ H + R)
-    xk = x[i] + K * (a_x - x[i] @ H)
-    IKH = np.eye(3) - np.outer(K, H)
-    Pk = IKH @ P[i] @ IKH.T + R * np.outer(K, K)
-    Pk = 0.5 * (Pk + Pk.T)
-    F = xk[2]
+    PH0 = P[i, 0, 0] * H[0] + P[i, 0, 1] * H[1] + P[i, 0, 2] * H[2]
+    PH1 = P[i, 1, 0] * H[0] + P[i, 1, 1] * H[1] + P[i, 1, 2] * H[2]
+    PH2 = P[i, 2, 0] * H[0] + P[i, 2, 1] * H[1] + P[i, 2, 2] * H[2]
+    s = PH0 * H[0] + PH1 * H[1] + PH2 * H[2] + R
+    K = (PH0 / s, PH1 / s, PH2 / s)
+    innov = a_x - (x[i, 0] * H[0] + x[i, 1] * H[1] + x[i, 2] * H[2])
+    F = x[i, 2] + K[2] * innov
+    for r in range(3):  # T = (I - K H) P
+        for c in range(3):
+            T[r, c] = P[i, r, c] - K[r] * (H[0] * P[i, 0, c] + H[1] * P[i, 1, c] + H[2] * P[i, 2, c])
+    for r in range(3):  # U = T (I - K H)^T + R K K^T, the Joseph form
+        for c in range(3):
+            U[r, c] = T[r, c] - (T[r, 0] * H[0] + T[r, 1] * H[1] + T[r, 2] * H[2]) * K[c] + R * K[r] * K[c]
+    for r in range(3):  # symmetric part, then T = A U
+        for c in range(r + 1):
+            U[r, c] = U[c, r] = 0.5 * (U[r, c] + U[c, r])
+    for r in range(3):
+        for c in range(3):
+            T[r, c] = A[r, 0] * U[0, c] + A[r, 1] * U[1, c] + A[r, 2] * U[2, c]
+    for r in range(3):  # P = A U A^T + Q, symmetric part
+        for c in range(3):
+            U[r, c] = T[r, 0] * A[c, 0] + T[r, 1] * A[c, 1] + T[r, 2] * A[c, 2] + Q[r, c]
+    for r in range(3):
+        for c in range(3):
+            P[i, r, c] = 0.5 * (U[r, c] + U[c, r])
     x[i, 0], x[i, 1], x[i, 2] = F / m, (-F * R_w + torque) / I_w, C_s * S
-    Pn = A @ Pk @ A.T + Q
-    P[i] = 0.5 * (Pn + Pn.T)
     return F
 
 
@@ -92,6 +108,7 @@ def _core_rows(omega, a_x, T_b, k, gated, gc, gx, gP, started, rejected, y, c, R
     health) per sub-env. ``k``: (dt, R_w, d, m_eff, m, I_w, C_s, a_x loop factor, dead zone, lam, F_z, phi_min
     slip, a_x noise variance). Plain Python compiled by :func:`_core_kernel`."""
     dt, R_w, d, m_eff, corr, db, lam, Fz = k[0], k[1], k[2], k[3], k[7], k[8], k[9], k[10]
+    T, U = np.empty((3, 3)), np.empty((3, 3))
     for i in range(omega.shape[0]):
         if not (np.isfinite(omega[i]) and np.isfinite(a_x[i]) and np.isfinite(T_b[i])):
             out[i, 0], out[i, 1], out[i, 2] = 0.0, 0.0, _INVALID  # skipped: values held
@@ -111,7 +128,7 @@ def _core_rows(omega, a_x, T_b, k, gated, gc, gx, gP, started, rejected, y, c, R
             c[i] = c_new
         R_g[i] = abs(torque) / (m_eff * R_w)  # eq. (5)
         S = (wr - y[i]) / max(max(y[i], wr), 0.1)  # 2. slip, eq. (3)
-        F = _ekf_row(i, a_x[i], torque, S, k, x, P, H, A, Q)  # 3. force EKF
+        F = _ekf_row(i, a_x[i], torque, S, k, x, P, H, A, Q, T, U)  # 3. force EKF
         phi = Fz * S  # 4. RLS, eqs. (10)-(14)
         if abs(phi) > k[11] * Fz:
             gain = P_rls[i] * phi / (lam + phi * P_rls[i] * phi)  # (12)
