@@ -406,7 +406,8 @@ class QuarterCarEkfRls(Estimator):
         cfg = EkfRlsConfig(m=p.m, I_w=p.J, R_w=p.r, Fz=(p.Fz,), ax_std=ax_std, forgetting=forgetting,
                            K=correction_gain, deadband=correction_deadband, omega_std=omega_std,
                            outlier_gate=outlier_gate)
-        fit = ShapeFit(1, shape_bank, shape_params) if shape_bank is not None and mu_map is None else None
+        coupling = p.J / (p.m * p.r**2)  # the speed filter's error per unit slip speed (estimators.curve_shape)
+        fit = ShapeFit(1, shape_bank, shape_params, coupling) if shape_bank is not None and mu_map is None else None
         self.core = EkfRlsCore(cfg, dt, mu_map or MagicFormulaFamilyMap(shape), fit)
         self.prior_peak_slip = float(fit.outputs()[0][0]) if fit is not None else shape.peak_slip
         self._last = None

@@ -1,4 +1,5 @@
-"""The batched EKF/RLS equals N single estimators (to 1e-9) across per-env resets, outliers and invalid samples."""
+"""The batched EKF/RLS (compiled) equals N single estimators (to 1e-9) across per-env resets, outliers and invalid
+samples, with and without the wheel-speed gate."""
 
 from __future__ import annotations
 
@@ -29,13 +30,14 @@ def _signals(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarr
     return omega, a_x, T_b
 
 
-@pytest.mark.parametrize("name", ["ekf-rls", "ekf-rls-paper-loop", "ekf-rls-paper-map"])
-def test_batched_ekf_rls_equals_single_estimators(name):
+@pytest.mark.parametrize(("name", "options"), [("ekf-rls", {}), ("ekf-rls-paper-loop", {}),
+                                               ("ekf-rls-paper-map", {}), ("ekf-rls", {"outlier_gate": None})])
+def test_batched_ekf_rls_equals_single_estimators(name, options):
     rng = np.random.default_rng(3)
     omega, a_x, T_b = _signals(rng)
     resets = {k: rng.random(N) < 0.01 for k in range(1, STEPS)}  # per-env resets, as autoresets do
-    batched = make_batched(name, N, PAPER_PARAMS, DT)
-    singles = [make_estimator(name, PAPER_PARAMS, DT) for _ in range(N)]
+    batched = make_batched(name, N, PAPER_PARAMS, DT, **options)
+    singles = [make_estimator(name, PAPER_PARAMS, DT, **options) for _ in range(N)]
     v0 = omega[0] * PAPER_PARAMS.r
     batched.reset(v0=v0)
     for i, est in enumerate(singles):
@@ -56,7 +58,9 @@ def test_batched_ekf_rls_equals_single_estimators(name):
             for key in est.names:
                 np.testing.assert_allclose(values[key][i], ref.values[key], rtol=1e-9, atol=1e-9,
                                            err_msg=f"{name} {key} step {k} env {i}")
-    assert {int(Health.OUTLIER), int(Health.REINITIALISED), int(Health.INVALID_INPUT), int(Health.OK)} <= seen
+    gated = {int(Health.OUTLIER), int(Health.REINITIALISED)}
+    assert {int(Health.INVALID_INPUT), int(Health.OK)} <= seen
+    assert gated <= seen if "outlier_gate" not in options else not gated & seen
     if name != "ekf-rls-paper-map":  # the curve-shape fit ran and left its prior (the paper's map has no fit)
         assert len(peaks) >= 2, peaks
 
