@@ -1,0 +1,90 @@
+"""The compiled nuisance fit (fricenv.gap.windows_kernel) against the numpy Gauss-Newton loop of
+fricenv.gap.windows around the same compiled simulator: the same replicas, steps, clips and bounds, so the residuals
+agree to rounding (the normal equations' summation order and the 2x2/3x3 solve differ: 1e-9 of the largest
+residual is the stated tolerance, measured below 3e-12); and the small solve and the move rule on their own."""
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from fricenv.effects.quarter_car import make_effect
+from fricenv.gap import windows, windows_kernel
+from fricenv.gap.config import DiagnoseConfig
+from fricenv.gap.simulate import simulate_log
+from fricenv.gap.windows import prepare, window_residuals
+from fricenv.plants import quarter_car as qc
+from fricenv.plants.tire import DRY, WET
+
+P = qc.PAPER_PARAMS
+TOL = 1e-9  # of the largest residual magnitude
+
+# (effects, parameter names, two parameter sets): the states fitted differ (lam_t for a relaxation model), and the
+# effects switch on every part of the simulator's substep
+CASES = [
+    ([], ("B", "C", "E", "theta"), [[*WET.as_array()], [*DRY.as_array()[:3], 0.6]]),
+    (["brake_lag", "brake_delay"], ("B", "C", "E", "theta", "tau", "delay"),
+     [[*WET.as_array(), 0.03, 0.02], [*WET.as_array()[:3], 0.7, 0.0, 0.04]]),
+    (["relaxation_length"], ("B", "C", "E", "theta", "sigma"), [[*WET.as_array(), 0.3], [*DRY.as_array(), 0.0]]),
+    (["brake_fade", "load_transfer", "drag"], ("B", "C", "E", "theta", "fade", "load", "c0", "c2"),
+     [[*WET.as_array(), 1e-5, 0.3, 40.0, 0.3], [*WET.as_array(), 0.0, -0.2, 0.0, 0.0]]),
+    (["sliding_speed_friction", "mu_change"], ("B", "C", "E", "theta", "slide", "t_change", "theta_after"),
+     [[*WET.as_array(), 0.05, 1.0, 0.5], [*DRY.as_array(), 0.0, np.inf, 1.0]]),
+]
+
+
+def _data(write_v: bool, seed: int, missing: bool = False):
+    log, _ = simulate_log([make_effect("brake_lag", tau=0.04)], WET, "abs", seed=seed, duration=2.0, write_v=write_v)
+    if missing:  # held and missing samples: no residual there
+        omega = np.array(log.omega, dtype=float)
+        omega[5::7] = np.nan
+        log = replace(log, omega=omega)
+    return prepare(log, P, DiagnoseConfig(jobs=1))
+
+
+@pytest.mark.parametrize("write_v", [True, False])
+@pytest.mark.parametrize("case", range(len(CASES)))
+def test_compiled_nuisance_fit_equals_the_numpy_loop(monkeypatch, write_v, case):
+    effects, names, x = CASES[case]
+    d = _data(write_v, seed=3 + case, missing=case == 1)
+    fused = window_residuals(effects, names, np.array(x), d)
+    monkeypatch.setattr(windows, "FUSED_NUISANCE_FIT", False)
+    loop, per_channel = window_residuals(effects, names, np.array(x), d, per_channel=True)
+    assert fused.shape == loop.shape and np.all(np.isfinite(fused))
+    np.testing.assert_allclose(fused, loop, rtol=0, atol=TOL * np.max(np.abs(loop)))
+    monkeypatch.setattr(windows, "FUSED_NUISANCE_FIT", True)
+    _, fused_channels = window_residuals(effects, names, np.array(x), d, per_channel=True)
+    for c in d.channels:  # NaN exactly where a sample is missing
+        np.testing.assert_array_equal(np.isnan(fused_channels[c]), np.isnan(per_channel[c]))
+
+
+def test_the_numpy_path_does_not_use_the_compiled_fit(monkeypatch):
+    d = _data(True, seed=4)
+    effects, names, x = CASES[1]
+    numpy_path = window_residuals(effects, names, np.array(x), replace(d, compiled=False))
+    monkeypatch.setattr(windows_kernel, "fit_windows", None)  # would fail if called
+    assert np.array_equal(window_residuals(effects, names, np.array(x), replace(d, compiled=False)), numpy_path)
+
+
+def test_the_small_solve_equals_numpy_and_a_singular_matrix_gives_no_move():
+    rng = np.random.default_rng(5)
+    for q in (1, 2, 3):
+        for _ in range(50):
+            J = rng.normal(size=(12, q)) * rng.uniform(0.01, 100.0, q)
+            A = J.T @ J + 1e-9 * np.eye(q)
+            g = rng.normal(size=q)
+            expected = np.linalg.solve(A, g)
+            got = windows_kernel._solve(A.copy(), g.copy(), q)
+            np.testing.assert_allclose(got, expected, rtol=1e-10, atol=0)
+    assert np.array_equal(windows_kernel._solve(np.zeros((2, 2)), np.array([1.0, 2.0]), 2), np.zeros(2))
+
+
+def test_the_move_is_nan_to_num_then_clipped_to_its_step_and_bounds():
+    s = np.array([10.0, 50.0, 0.95])
+    free = np.array([1, 0, 2], dtype=np.int64)
+    max_move, lower, upper = np.array([0.5, 0.3, 0.1]), np.array([0.0, 0.0, -1.0]), np.array([np.inf, np.inf, 1.0])
+    windows_kernel._move(s, np.array([np.nan, -np.inf, np.inf]), free, max_move, lower, upper)
+    # omega: NaN -> no move; v: -inf -> -max_move; lam_t: +inf -> +0.1, then the bound 1
+    np.testing.assert_array_equal(s, [9.5, 50.0, 1.0])
+    windows_kernel._move(s, np.array([-0.2, -100.0, -0.05]), free, max_move, lower, upper)
+    np.testing.assert_allclose(s, [9.0, 49.8, 0.95], rtol=0, atol=1e-15)
