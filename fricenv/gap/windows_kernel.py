@@ -3,9 +3,11 @@ parameter set and window, the Gauss-Newton iterations on the window's start stat
 normalised residuals, the small normal equations, the clipped move) and the final simulation run in one call,
 element by element, instead of one numpy round trip per iteration.
 
-The same arithmetic as the numpy loop in :mod:`fricenv.gap.windows` (the same replicas, steps, clips and bounds);
-only the summation order of the normal equations and the small linear solve differ, at rounding level (tested to
-1e-9 against the numpy loop, ``tests/gap/test_gap_speed3_kernel.py``). The windows are simulated by
+The same arithmetic as the numpy loop in :mod:`fricenv.gap.windows` (the same replicas, steps, clips and bounds,
+the normal equations summed in numpy's einsum order, the same LAPACK solve), so equal to it bit for bit on this
+platform's numpy build (``tests/gap/test_gap_speed3_kernel.py``; elsewhere einsum's SIMD width may differ, and with
+it the last bit of a one-state sum). A fit's path through a least-squares run can amplify a last-bit difference
+into a visibly different optimum, so the diagnosis' results depend on this equality. The windows are simulated by
 :func:`fricenv.effects.kernels._trajectory`, the compiled ``EffectSimulator``. Imported only when a compiled
 diagnosis runs, so ``import fricenv`` does not load numba.
 """
@@ -30,33 +32,32 @@ _BIG = np.finfo(float).max  # np.nan_to_num's replacement of an infinite move
 
 
 @numba.njit(cache=True, error_model="numpy")
-def _solve(A, g, q):
-    """``A x = g`` for the leading ``q x q`` block by LU with partial pivoting (LAPACK's gesv for q <= 3); a zero
-    pivot (singular matrix) gives ``x = 0``, the numpy loop's answer to a ``LinAlgError``. ``A``, ``g`` are
-    overwritten; returns ``g``."""
-    for c in range(q):
-        piv = c
-        for r in range(c + 1, q):
-            if abs(A[r, c]) > abs(A[piv, c]):
-                piv = r
-        if A[piv, c] == 0.0:
-            g[:q] = 0.0
-            return g
-        if piv != c:
-            for j in range(q):
-                A[c, j], A[piv, j] = A[piv, j], A[c, j]
-            g[c], g[piv] = g[piv], g[c]
-        inv = 1.0 / A[c, c]
-        for r in range(c + 1, q):
-            A[r, c] *= inv
-            for j in range(c + 1, q):
-                A[r, j] -= A[r, c] * A[c, j]
-            g[r] -= A[r, c] * g[c]
-    for c in range(q - 1, -1, -1):
-        g[c] /= A[c, c]
-        for r in range(c):
-            g[r] -= g[c] * A[r, c]
-    return g
+def _solve(A, g):
+    """``A x = g`` by LAPACK's gesv (numba's ``np.linalg.solve``: bit for bit numpy's); a singular matrix gives
+    ``x = 0``, the numpy loop's answer to a ``LinAlgError`` (there for the whole batch, here for this window)."""
+    try:
+        return np.linalg.solve(A, g)
+    except Exception:  # numba raises LinAlgError for a singular matrix
+        return np.zeros_like(g)
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _dot_simd(a, b):
+    """``sum(a * b)`` in the order of numpy's einsum on contiguous operands (two SIMD lanes, unrolled four times,
+    the lanes added at the end), so that the one-state normal equations equal the numpy loop's bit for bit."""
+    n = a.shape[0]
+    acc0, acc1 = 0.0, 0.0
+    i = 0
+    while n - i >= 8:
+        acc0 = a[i] * b[i] + (a[i + 2] * b[i + 2] + (a[i + 4] * b[i + 4] + (a[i + 6] * b[i + 6] + acc0)))
+        acc1 = a[i + 1] * b[i + 1] + (a[i + 3] * b[i + 3] + (a[i + 5] * b[i + 5] + (a[i + 7] * b[i + 7] + acc1)))
+        i += 8
+    while i < n:
+        acc0 = a[i] * b[i] + acc0
+        if i + 1 < n:
+            acc1 = a[i + 1] * b[i + 1] + acc1
+        i += 2
+    return acc0 + acc1
 
 
 @numba.njit(cache=True, error_model="numpy")
@@ -76,25 +77,35 @@ def _replicas(cmd, k, p, s, Ta, free, steps, has_lt, flags, dt, t0, substeps, co
 
 
 @numba.njit(cache=True, error_model="numpy")
-def _normal_equations(buf, meas, sig, rows, free, steps, A, g):
+def _normal_equations(buf, meas, sig, rows, free, steps, J, r0, A, g):
     """``A = J^T J + 1e-9 I`` and ``g = -J^T r`` of one window from its replicas ``buf`` (3, 1 + q, H): ``r`` the
-    normalised residuals of the base simulation (0 where no measurement), ``J`` their forward differences."""
+    normalised residuals of the base simulation (0 where no measurement), ``J`` their forward differences, (M, q)
+    with ``M`` = channels x H in the residuals' order. The sums in the numpy loop's order (einsum: sequential over
+    ``M`` for several states, :func:`_dot_simd` for one)."""
     q = free.shape[0]
-    A[:, :] = 0.0
-    g[:] = 0.0
-    J = np.empty(q)
+    H = meas.shape[1]
     for c in range(meas.shape[0]):
-        for t in range(meas.shape[1]):
+        for t in range(H):
             m = meas[c, t]
-            if not np.isfinite(m):
-                continue  # residual 0 in every replica: J row 0
-            r0 = (buf[rows[c], 0, t] - m) / sig[c]
+            row = c * H + t
+            ok = np.isfinite(m)
+            r0[row] = (buf[rows[c], 0, t] - m) / sig[c] if ok else 0.0
             for i in range(q):
-                J[i] = ((buf[rows[c], 1 + i, t] - m) / sig[c] - r0) / steps[free[i]]
+                ri = (buf[rows[c], 1 + i, t] - m) / sig[c] if ok else 0.0
+                J[row, i] = (ri - r0[row]) / steps[free[i]]
+    if q == 1:
+        A[0, 0] = _dot_simd(J[:, 0], J[:, 0])
+        g[0] = -_dot_simd(J[:, 0], r0)
+    else:
+        A[:, :] = 0.0
+        g[:] = 0.0
+        for row in range(J.shape[0]):
             for i in range(q):
-                g[i] -= J[i] * r0
+                g[i] += J[row, i] * r0[row]
                 for j in range(q):
-                    A[i, j] += J[i] * J[j]
+                    A[i, j] += J[row, i] * J[row, j]
+        for i in range(q):
+            g[i] = -g[i]
     for i in range(q):
         A[i, i] += _REG
 
@@ -124,12 +135,14 @@ def _fit_windows(cmd, k0, par, x0, meas, sig, rows, free, steps, max_move, lower
         s = x0[k, w, :3].copy()
         Ta = x0[k, w, 3]
         buf = np.empty((3, 1 + q, H))
+        J = np.empty((meas.shape[0] * H, q))
+        r0 = np.empty(meas.shape[0] * H)
         A = np.empty((q, q))
         g = np.empty(q)
         for _ in range(iters):
             _replicas(cmd, k0[w], par[k], s, Ta, free, steps, has_lt, flags, dt, t0, substeps, consts, want_ax, buf)
-            _normal_equations(buf, meas[:, w], sig, rows, free, steps, A, g)
-            _move(s, _solve(A, g, q), free, max_move, lower, upper)
+            _normal_equations(buf, meas[:, w], sig, rows, free, steps, J, r0, A, g)
+            _move(s, _solve(A, g), free, max_move, lower, upper)
         lt = s[2] if has_lt else _slip(s[0], s[1], par[k, 8])
         _trajectory(cmd, k0[w], par[k], s[0], s[1], Ta, lt, flags, dt, t0, substeps, consts, want_ax, out, e)
 
