@@ -7,7 +7,6 @@ fitted by Gauss-Newton.
 
 from __future__ import annotations
 
-import multiprocessing
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -76,7 +75,9 @@ class Data:
     counts: np.ndarray | None = None  # (windows,) residual samples with a fresh measurement per window
     sensors: dict | None = None  # channel -> ChannelCondition.summary() (missing, outliers, filtered, quantised)
     compiled: bool = True  # windows simulated by the compiled kernel (DiagnoseConfig.compiled)
-    threads: int = 1  # kernel threads in the main process (its cores idle outside the parallel candidate fits)
+    # kernel threads, in the main process and in each of the diagnosis' ``jobs`` worker processes: the phases with
+    # fewer fits than workers (the last fits of a phase, the main process's own fits) then use every core
+    threads: int = 1
 
     @property
     def n(self) -> int:
@@ -201,10 +202,8 @@ def _simulate_windows(batch: ModelBatch, d: Data, widx: np.ndarray, v0, w0, Ta0,
         from fricenv.effects import kernels
 
         if kernels.supported(batch):
-            # a pool worker is one of the diagnosis' ``jobs`` processes: one thread there
-            threads = d.threads if multiprocessing.parent_process() is None else 1
             sim = kernels.simulate_windows(batch, d.Tb, k0, v0.ravel(), w0.ravel(), Ta0, lt0, H, d.dt, d.t0,
-                                           d.substeps, d.p, want_ax=d.a_x is not None, threads=threads,
+                                           d.substeps, d.p, want_ax=d.a_x is not None, threads=d.threads,
                                            repeat=W * reps)
             out = {"omega": sim[0], **({"v": sim[1]} if d.v is not None else {}),
                    **({"a_x": sim[2]} if d.a_x is not None else {})}
@@ -325,10 +324,9 @@ def _fitted_compiled(batch: ModelBatch, d: Data, widx: np.ndarray, meas: dict, n
     """:func:`_fitted_numpy` in one compiled call (:mod:`fricenv.gap.windows_kernel`)."""
     from fricenv.gap import windows_kernel
 
-    threads = d.threads if multiprocessing.parent_process() is None else 1  # a pool worker: one thread
     x0 = {"v": nu.state["v"], "omega": nu.state["omega"], "Ta": nu.Ta0, "lam_t": nu.state.get("lam_t")}
     return windows_kernel.fit_windows(batch, d.Tb, d.starts[widx], x0, meas, d.sigma, nu.free, _steps(),
-                                      nu.max_move, LOWER, UPPER, GN_ITERS, d.dt, d.t0, d.substeps, d.p, threads)
+                                      nu.max_move, LOWER, UPPER, GN_ITERS, d.dt, d.t0, d.substeps, d.p, d.threads)
 
 
 def _fused(batch: ModelBatch, d: Data) -> bool:

@@ -99,3 +99,21 @@ def test_the_move_is_nan_to_num_then_clipped_to_its_step_and_bounds():
     np.testing.assert_array_equal(s, [9.5, 50.0, 1.0])
     windows_kernel._move(s, np.array([-0.2, -100.0, -0.05]), free, max_move, lower, upper)
     np.testing.assert_allclose(s, [9.0, 49.8, 0.95], rtol=0, atol=1e-15)
+
+
+def _residuals(effects, names, x, d):
+    return window_residuals(effects, names, x, d)
+
+
+def test_threads_and_worker_processes_do_not_change_the_residuals():
+    """Kernel threads in the main process and in forked pool workers (Data.threads = jobs): the pairs are
+    independent, so the residuals equal the single-threaded ones bit for bit."""
+    from fricenv.gap.pool import map_tasks, shared_pool
+
+    effects, names, x = CASES[2]
+    d = _data(True, seed=6)
+    one = window_residuals(effects, names, np.array(x), replace(d, threads=1))
+    two = window_residuals(effects, names, np.array(x), replace(d, threads=2))
+    with shared_pool(2):
+        in_workers = map_tasks(_residuals, [(effects, names, np.array(x), replace(d, threads=2))] * 2, 2, "residuals")
+    assert np.array_equal(one, two) and all(np.array_equal(one, w) for w in in_workers)
