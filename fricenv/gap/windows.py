@@ -2,7 +2,8 @@
 starts from a state estimated from data and is simulated ``horizon`` samples ahead by
 :class:`fricenv.effects.quarter_car.EffectSimulator`; :func:`window_residuals` returns the normalised residuals
 of any number of parameter sets at once, the per-window nuisance states (wheel speed, speed, transient slip)
-fitted by Gauss-Newton.
+fitted by Gauss-Newton (in a compiled diagnosis by :mod:`fricenv.gap.windows_kernel`, one call for all the
+iterations, equal to the numpy loop here bit for bit).
 """
 
 from __future__ import annotations
