@@ -37,7 +37,7 @@ def _solve(A, g):
     ``x = 0``, the numpy loop's answer to a ``LinAlgError`` (there for the whole batch, here for this window)."""
     try:
         return np.linalg.solve(A, g)
-    except Exception:  # numba raises LinAlgError for a singular matrix
+    except Exception:  # noqa: BLE001 (numba catches only Exception; solve raises LinAlgError when singular)
         return np.zeros_like(g)
 
 
@@ -117,9 +117,10 @@ def _move(s, move, free, max_move, lower, upper):
         f = free[i]
         x = move[i]
         x = 0.0 if np.isnan(x) else (_BIG if x == np.inf else (-_BIG if x == -np.inf else x))
-        x = -max_move[f] if x < -max_move[f] else (max_move[f] if x > max_move[f] else x)
+        x = max(-max_move[f], min(x, max_move[f]))  # finite here
         y = s[f] + x
-        s[f] = lower[f] if y < lower[f] else (upper[f] if y > upper[f] else y)  # NaN stays NaN, as in np.clip
+        # NaN stays NaN, as in np.clip (numba's min/max would not keep it)
+        s[f] = lower[f] if y < lower[f] else (upper[f] if y > upper[f] else y)  # noqa: FURB136
 
 
 @numba.njit(cache=True, error_model="numpy", parallel=True)
