@@ -207,19 +207,18 @@ def _sample(cmd, k, par, x, keep, spread, s1, ks, dt, t0, substeps, flags, const
 
 
 @_jit
-def _window(i, cmd, k0, x0, par, flags, dt, t0, substeps, consts, want_ax, out):
-    """Simulate element ``i``'s window: ``out[:, i]`` (3, H) receives omega, v and a_x at the sample times."""
+def _trajectory(cmd, k, p, v, w, Ta, lt, flags, dt, t0, substeps, consts, want_ax, out, i):
+    """Simulate one window of the element with parameter row ``p`` from sample ``k`` and state (v, w, Ta, lt):
+    ``out[:, i]`` (3, H) receives omega, v and a_x at the sample times."""
     m, Fz = consts[0], consts[2]
     h = dt / substeps
-    p = par[i]
     keep, spread = 0.0, 0.0
     if p[4] > 0.0:
         e = np.exp(-h / p[4])
         keep, spread = e, p[4] / h * (1.0 - e)
     s1 = _mf(1.0, p[0], p[1], p[2], 1.0)
     ks = _substep_constants(h, p[8], consts[0], consts[1])
-    x = (x0[i, 0], x0[i, 1], x0[i, 2], x0[i, 3], 0.0, 0.0, 0.0)
-    k = k0[i]
+    x = (v, w, Ta, lt, 0.0, 0.0, 0.0)
     H = out.shape[2]
     for jj in range(H):
         out[0, i, jj] = x[1]
@@ -230,6 +229,13 @@ def _window(i, cmd, k0, x0, par, flags, dt, t0, substeps, consts, want_ax, out):
         if jj < H - 1:
             x = _sample(cmd, k, p, x, keep, spread, s1, ks, dt, t0, substeps, flags, consts)
             k += 1
+
+
+@_jit
+def _window(i, cmd, k0, x0, par, flags, dt, t0, substeps, consts, want_ax, out):
+    """Simulate element ``i``'s window (:func:`_trajectory` from row ``i`` of ``k0``, ``x0`` and ``par``)."""
+    _trajectory(cmd, k0[i], par[i], x0[i, 0], x0[i, 1], x0[i, 2], x0[i, 3], flags, dt, t0, substeps, consts,
+                want_ax, out, i)
 
 
 @numba.njit(cache=True, error_model="numpy", parallel=True)

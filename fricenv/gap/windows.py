@@ -2,12 +2,12 @@
 starts from a state estimated from data and is simulated ``horizon`` samples ahead by
 :class:`fricenv.effects.quarter_car.EffectSimulator`; :func:`window_residuals` returns the normalised residuals
 of any number of parameter sets at once, the per-window nuisance states (wheel speed, speed, transient slip)
-fitted by Gauss-Newton.
+fitted by Gauss-Newton (in a compiled diagnosis by :mod:`fricenv.gap.windows_kernel`, one call for all the
+iterations, equal to the numpy loop here bit for bit).
 """
 
 from __future__ import annotations
 
-import multiprocessing
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -48,6 +48,9 @@ RELAX_STATE_FROM_FILTER = True
 # relaxation model's held-out error by about one noise variance per window even on pure noise; the significance
 # tests subtract that (:func:`window_nuisances`).
 RELAX_STATE_FITTED = True
+# A compiled diagnosis fits the window start states in one compiled call (:mod:`fricenv.gap.windows_kernel`); False
+# runs the Gauss-Newton loop in numpy around the compiled simulator (the loop the kernel is tested against).
+FUSED_NUISANCE_FIT = True
 
 
 @dataclass
@@ -73,7 +76,9 @@ class Data:
     counts: np.ndarray | None = None  # (windows,) residual samples with a fresh measurement per window
     sensors: dict | None = None  # channel -> ChannelCondition.summary() (missing, outliers, filtered, quantised)
     compiled: bool = True  # windows simulated by the compiled kernel (DiagnoseConfig.compiled)
-    threads: int = 1  # kernel threads in the main process (its cores idle outside the parallel candidate fits)
+    # kernel threads, in the main process and in each of the diagnosis' ``jobs`` worker processes: the phases with
+    # fewer fits than workers (the last fits of a phase, the main process's own fits) then use every core
+    threads: int = 1
 
     @property
     def n(self) -> int:
@@ -198,10 +203,8 @@ def _simulate_windows(batch: ModelBatch, d: Data, widx: np.ndarray, v0, w0, Ta0,
         from fricenv.effects import kernels
 
         if kernels.supported(batch):
-            # a pool worker is one of the diagnosis' ``jobs`` processes: one thread there
-            threads = d.threads if multiprocessing.parent_process() is None else 1
             sim = kernels.simulate_windows(batch, d.Tb, k0, v0.ravel(), w0.ravel(), Ta0, lt0, H, d.dt, d.t0,
-                                           d.substeps, d.p, want_ax=d.a_x is not None, threads=threads,
+                                           d.substeps, d.p, want_ax=d.a_x is not None, threads=d.threads,
                                            repeat=W * reps)
             out = {"omega": sim[0], **({"v": sim[1]} if d.v is not None else {}),
                    **({"a_x": sim[2]} if d.a_x is not None else {})}
@@ -246,35 +249,49 @@ def window_nuisances(effects: Sequence[str], d: Data) -> int:
     return 1 + (d.v is not None) + (states if RELAX_STATE_FITTED else 0)
 
 
-def window_residuals(effects: Sequence[str], names: Sequence[str], X: np.ndarray, d: Data,
-                     widx: np.ndarray | None = None, per_channel: bool = False):
-    """Normalised residuals (K, W, M) of K parameter sets on windows ``widx``, wheel-speed nuisance fitted.
+@dataclass
+class _Nuisance:
+    """The per-window start states of one :func:`window_residuals` call and how Gauss-Newton fits them."""
 
-    :param per_channel: also return the per-channel residual blocks, dict channel -> (K, W, H).
-    """
-    X = np.atleast_2d(X)
-    widx = np.arange(len(d.starts)) if widx is None else np.asarray(widx)
-    batch = model_batch(effects, names, X, d.p)
-    K, W = X.shape[0], len(widx)
+    state: dict  # name -> (K, W): omega, v, and lam_t for a relaxation model
+    free: list  # the fitted states, in the Jacobian's column order
+    Ta0: np.ndarray | None  # (K, W) lag-filter state, not fitted
+    max_move: dict  # largest move per iteration
+    relax: bool  # the model has tire relaxation (lam_t is a state)
+
+
+LOWER = {"omega": 0.0, "v": 0.0, "lam_t": -1.0}  # bounds of the fitted start states
+UPPER = {"omega": np.inf, "v": np.inf, "lam_t": 1.0}
+
+
+def _steps() -> dict:
+    """Finite-difference step per start state (the module constants, read at call time)."""
+    return {"omega": OMEGA0_STEP, "v": V0_STEP, "lam_t": LAMT_STEP}
+
+
+def _nuisance(batch: ModelBatch, d: Data, s: np.ndarray) -> _Nuisance:
+    """The start states of the windows starting at samples ``s``: wheel speed measured, speed and effect states
+    estimated from the whole log; which of them the Gauss-Newton iterations fit."""
+    K = len(batch)
     vhat = speed_states(batch, d)
     Ta, lt = _effect_states(batch, d, vhat)
-    s = d.starts[widx]
-    meas = _measured(d, widx)
-    # nuisance states of each window, fitted by Gauss-Newton: omega0 always, v0 if v is logged, the transient slip
-    # if the model has tire relaxation
-    state = {"omega": np.broadcast_to(d.omega[s][None, :], (K, W)).copy(), "v": vhat[:, s].copy()}
+    state = {"omega": np.broadcast_to(d.omega[s][None, :], (K, len(s))).copy(), "v": vhat[:, s].copy()}
     relax = bool(np.any(batch.sigma > 0))
     if relax:
         state["lam_t"] = lt[:, s].copy() if lt is not None else \
             longitudinal_slip(state["v"], state["omega"], batch.r_eff[:, None])
     free = ["omega"] + (["v"] if d.v is not None else []) + (["lam_t"] if relax and RELAX_STATE_FITTED else [])
-    steps = {"omega": OMEGA0_STEP, "v": V0_STEP, "lam_t": LAMT_STEP}
     max_move = {"omega": OMEGA0_MAX_MOVE * d.sigma["omega"], "v": OMEGA0_MAX_MOVE * d.sigma.get("v", 1.0),
                 "lam_t": LAMT_MAX_MOVE}
-    lower = {"omega": 0.0, "v": 0.0, "lam_t": -1.0}
-    upper = {"omega": np.inf, "v": np.inf, "lam_t": 1.0}
+    return _Nuisance(state, free, None if Ta is None else Ta[:, s], max_move, relax)
+
+
+def _fitted_numpy(batch: ModelBatch, d: Data, widx: np.ndarray, meas: dict, nu: _Nuisance) -> dict:
+    """Gauss-Newton on the free start states, one simulator call per iteration (the numpy loop), then the
+    predictions (K, W, H) per channel from the fitted states."""
+    state, free, steps = nu.state, nu.free, _steps()
     reps = 1 + len(free)
-    Ta0 = None if Ta is None else np.repeat(Ta[:, s][:, :, None], reps, axis=2)
+    Ta0 = None if nu.Ta0 is None else np.repeat(nu.Ta0[:, :, None], reps, axis=2)
     meas_b = {c: m[None, :, None, :] for c, m in meas.items()}
 
     def replicas(name):
@@ -285,7 +302,7 @@ def window_residuals(effects: Sequence[str], names: Sequence[str], X: np.ndarray
 
     for _ in range(GN_ITERS):
         pred = _simulate_windows(batch, d, widx, replicas("v"), replicas("omega"), Ta0,
-                                 replicas("lam_t") if relax else None, reps)
+                                 replicas("lam_t") if nu.relax else None, reps)
         r = _normalised(pred, meas_b, d)  # (K, W, reps, M)
         J = np.stack([(r[:, :, 1 + i] - r[:, :, 0]) / steps[n] for i, n in enumerate(free)], axis=-1)  # (K,W,M,q)
         A = np.einsum("kwmi,kwmj->kwij", J, J) + 1e-9 * np.eye(len(free))
@@ -296,13 +313,47 @@ def window_residuals(effects: Sequence[str], names: Sequence[str], X: np.ndarray
             move = np.zeros_like(g)
         move = np.nan_to_num(move)
         for i, n in enumerate(free):
-            state[n] = np.clip(state[n] + np.clip(move[..., i], -max_move[n], max_move[n]), lower[n], upper[n])
+            state[n] = np.clip(state[n] + np.clip(move[..., i], -nu.max_move[n], nu.max_move[n]), LOWER[n],
+                               UPPER[n])
     pred = _simulate_windows(batch, d, widx, state["v"][:, :, None], state["omega"][:, :, None],
                              None if Ta0 is None else Ta0[:, :, :1],
-                             state["lam_t"][:, :, None] if relax else None, 1)
-    pred = {c: x[:, :, 0] for c, x in pred.items()}
+                             state["lam_t"][:, :, None] if nu.relax else None, 1)
+    return {c: x[:, :, 0] for c, x in pred.items()}
+
+
+def _fitted_compiled(batch: ModelBatch, d: Data, widx: np.ndarray, meas: dict, nu: _Nuisance) -> dict:
+    """:func:`_fitted_numpy` in one compiled call (:mod:`fricenv.gap.windows_kernel`)."""
+    from fricenv.gap import windows_kernel
+
+    x0 = {"v": nu.state["v"], "omega": nu.state["omega"], "Ta": nu.Ta0, "lam_t": nu.state.get("lam_t")}
+    return windows_kernel.fit_windows(batch, d.Tb, d.starts[widx], x0, meas, d.sigma, nu.free, _steps(),
+                                      nu.max_move, LOWER, UPPER, GN_ITERS, d.dt, d.t0, d.substeps, d.p, d.threads)
+
+
+def _fused(batch: ModelBatch, d: Data) -> bool:
+    """Whether the compiled nuisance fit runs ``batch``: a compiled diagnosis, ``FUSED_NUISANCE_FIT``, and no
+    plug-in effect with Python hooks (:func:`fricenv.effects.kernels.supported`)."""
+    if not (d.compiled and FUSED_NUISANCE_FIT):
+        return False
+    from fricenv.effects import kernels
+
+    return kernels.supported(batch)
+
+
+def window_residuals(effects: Sequence[str], names: Sequence[str], X: np.ndarray, d: Data,
+                     widx: np.ndarray | None = None, per_channel: bool = False):
+    """Normalised residuals (K, W, M) of K parameter sets on windows ``widx``, the windows' start states (wheel
+    speed; speed when ``v`` is logged; transient slip of a relaxation model) fitted by Gauss-Newton.
+
+    :param per_channel: also return the per-channel residual blocks, dict channel -> (K, W, H).
+    """
+    X = np.atleast_2d(X)
+    widx = np.arange(len(d.starts)) if widx is None else np.asarray(widx)
+    batch = model_batch(effects, names, X, d.p)
+    meas = _measured(d, widx)
+    nu = _nuisance(batch, d, d.starts[widx])
+    pred = (_fitted_compiled if _fused(batch, d) else _fitted_numpy)(batch, d, widx, meas, nu)
     r = _normalised(pred, {c: m[None] for c, m in meas.items()}, d)
     if per_channel:
         return r, {c: (pred[c] - meas[c][None]) / d.sigma[c] for c in d.channels}  # NaN where missing
     return r
-
