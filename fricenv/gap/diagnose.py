@@ -53,9 +53,10 @@ Method (every error measure is computed on data not used for fitting):
    the verdict is ``unexplained``. The constant model is refitted from the split fits first, so that a better
    optimum is not mistaken for a drift (``where["drift_test"]``).
 9. **Testability and several effects.** Candidates the log cannot show (each effect's registry rule, e.g. a
-   relaxation length without slip transients) are not fitted and are listed in ``where["not_testable"]``. After the
-   verdict, a forward selection (:mod:`fricenv.gap.selection`) adds the next significant candidate while the joint
-   model beats the set so far on held-out data, up to three (``effects``; ``gap_after`` is the whole set's).
+   relaxation length without slip transients, or one too small for this log's noise at its largest plausible size,
+   :mod:`fricenv.gap.detectability`) are not fitted and are listed in ``where["not_testable"]``. After the verdict, a
+   forward selection (:mod:`fricenv.gap.selection`) adds the next candidate (any fitted one) while the joint model
+   beats the set so far on held-out data, up to three (``effects``; ``gap_after`` is the whole set's).
 """
 
 from __future__ import annotations
@@ -179,7 +180,7 @@ def _calibrate_and_fit(folds: list[Data], d: Data, cfg: DiagnoseConfig, jobs: in
         first = fit_nominal(folds[0], cfg)
         refine_noise(first, folds[0])  # the folds share the noise levels (one dict)
         nominal_folds = [score("nominal", [], first.names, first.x, folds[0], first.seconds)]
-        not_testable = untestable(cfg.candidates, excitation(nominal_folds[0], d))
+        not_testable = untestable(cfg.candidates, excitation(nominal_folds[0], d, cfg.sig_z))
         candidates = [c for c in cfg.candidates if c not in not_testable]
         run_cfg = replace(cfg, candidates=tuple(candidates))
         pending = [start_fits([([c], nominal_folds[0].road_x(), folds[0], run_cfg, None) for c in candidates], jobs)]
