@@ -176,6 +176,8 @@ class ShapeFit:
         self._best_bias = np.zeros(self.n, dtype=np.int64)  # its speed error
         self._informed = np.zeros(self.n, dtype=bool)  # n_eff has reached min_samples
         self.reset()
+        off = np.zeros(self.n)  # an inactive sample changes no state: it loads the compiled update now, not in the
+        self.update(off, off, off, np.zeros(self.n, dtype=bool))  # first timed step
 
     def reset(self, mask: np.ndarray | None = None) -> None:
         """Forget the data of the estimators in ``mask`` (all by default)."""
