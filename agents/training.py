@@ -47,6 +47,7 @@ __all__ = [
     "DEFAULT_CONFIGS",
     "ENVS",
     "PPOConfig",
+    "RecurrentPPOConfig",
     "SACConfig",
     "ScenarioMix",
     "TrainResult",
@@ -91,6 +92,19 @@ class PPOConfig:
     net_arch: tuple[int, ...] = (64, 64)  # policy and value MLP
     norm_obs: bool = True  # VecNormalize observations
     norm_reward: bool = True  # VecNormalize rewards
+    action_map: str = "linear"  # network output -> env torque command (agents.action_map.ACTION_MAPS)
+
+
+@dataclass(frozen=True)
+class RecurrentPPOConfig(PPOConfig):
+    """RecurrentPPO (sb3-contrib, ``MlpLstmPolicy``): PPO's fields plus the LSTM's. sb3-contrib's default (256
+    units, separate actor and critic LSTMs) costs about 24 min per 300k steps on a loaded 2-core machine; the
+    committed file uses a small actor-only LSTM (the critic is an MLP on the observation)."""
+
+    lstm_hidden_size: int = 256  # LSTM units
+    n_lstm_layers: int = 1  # stacked LSTM layers
+    shared_lstm: bool = False  # one LSTM for actor and critic
+    enable_critic_lstm: bool = True  # a separate LSTM for the critic (False with shared_lstm False: MLP critic)
 
 
 @dataclass(frozen=True)
@@ -110,15 +124,18 @@ class SACConfig:
     net_arch: tuple[int, ...] = (256, 256)  # actor and critic MLPs
     norm_obs: bool = True  # VecNormalize observations
     norm_reward: bool = True  # VecNormalize rewards
+    action_map: str = "linear"  # network output -> env torque command (agents.action_map.ACTION_MAPS)
 
 
 # Payload excitation: longer horizon (the calibration reward comes from accumulated information).
 PAYLOAD_PPO = PPOConfig(n_envs=4, n_steps=512, gamma=0.99, gae_lambda=0.95, log_std_init=-0.5, ent_coef=0.0)
-BRAKING_CONFIGS = load_hyperparams(BRAKING_FILE, {"ppo": PPOConfig, "sac": SACConfig})  # the committed file
+CONFIG_CLASSES: dict[str, type] = {"ppo": PPOConfig, "sac": SACConfig, "recurrent-ppo": RecurrentPPOConfig}
+BRAKING_CONFIGS = load_hyperparams(BRAKING_FILE, CONFIG_CLASSES)  # the committed file
 DEFAULT_CONFIGS: dict[tuple[str, str], PPOConfig | SACConfig] = {
     ("braking", "ppo"): BRAKING_CONFIGS["ppo"],
     ("braking", "sac"): BRAKING_CONFIGS["sac"],
-    ("braking", "recurrent-ppo"): BRAKING_CONFIGS.get("recurrent-ppo", BRAKING_CONFIGS["ppo"]),  # PPO's by default
+    ("braking", "recurrent-ppo"): BRAKING_CONFIGS.get(
+        "recurrent-ppo", RecurrentPPOConfig(**dataclasses.asdict(BRAKING_CONFIGS["ppo"]))),  # PPO's by default
     ("payload", "ppo"): PAYLOAD_PPO,
     ("payload", "sac"): SACConfig(gamma=0.99),
 }
@@ -211,9 +228,16 @@ def _checked_config(env: str, estimator: str, algo: str, steps: int, vec: str,
     if not isinstance(steps, int) or steps < 1:
         raise ValueError(f"steps must be a positive int, got {steps!r}")
     cfg = config if config is not None else DEFAULT_CONFIGS[(env, algo)]
-    expected = SACConfig if algo == "sac" else PPOConfig
+    if algo == "recurrent-ppo" and type(cfg) is PPOConfig:
+        cfg = RecurrentPPOConfig(**dataclasses.asdict(cfg))  # PPO's fields, sb3-contrib's LSTM defaults
+    expected = CONFIG_CLASSES[algo]
     if not isinstance(cfg, expected):
         raise TypeError(f"config for {algo} must be a {expected.__name__}, got {type(cfg).__name__}")
+    from agents.action_map import check_action_map
+
+    check_action_map(cfg.action_map)
+    if env != "braking" and cfg.action_map != "linear":
+        raise ValueError(f"action_map {cfg.action_map!r} maps brake torque: env {env!r} takes action_map 'linear'")
     return cfg
 
 
@@ -229,6 +253,8 @@ def _make_model(algo: str, cfg: PPOConfig | SACConfig, venv, tb: str | None, see
             from sb3_contrib import RecurrentPPO as PPO
 
             policy = "MlpLstmPolicy"
+            policy_kwargs.update(lstm_hidden_size=cfg.lstm_hidden_size, n_lstm_layers=cfg.n_lstm_layers,
+                                 shared_lstm=cfg.shared_lstm, enable_critic_lstm=cfg.enable_critic_lstm)
         return PPO(policy, venv, n_steps=cfg.n_steps, batch_size=cfg.batch_size, n_epochs=cfg.n_epochs,
                    learning_rate=cfg.learning_rate, gamma=cfg.gamma, gae_lambda=cfg.gae_lambda,
                    clip_range=cfg.clip_range, ent_coef=cfg.ent_coef, vf_coef=cfg.vf_coef,
@@ -271,6 +297,10 @@ def make_training_model(env: str, estimator: str, algo: str, cfg: PPOConfig | SA
                for i in range(cfg.n_envs)]
         venv = SubprocVecEnv(fns) if vec == "subproc" else DummyVecEnv(fns)
         venv.seed(seed * SEED_STRIDE)
+    if cfg.action_map != "linear":
+        from agents.action_map import ActionMapVecEnv
+
+        venv = ActionMapVecEnv(venv, cfg.action_map)
     if frame_stack:
         from stable_baselines3.common.vec_env import VecFrameStack
 
@@ -353,6 +383,9 @@ class TrainedPolicy:
         self.estimator = meta.get("estimator", "none")
         self.algo = meta.get("algo", "ppo")
         self.frame_stack = int(meta.get("frame_stack", 0))
+        from agents.action_map import check_action_map
+
+        self.action_map = check_action_map(meta.get("config", {}).get("action_map", "linear"))
         self.name = f"{self.algo}[{self.estimator}]"
         self.reset()
 
@@ -380,6 +413,8 @@ class TrainedPolicy:
             self._episode_start = False
         else:
             action, _ = self.model.predict(obs, deterministic=True)
+        if self.meta.get("env", "braking") == "braking":
+            action = self.action_map(np.asarray(action, dtype=float))
         return np.asarray(action, dtype=np.float32)
 
 

@@ -281,12 +281,13 @@ def _model(algo: str, cfg, estimator: str, seed: int):
     return make_training_model("braking", estimator, algo, cfg, seed, vec)
 
 
-def _score(model, algo: str, settings: TuneSettings) -> tuple[float, int, int]:
+def _score(model, algo: str, cfg, settings: TuneSettings) -> tuple[float, int, int]:
     """Mean ratio, lock episodes and episodes of the model's deterministic policy on the tuning set."""
     from agents.training import TrainedPolicy
     from fricenv.envs.factory import make_braking
 
-    policy = TrainedPolicy(model, model.get_env(), {"estimator": settings.estimator, "algo": algo})
+    policy = TrainedPolicy(model, model.get_env(), {"estimator": settings.estimator, "algo": algo,
+                                                    "config": dataclasses.asdict(cfg)})
     ratios, locks = [], 0
     for sc in settings.scenarios:
         env = make_braking(settings.estimator, road=sc.road, v0=sc.v0, change_distance=CHANGE_DISTANCE)
@@ -318,7 +319,7 @@ def train_and_score(trial, settings: TuneSettings) -> float:
     for stage in range(settings.n_evals):
         for m in models:
             m.learn(total_timesteps=chunk, reset_num_timesteps=stage == 0)
-        scored = [_score(m, algo, settings) for m in models]
+        scored = [_score(m, algo, cfg, settings) for m in models]
         ratio = float(np.mean([s[0] for s in scored]))
         locks, episodes = sum(s[1] for s in scored), sum(s[2] for s in scored)
         score = ratio + LOCK_PENALTY * locks / episodes
