@@ -93,6 +93,8 @@ class PPOConfig:
     norm_obs: bool = True  # VecNormalize observations
     norm_reward: bool = True  # VecNormalize rewards
     action_map: str = "linear"  # network output -> env torque command (agents.action_map.ACTION_MAPS)
+    lock_onset_penalty: float = 0.0  # training reward per step of lock condition before it counts as a lock
+    # (agents.lock_shaping); 0: the env's reward alone
 
 
 @dataclass(frozen=True)
@@ -125,6 +127,7 @@ class SACConfig:
     norm_obs: bool = True  # VecNormalize observations
     norm_reward: bool = True  # VecNormalize rewards
     action_map: str = "linear"  # network output -> env torque command (agents.action_map.ACTION_MAPS)
+    lock_onset_penalty: float = 0.0  # training reward per step of lock condition before it counts as a lock
 
 
 # Payload excitation: longer horizon (the calibration reward comes from accumulated information).
@@ -236,8 +239,9 @@ def _checked_config(env: str, estimator: str, algo: str, steps: int, vec: str,
     from agents.action_map import check_action_map
 
     check_action_map(cfg.action_map)
-    if env != "braking" and cfg.action_map != "linear":
-        raise ValueError(f"action_map {cfg.action_map!r} maps brake torque: env {env!r} takes action_map 'linear'")
+    if env != "braking" and (cfg.action_map != "linear" or cfg.lock_onset_penalty):
+        raise ValueError(f"action_map and lock_onset_penalty are of the braking env: env {env!r} takes "
+                         f"action_map 'linear' and lock_onset_penalty 0")
     return cfg
 
 
@@ -301,6 +305,10 @@ def make_training_model(env: str, estimator: str, algo: str, cfg: PPOConfig | SA
         from agents.action_map import ActionMapVecEnv
 
         venv = ActionMapVecEnv(venv, cfg.action_map)
+    if cfg.lock_onset_penalty:
+        from agents.lock_shaping import LockOnsetPenaltyVecEnv
+
+        venv = LockOnsetPenaltyVecEnv(venv, cfg.lock_onset_penalty)
     if frame_stack:
         from stable_baselines3.common.vec_env import VecFrameStack
 
@@ -350,17 +358,18 @@ def train(out: str | Path, env: str = "braking", estimator: str = "none", algo: 
         callbacks.append(CheckpointCallback(save_freq=max(checkpoint_every // cfg.n_envs, 1),
                                             save_path=str(out / "checkpoints"), name_prefix=algo,
                                             save_vecnormalize=True))
-    t0 = time.perf_counter()
+    t0, cpu0 = time.perf_counter(), time.process_time()
     model.learn(total_timesteps=steps, callback=callbacks or None, progress_bar=progress_bar,
                 tb_log_name=f"{algo}-{estimator}")
-    wall = time.perf_counter() - t0
+    wall, cpu = time.perf_counter() - t0, time.process_time() - cpu0
     model_path, vn_path = out / MODEL_FILE, out / VECNORM_FILE
     model.save(str(model_path))
     venv.save(str(vn_path))
     venv.close()
     trained = int(model.num_timesteps)
     meta = {"env": env, "estimator": estimator, "algo": algo, "seed": seed, "steps": trained,
-            "wall_time_s": wall, "steps_per_second": trained / wall, "config": dataclasses.asdict(cfg),
+            "wall_time_s": wall, "steps_per_second": trained / wall, "cpu_time_s": cpu,
+            "config": dataclasses.asdict(cfg),
             "vec": vec, "env_kwargs": env_kwargs or {}, "tensorboard": tb is not None,
             "torch_threads": torch.get_num_threads(), "frame_stack": frame_stack}
     write_json(out / META_FILE, meta)
