@@ -25,14 +25,14 @@ def lock_counter(venv: VecEnv) -> tuple[Callable[[], np.ndarray], int]:
     native one or a ``DummyVecEnv`` of ``Braking-v0``, possibly wrapped), and the steps after which they count as
     a lock.
 
-    :raises ValueError: a vector env whose sub-envs live in other processes.
+    :raises TypeError: a vector env whose sub-envs live in other processes.
     """
     from fricenv.envs.sb3_vec import BrakingSB3VecEnv
 
     base = venv
     while not isinstance(base, (BrakingSB3VecEnv, DummyVecEnv)):
         if not isinstance(base, VecEnvWrapper):
-            raise ValueError(f"the lock-onset penalty reads the sims of a native or dummy braking vector env, "
+            raise TypeError(f"the lock-onset penalty reads the sims of a native or dummy braking vector env, "
                              f"got {type(base).__name__}; train with vec 'native' or 'dummy'")
         base = base.venv
     if isinstance(base, BrakingSB3VecEnv):

@@ -16,8 +16,15 @@ file                              content
 Braking scenarios (:class:`ScenarioMix`): each episode draws either a preset road (dry, wet, snow, ice;
 probability ``1 - change_probability``) or a friction change between two different presets at a distance drawn
 on 5..30 m, with roads weighted so that each gets about the same share of env steps, and an initial speed uniform
-on :data:`V0_RANGE`. Payload: a random calibration
-S per episode.
+on :data:`V0_RANGE`. Payload: a random calibration S per episode.
+
+Training signal of the ABS task beyond the env (fields of :class:`PPOConfig`, committed in
+``agents/hyperparams/braking.json``): ``action_map`` maps the network's action to the env's torque command
+(:mod:`agents.action_map`; ``log`` gives ice's 110 N m peak torque the same relative resolution as dry's 1100), and
+``lock_onset_penalty`` charges the wheel-lock condition from its first step (:mod:`agents.lock_shaping`). Both act
+in the training vector env only; the saved policy applies its map in :class:`TrainedPolicy`, so the env and the
+evaluation are unchanged. ``train.json`` records wall and CPU time (one torch thread: the CPU time is the wall time
+the run takes on a core of its own).
 
 Torch runs one thread per process (``torch.set_num_threads(1)``): on a small machine the env, not the network, is
 the bottleneck, and several threads per process only fight over the cores.
