@@ -318,7 +318,7 @@ MEMORY_BASELINES: dict[str, dict[str, Any]] = {
     "recurrent-ppo": {"algo": "recurrent-ppo"},  # sb3-contrib's RecurrentPPO (LSTM)
 }
 COMPARE_KEYS = ("policy", "estimator", "train_seed", "scenario", "ratio_mean", "ratio_std", "locks")
-TRAINING_KEYS = ("policy", "estimator", "train_seed", "steps", "wall_time_s", "steps_per_second")
+TRAINING_KEYS = ("policy", "estimator", "train_seed", "steps", "wall_time_s", "steps_per_second", "cpu_time_s")
 
 
 def _training_jobs(out: Path, estimators: Sequence[str], baselines: Sequence[str], algo: str, steps: int,
@@ -381,7 +381,8 @@ def compare_abs(out: str | Path, estimators: Sequence[str] = ("none", "ekf-rls",
         row["policy"], row["train_seed"] = label, int(seed) if seed else None
     training = [{"policy": spec.label.partition("#s")[0], "estimator": metas[key]["estimator"],
                  "train_seed": jobs[key]["seed"], "steps": metas[key]["steps"],
-                 "wall_time_s": metas[key]["wall_time_s"], "steps_per_second": metas[key]["steps_per_second"]}
+                 "wall_time_s": metas[key]["wall_time_s"], "steps_per_second": metas[key]["steps_per_second"],
+                 "cpu_time_s": metas[key].get("cpu_time_s")}  # None for runs made before it was recorded
                 for key, spec in zip(jobs, specs)]
     return {"rows": rows, "training": training, "evaluation_time_s": time.perf_counter() - t0}
 

@@ -16,8 +16,15 @@ file                              content
 Braking scenarios (:class:`ScenarioMix`): each episode draws either a preset road (dry, wet, snow, ice;
 probability ``1 - change_probability``) or a friction change between two different presets at a distance drawn
 on 5..30 m, with roads weighted so that each gets about the same share of env steps, and an initial speed uniform
-on :data:`V0_RANGE`. Payload: a random calibration
-S per episode.
+on :data:`V0_RANGE`. Payload: a random calibration S per episode.
+
+Training signal of the ABS task beyond the env (fields of :class:`PPOConfig`, committed in
+``agents/hyperparams/braking.json``): ``action_map`` maps the network's action to the env's torque command
+(:mod:`agents.action_map`; ``log`` gives ice's 110 N m peak torque the same relative resolution as dry's 1100), and
+``lock_onset_penalty`` charges the wheel-lock condition from its first step (:mod:`agents.lock_shaping`). Both act
+in the training vector env only; the saved policy applies its map in :class:`TrainedPolicy`, so the env and the
+evaluation are unchanged. ``train.json`` records wall and CPU time (one torch thread: the CPU time is the wall time
+the run takes on a core of its own).
 
 Torch runs one thread per process (``torch.set_num_threads(1)``): on a small machine the env, not the network, is
 the bottleneck, and several threads per process only fight over the cores.
@@ -47,6 +54,7 @@ __all__ = [
     "DEFAULT_CONFIGS",
     "ENVS",
     "PPOConfig",
+    "RecurrentPPOConfig",
     "SACConfig",
     "ScenarioMix",
     "TrainResult",
@@ -91,6 +99,21 @@ class PPOConfig:
     net_arch: tuple[int, ...] = (64, 64)  # policy and value MLP
     norm_obs: bool = True  # VecNormalize observations
     norm_reward: bool = True  # VecNormalize rewards
+    action_map: str = "linear"  # network output -> env torque command (agents.action_map.ACTION_MAPS)
+    lock_onset_penalty: float = 0.0  # training reward per step of lock condition before it counts as a lock
+    # (agents.lock_shaping); 0: the env's reward alone
+
+
+@dataclass(frozen=True)
+class RecurrentPPOConfig(PPOConfig):
+    """RecurrentPPO (sb3-contrib, ``MlpLstmPolicy``): PPO's fields plus the LSTM's. sb3-contrib's default (256
+    units, separate actor and critic LSTMs) costs about 24 min per 300k steps on a loaded 2-core machine; the
+    committed file uses a small actor-only LSTM (the critic is an MLP on the observation)."""
+
+    lstm_hidden_size: int = 256  # LSTM units
+    n_lstm_layers: int = 1  # stacked LSTM layers
+    shared_lstm: bool = False  # one LSTM for actor and critic
+    enable_critic_lstm: bool = True  # a separate LSTM for the critic (False with shared_lstm False: MLP critic)
 
 
 @dataclass(frozen=True)
@@ -110,15 +133,19 @@ class SACConfig:
     net_arch: tuple[int, ...] = (256, 256)  # actor and critic MLPs
     norm_obs: bool = True  # VecNormalize observations
     norm_reward: bool = True  # VecNormalize rewards
+    action_map: str = "linear"  # network output -> env torque command (agents.action_map.ACTION_MAPS)
+    lock_onset_penalty: float = 0.0  # training reward per step of lock condition before it counts as a lock
 
 
 # Payload excitation: longer horizon (the calibration reward comes from accumulated information).
 PAYLOAD_PPO = PPOConfig(n_envs=4, n_steps=512, gamma=0.99, gae_lambda=0.95, log_std_init=-0.5, ent_coef=0.0)
-BRAKING_CONFIGS = load_hyperparams(BRAKING_FILE, {"ppo": PPOConfig, "sac": SACConfig})  # the committed file
+CONFIG_CLASSES: dict[str, type] = {"ppo": PPOConfig, "sac": SACConfig, "recurrent-ppo": RecurrentPPOConfig}
+BRAKING_CONFIGS = load_hyperparams(BRAKING_FILE, CONFIG_CLASSES)  # the committed file
 DEFAULT_CONFIGS: dict[tuple[str, str], PPOConfig | SACConfig] = {
     ("braking", "ppo"): BRAKING_CONFIGS["ppo"],
     ("braking", "sac"): BRAKING_CONFIGS["sac"],
-    ("braking", "recurrent-ppo"): BRAKING_CONFIGS.get("recurrent-ppo", BRAKING_CONFIGS["ppo"]),  # PPO's by default
+    ("braking", "recurrent-ppo"): BRAKING_CONFIGS.get(
+        "recurrent-ppo", RecurrentPPOConfig(**dataclasses.asdict(BRAKING_CONFIGS["ppo"]))),  # PPO's by default
     ("payload", "ppo"): PAYLOAD_PPO,
     ("payload", "sac"): SACConfig(gamma=0.99),
 }
@@ -211,9 +238,17 @@ def _checked_config(env: str, estimator: str, algo: str, steps: int, vec: str,
     if not isinstance(steps, int) or steps < 1:
         raise ValueError(f"steps must be a positive int, got {steps!r}")
     cfg = config if config is not None else DEFAULT_CONFIGS[(env, algo)]
-    expected = SACConfig if algo == "sac" else PPOConfig
+    if algo == "recurrent-ppo" and type(cfg) is PPOConfig:
+        cfg = RecurrentPPOConfig(**dataclasses.asdict(cfg))  # PPO's fields, sb3-contrib's LSTM defaults
+    expected = CONFIG_CLASSES[algo]
     if not isinstance(cfg, expected):
         raise TypeError(f"config for {algo} must be a {expected.__name__}, got {type(cfg).__name__}")
+    from agents.action_map import check_action_map
+
+    check_action_map(cfg.action_map)
+    if env != "braking" and (cfg.action_map != "linear" or cfg.lock_onset_penalty):
+        raise ValueError(f"action_map and lock_onset_penalty are of the braking env: env {env!r} takes "
+                         f"action_map 'linear' and lock_onset_penalty 0")
     return cfg
 
 
@@ -229,6 +264,8 @@ def _make_model(algo: str, cfg: PPOConfig | SACConfig, venv, tb: str | None, see
             from sb3_contrib import RecurrentPPO as PPO
 
             policy = "MlpLstmPolicy"
+            policy_kwargs.update(lstm_hidden_size=cfg.lstm_hidden_size, n_lstm_layers=cfg.n_lstm_layers,
+                                 shared_lstm=cfg.shared_lstm, enable_critic_lstm=cfg.enable_critic_lstm)
         return PPO(policy, venv, n_steps=cfg.n_steps, batch_size=cfg.batch_size, n_epochs=cfg.n_epochs,
                    learning_rate=cfg.learning_rate, gamma=cfg.gamma, gae_lambda=cfg.gae_lambda,
                    clip_range=cfg.clip_range, ent_coef=cfg.ent_coef, vf_coef=cfg.vf_coef,
@@ -271,6 +308,14 @@ def make_training_model(env: str, estimator: str, algo: str, cfg: PPOConfig | SA
                for i in range(cfg.n_envs)]
         venv = SubprocVecEnv(fns) if vec == "subproc" else DummyVecEnv(fns)
         venv.seed(seed * SEED_STRIDE)
+    if cfg.action_map != "linear":
+        from agents.action_map import ActionMapVecEnv
+
+        venv = ActionMapVecEnv(venv, cfg.action_map)
+    if cfg.lock_onset_penalty:
+        from agents.lock_shaping import LockOnsetPenaltyVecEnv
+
+        venv = LockOnsetPenaltyVecEnv(venv, cfg.lock_onset_penalty)
     if frame_stack:
         from stable_baselines3.common.vec_env import VecFrameStack
 
@@ -320,17 +365,18 @@ def train(out: str | Path, env: str = "braking", estimator: str = "none", algo: 
         callbacks.append(CheckpointCallback(save_freq=max(checkpoint_every // cfg.n_envs, 1),
                                             save_path=str(out / "checkpoints"), name_prefix=algo,
                                             save_vecnormalize=True))
-    t0 = time.perf_counter()
+    t0, cpu0 = time.perf_counter(), time.process_time()
     model.learn(total_timesteps=steps, callback=callbacks or None, progress_bar=progress_bar,
                 tb_log_name=f"{algo}-{estimator}")
-    wall = time.perf_counter() - t0
+    wall, cpu = time.perf_counter() - t0, time.process_time() - cpu0
     model_path, vn_path = out / MODEL_FILE, out / VECNORM_FILE
     model.save(str(model_path))
     venv.save(str(vn_path))
     venv.close()
     trained = int(model.num_timesteps)
     meta = {"env": env, "estimator": estimator, "algo": algo, "seed": seed, "steps": trained,
-            "wall_time_s": wall, "steps_per_second": trained / wall, "config": dataclasses.asdict(cfg),
+            "wall_time_s": wall, "steps_per_second": trained / wall, "cpu_time_s": cpu,
+            "config": dataclasses.asdict(cfg),
             "vec": vec, "env_kwargs": env_kwargs or {}, "tensorboard": tb is not None,
             "torch_threads": torch.get_num_threads(), "frame_stack": frame_stack}
     write_json(out / META_FILE, meta)
@@ -353,6 +399,9 @@ class TrainedPolicy:
         self.estimator = meta.get("estimator", "none")
         self.algo = meta.get("algo", "ppo")
         self.frame_stack = int(meta.get("frame_stack", 0))
+        from agents.action_map import check_action_map
+
+        self.action_map = check_action_map(meta.get("config", {}).get("action_map", "linear"))
         self.name = f"{self.algo}[{self.estimator}]"
         self.reset()
 
@@ -380,6 +429,8 @@ class TrainedPolicy:
             self._episode_start = False
         else:
             action, _ = self.model.predict(obs, deterministic=True)
+        if self.meta.get("env", "braking") == "braking":
+            action = self.action_map(np.asarray(action, dtype=float))
         return np.asarray(action, dtype=np.float32)
 
 

@@ -89,8 +89,13 @@ def run(args) -> int:
         seed = "-" if s["train_seed"] is None else str(s["train_seed"])
         print(f"{s['policy']:<26} {seed:>4} {s['ratio_mean']:>10.3f} {s['ratio_worst']:>7.3f} {s['locks']:>5d}")
     for t in abs_result["training"]:
-        print(f"training {t['policy']:<24} seed {t['train_seed']}: {t['steps']} steps, {t['wall_time_s']:.0f} s, "
-              f"{t['steps_per_second']:.0f} steps/s")
+        cpu = "" if t.get("cpu_time_s") is None else f", {t['cpu_time_s']:.0f} s CPU"
+        print(f"training {t['policy']:<24} seed {t['train_seed']}: {t['steps']} steps, {t['wall_time_s']:.0f} s"
+              f"{cpu}, {t['steps_per_second']:.0f} steps/s")
+    cpu = [t["cpu_time_s"] for t in abs_result["training"] if t.get("cpu_time_s") is not None]
+    if cpu:  # one torch thread per training: its CPU time is its wall time on a core of its own
+        print(f"training CPU time {sum(cpu):.0f} s over {len(cpu)} runs: about {sum(cpu) / max(args.workers, 1):.0f} s "
+              f"of training wall time on {args.workers} quiet cores")
     print(f"evaluation wall time {abs_result['evaluation_time_s']:.0f} s")
     written = write_outputs(rows, out, None, title="headline comparison")
     payload = None

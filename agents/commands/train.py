@@ -21,7 +21,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--estimator", default="none",
                         help="observation estimator: braking none|ekf|mhe|ekf-rls|oracle|ekf-full|mhe-full, "
                              "payload none|rls|oracle (default %(default)s)")
-    parser.add_argument("--algo", choices=("ppo", "sac"), default="ppo", help="algorithm (default %(default)s)")
+    parser.add_argument("--algo", choices=("ppo", "sac", "recurrent-ppo"), default="ppo",
+                        help="algorithm (default %(default)s)")
     parser.add_argument("--steps", type=int, default=500_000, help="env steps (default %(default)s)")
     parser.add_argument("--seed", type=int, default=0, help="seed (default %(default)s)")
     parser.add_argument("--out", required=True, metavar="DIR", help="run directory")
@@ -39,7 +40,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args) -> int:
     """Train and save; print wall time and steps per second."""
     from agents.hyperparams import load_hyperparams
-    from agents.training import PPOConfig, SACConfig, train
+    from agents.training import CONFIG_CLASSES, train
     from fricenv.utils import write_json
 
     if args.steps < 1:
@@ -47,7 +48,7 @@ def run(args) -> int:
     try:
         config = None
         if args.hyperparams:
-            config = load_hyperparams(args.hyperparams, {"ppo": PPOConfig, "sac": SACConfig}).get(args.algo)
+            config = load_hyperparams(args.hyperparams, CONFIG_CLASSES).get(args.algo)
             if config is None:
                 raise ValueError(f"{args.hyperparams} has no {args.algo!r} entry")
         result = train(args.out, env=args.env, estimator=args.estimator, algo=args.algo, steps=args.steps,

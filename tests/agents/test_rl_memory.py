@@ -50,7 +50,13 @@ def test_bad_frame_stack_is_rejected(tmp_path):
         train(tmp_path, steps=64, config=TINY, frame_stack=-1, progress_bar=False)
 
 
-def test_recurrent_ppo_has_default_hyperparameters():
-    from agents.training import DEFAULT_CONFIGS
+def test_recurrent_ppo_has_ppo_hyperparameters_and_a_small_lstm():
+    import dataclasses
 
-    assert DEFAULT_CONFIGS[("braking", "recurrent-ppo")] == DEFAULT_CONFIGS[("braking", "ppo")]
+    from agents.training import DEFAULT_CONFIGS, RecurrentPPOConfig
+
+    rec, ppo = DEFAULT_CONFIGS[("braking", "recurrent-ppo")], DEFAULT_CONFIGS[("braking", "ppo")]
+    assert isinstance(rec, RecurrentPPOConfig)
+    assert {k: v for k, v in dataclasses.asdict(rec).items() if k in dataclasses.asdict(ppo)} == \
+        dataclasses.asdict(ppo)
+    assert rec.lstm_hidden_size == 32 and not rec.enable_critic_lstm and not rec.shared_lstm

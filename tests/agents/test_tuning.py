@@ -143,8 +143,10 @@ def test_real_tiny_trial_is_read_by_fricenv_train(tmp_path, capsys):
     trials = json.loads((tmp_path / "tune" / TRIALS_FILE).read_text())
     (trial,) = trials["trials"]
     assert trial["state"] == "COMPLETE" and trial["user_attrs"]["steps"] >= 2048
-    assert trial["value"] == pytest.approx(trial["user_attrs"]["ratio_mean"] + 0.1 * trial["user_attrs"]["locks"] / 5,
-                                           rel=1e-12)
+    attrs = trial["user_attrs"]
+    assert attrs["ratio_worst"] >= attrs["ratio_mean"]
+    assert trial["value"] == pytest.approx(attrs["ratio_mean"] + 0.5 * (attrs["ratio_worst"] - 1.0)
+                                           + 0.1 * attrs["locks"] / 5, rel=1e-12)
     assert trial["user_attrs"]["ratio_mean"] > 0.99  # no policy stops shorter than the physical limit
     assert trials["seeds"]["tuning_train_seeds"] == list(TUNING_TRAIN_SEEDS)
     hp = tmp_path / "tune" / HYPERPARAMS_FILE
