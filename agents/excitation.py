@@ -21,8 +21,18 @@ import numpy as np
 
 from fricenv.plants.payload import PAPER_PARAMS, paper_wrench
 
-__all__ = ["ExcitationPolicy", "MultiSinePolicy", "PRBSPolicy", "ZeroPolicy", "POLICIES", "make_policy",
-           "EpisodeResult", "run_episode", "evaluate", "E_THRESHOLD"]
+__all__ = [
+    "E_THRESHOLD",
+    "POLICIES",
+    "EpisodeResult",
+    "ExcitationPolicy",
+    "MultiSinePolicy",
+    "PRBSPolicy",
+    "ZeroPolicy",
+    "evaluate",
+    "make_policy",
+    "run_episode",
+]
 
 E_THRESHOLD = 1e-2  # calibration error counted as "calibrated"
 PD_OMEGA = 2.0  # natural frequency of the workspace-keeping PD [rad/s]

@@ -14,12 +14,12 @@ from __future__ import annotations
 
 import enum
 from abc import ABC, abstractmethod
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Mapping, Sequence
 
 import numpy as np
 
-__all__ = ["Health", "Estimate", "Estimator", "EstimatorConfigError", "run", "check_dt"]
+__all__ = ["Estimate", "Estimator", "EstimatorConfigError", "Health", "check_dt", "run"]
 
 
 class EstimatorConfigError(ValueError):

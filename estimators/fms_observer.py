@@ -52,7 +52,7 @@ from estimators.base import Estimate, Estimator, EstimatorConfigError, Health, c
 from estimators.outliers import FMS_GATE, GateParams, block_health, check_gate, wrench_gate
 from fricenv.plants.payload import PAPER_NOISE, PAPER_PARAMS, PayloadParams
 
-__all__ = ["FmsObserver", "READINGS", "PAPER_K1", "PAPER_K2", "PAPER_DELTA"]
+__all__ = ["PAPER_DELTA", "PAPER_K1", "PAPER_K2", "READINGS", "FmsObserver"]
 
 READINGS = ("paper", "corrected")
 PAPER_DELTA = 20.0  # stiffness constant delta of eq. (8) [-]

@@ -49,7 +49,7 @@ from estimators.base import Estimate, Estimator, EstimatorConfigError, Health, c
 from estimators.outliers import FMS_GATE, GateParams, block_health, check_gate, wrench_gate
 from fricenv.plants.payload import PAPER_NOISE, PAPER_PARAMS, PayloadParams
 
-__all__ = ["FmsRLS", "WRENCH_HOLDS"]
+__all__ = ["WRENCH_HOLDS", "FmsRLS"]
 
 WRENCH_HOLDS = ("point", "zoh")
 DEFAULT_CUTOFF_HZ = 2.0  # low-pass cut-off of the common filter [Hz]

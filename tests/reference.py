@@ -39,10 +39,10 @@ def stopping_distance_radau(road: MagicFormula, torque, v0: float = 20.0, v_stop
         else:
             f_slide = p.Fz * road.mu(1.0)
 
-            def rhs(t, y):
+            def rhs(t, y, f_slide=f_slide):
                 return [-f_slide / p.m, 0.0, y[0]]
 
-            def switch(t, y):
+            def switch(t, y, f_slide=f_slide):
                 return p.r * f_slide - torque(t)
 
             def jac(t, y):

@@ -6,7 +6,7 @@ calibrator that runs inside).
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, ClassVar
 
 import gymnasium as gym
 import numpy as np
@@ -123,7 +123,7 @@ class PayloadExcitationEnv(gym.Env):
     * v0: initial version.
     """
 
-    metadata = {"render_modes": ["rgb_array"], "render_fps": RENDER_FPS}
+    metadata: ClassVar[dict] = {"render_modes": ["rgb_array"], "render_fps": RENDER_FPS}
 
     def __init__(self, render_mode: str | None = None, estimator: bool | str = False, calibration="paper",
                  noise_scale: float = 1.0, time_limit: float = TIME_LIMIT, effort_weight: float = EFFORT_WEIGHT,

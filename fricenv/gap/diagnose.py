@@ -149,8 +149,8 @@ class Diagnosis:
 
 # Effects a log's provenance predicts: log attribute -> (effect, why). Such an effect is tried first in the forward
 # selection, listed first in ``effects`` and reported as a calibration, not as a discovery.
-EXPECTED_EFFECTS = {"torque_from_pressure": ("brake_gain", "T_b was computed from brake pressure through a nominal "
-                                                           "factor: a brake gain is its calibration, not a discovery")}
+EXPECTED_EFFECTS = {"torque_from_pressure": ("brake_gain", ("T_b was computed from brake pressure through a nominal "
+                                                            "factor: a brake gain is its calibration, not a discovery"))}
 
 
 @dataclass

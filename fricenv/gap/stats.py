@@ -14,8 +14,22 @@ from fricenv.gap.params import ROAD_NAMES
 if TYPE_CHECKING:  # the windows module imports this one
     from fricenv.gap.windows import Data
 
-__all__ = ["TRIM_SHARE", "WINDOW_MSE_CAP", "CandidateFit", "soft_cap", "window_counts", "window_mse", "cross_fitted", "estimate_noise", "fold_data", "gap_of",
-           "improvement_z", "paired_t", "paired_z", "robust_gap"]
+__all__ = [
+    "TRIM_SHARE",
+    "WINDOW_MSE_CAP",
+    "CandidateFit",
+    "cross_fitted",
+    "estimate_noise",
+    "fold_data",
+    "gap_of",
+    "improvement_z",
+    "paired_t",
+    "paired_z",
+    "robust_gap",
+    "soft_cap",
+    "window_counts",
+    "window_mse",
+]
 
 # Beyond this mean squared normalised error (RMS 5 noise std) a window's error counts only logarithmically
 # (:func:`soft_cap`): a wheel lock-up predicted a few milliseconds early or late is wrong whatever the size of its

@@ -99,7 +99,7 @@ def horizon_samples(cfg: DiagnoseConfig, dt: float) -> int:
     least ``MIN_HORIZON``)."""
     if cfg.horizon is not None:
         return int(cfg.horizon)
-    return max(MIN_HORIZON, int(round(cfg.horizon_s / dt)))
+    return max(MIN_HORIZON, round(float(cfg.horizon_s / dt)))
 
 
 def _conditioned(log: QuarterCarLog, free_end: int) -> dict:

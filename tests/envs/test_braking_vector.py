@@ -275,8 +275,8 @@ def test_bench_command_writes_the_json_contract(tmp_path):
 @pytest.mark.slow
 def test_two_substeps_stay_within_a_tenth_of_a_percent_of_radau():
     """physics_dt=0.005 (2 substeps, the bench's coarse option) against the plant tests' Radau cases."""
-    from tests.reference import stopping_distance_radau
     from tests.plants.test_quarter_car_plant import CASES, _stop_distance_ros2, _zoh
+    from tests.reference import stopping_distance_radau
 
     p = qc.PAPER_PARAMS
     for road, profile in CASES:

@@ -132,20 +132,20 @@ def test_prepare_leaves_nan_samples_out_of_the_window_counts():
 
 
 def _excitation(**kw) -> Excitation:
-    base = dict(has_v=True, has_a_x=True, braking_windows=40, torque_transients=6, slip_transient_windows=10,
-                near_peak_early=5, near_peak_late=5, speed_range=15.0, training_windows=20)
+    base = {"has_v": True, "has_a_x": True, "braking_windows": 40, "torque_transients": 6, "slip_transient_windows": 10,
+                "near_peak_early": 5, "near_peak_late": 5, "speed_range": 15.0, "training_windows": 20}
     return Excitation(**{**base, **kw})
 
 
 @pytest.mark.parametrize("effect, lacking", [
-    ("radius_error", dict(has_v=False, has_a_x=False)),
-    ("relaxation_length", dict(slip_transient_windows=0)),
-    ("brake_lag", dict(torque_transients=1)),
-    ("brake_delay", dict(torque_transients=0)),
-    ("mu_change", dict(near_peak_late=0)),
-    ("mu_change", dict(training_windows=2)),
-    ("drag", dict(speed_range=3.0, has_v=False, has_a_x=False)),
-    ("brake_gain", dict(braking_windows=0)),
+    ("radius_error", {"has_v": False, "has_a_x": False}),
+    ("relaxation_length", {"slip_transient_windows": 0}),
+    ("brake_lag", {"torque_transients": 1}),
+    ("brake_delay", {"torque_transients": 0}),
+    ("mu_change", {"near_peak_late": 0}),
+    ("mu_change", {"training_windows": 2}),
+    ("drag", {"speed_range": 3.0, "has_v": False, "has_a_x": False}),
+    ("brake_gain", {"braking_windows": 0}),
 ])
 def test_testability_rules_name_what_the_log_lacks(effect, lacking):
     rule = registry.get(effect).testable
