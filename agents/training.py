@@ -144,8 +144,7 @@ BRAKING_CONFIGS = load_hyperparams(BRAKING_FILE, CONFIG_CLASSES)  # the committe
 DEFAULT_CONFIGS: dict[tuple[str, str], PPOConfig | SACConfig] = {
     ("braking", "ppo"): BRAKING_CONFIGS["ppo"],
     ("braking", "sac"): BRAKING_CONFIGS["sac"],
-    ("braking", "recurrent-ppo"): BRAKING_CONFIGS.get(
-        "recurrent-ppo", RecurrentPPOConfig(**dataclasses.asdict(BRAKING_CONFIGS["ppo"]))),  # PPO's by default
+    ("braking", "recurrent-ppo"): BRAKING_CONFIGS.get("recurrent-ppo", BRAKING_CONFIGS["ppo"]),  # PPO's by default
     ("payload", "ppo"): PAYLOAD_PPO,
     ("payload", "sac"): SACConfig(gamma=0.99),
 }
