@@ -54,13 +54,11 @@ def test_a_row_of_a_batch_equals_its_parameter_set_alone(write_v, effects):
         np.testing.assert_array_equal(batch[i], window_residuals(effects, names, starts[i:i + 1], d, train)[0])
 
 
-@pytest.mark.parametrize("effects", EFFECTS[1:3], ids=lambda e: "+".join(e))
-def test_a_seeded_run_ends_where_the_unseeded_one_does_with_one_simulation_less(monkeypatch, effects):
-    d = _fold(True)
+def _runs(monkeypatch, effects: list, x0: np.ndarray, d) -> tuple:
+    """One least-squares run from ``x0`` without and one with the residuals at ``x0`` given: (unseeded result,
+    seeded result, parameter sets each simulated)."""
     names = param_names(effects)
-    x0 = effect_start_matrix(effects, DRY.as_array(), d)[0]
     lo, hi = bounds(names, d)
-    assert np.all((x0 > lo) & (x0 < hi)), "the start must lie inside its bounds"
     train, fidx = np.flatnonzero(~d.test), np.arange(len(names))
     r0 = window_residuals(effects, names, x0, d, train)[0].ravel()
     rows = _counting(monkeypatch)
@@ -68,27 +66,30 @@ def test_a_seeded_run_ends_where_the_unseeded_one_does_with_one_simulation_less(
     unseeded = sum(rows)
     rows.clear()
     seeded = least_squares_run(effects, names, x0.copy(), fidx, lo, hi, train, d, CFG, r0)
+    return plain, seeded, unseeded, sum(rows)
+
+
+@pytest.mark.parametrize("effects", EFFECTS[1:3], ids=lambda e: "+".join(e))
+def test_a_seeded_run_ends_where_the_unseeded_one_does_with_one_simulation_less(monkeypatch, effects):
+    d = _fold(True)
+    x0 = effect_start_matrix(effects, DRY.as_array(), d)[0]
+    lo, hi = bounds(param_names(effects), d)
+    assert np.all((x0 > lo) & (x0 < hi)), "the start must lie inside its bounds"
+    plain, seeded, unseeded, rows = _runs(monkeypatch, effects, x0, d)
     np.testing.assert_array_equal(seeded[0], plain[0])
     assert seeded[1] == plain[1]
-    assert sum(rows) == unseeded - 1  # the start's residuals came from r0
+    assert rows == unseeded - 1  # the start's residuals came from r0
 
 
 def test_a_start_on_its_bound_is_evaluated_where_the_run_moves_it(monkeypatch):
     d = _fold(True)
     effects = ["brake_lag"]
     names = param_names(effects)
-    lo, hi = bounds(names, d)
     x0 = effect_start_matrix(effects, WET.as_array(), d)[0]
-    x0[names.index("tau")] = lo[names.index("tau")]  # the run starts 1e-12 inside, not where r0 was simulated
-    train, fidx = np.flatnonzero(~d.test), np.arange(len(names))
-    r0 = window_residuals(effects, names, x0, d, train)[0].ravel()
-    rows = _counting(monkeypatch)
-    plain = least_squares_run(effects, names, x0.copy(), fidx, lo, hi, train, d, CFG)
-    unseeded = sum(rows)
-    rows.clear()
-    seeded = least_squares_run(effects, names, x0.copy(), fidx, lo, hi, train, d, CFG, r0)
+    x0[names.index("tau")] = bounds(names, d)[0][names.index("tau")]  # the run starts 1e-12 inside, not at r0
+    plain, seeded, unseeded, rows = _runs(monkeypatch, effects, x0, d)
     np.testing.assert_array_equal(seeded[0], plain[0])
-    assert sum(rows) == unseeded  # r0 was not used
+    assert rows == unseeded  # r0 was not used
 
 
 def test_fit_seeds_each_run_with_its_own_start(monkeypatch):
