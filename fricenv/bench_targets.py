@@ -312,37 +312,56 @@ def _speed_reconstruction_ms(log) -> tuple[float, float]:
 GAP_PATHS = {"compiled": True, "numpy": False}  # window simulators timed in the same run (DiagnoseConfig.compiled)
 
 
-def _diagnose_seconds(log, compiled: bool) -> float:
+def _diagnose_seconds(log, compiled: bool) -> tuple[float, float]:
+    """Wall seconds and CPU seconds of one diagnosis (its worker processes end with it, so their CPU is counted)."""
     import warnings
 
     from fricenv.gap.diagnose import DiagnoseConfig, diagnose
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
-        t = time.perf_counter()
+        cpu, t = _cpu_seconds(), time.perf_counter()
         diagnose(log, cfg=DiagnoseConfig(jobs=GAP_JOBS, compiled=compiled))
-        return time.perf_counter() - t
+        return time.perf_counter() - t, _cpu_seconds() - cpu
+
+
+def _cpu_seconds() -> float:
+    """User + system CPU seconds of this process and of its ended child processes (NaN where not measurable)."""
+    try:
+        import resource
+    except ImportError:  # pragma: no cover - not on Linux / macOS
+        return float("nan")
+    return sum(u.ru_utime + u.ru_stime for u in (resource.getrusage(resource.RUSAGE_SELF),
+                                                 resource.getrusage(resource.RUSAGE_CHILDREN)))
 
 
 def bench_gap(args: argparse.Namespace) -> dict[str, Any]:
     """Wall seconds to diagnose one 5 s log on 2 cores (all channels, and t, T_b, omega only) with the compiled
     window simulator and with the numpy one (the path before issue 18) in the same run, interleaved, and their
-    ratio; ms per speed reconstruction (the no-``v`` logs' inner loop) against its sample-by-sample reference."""
+    ratio, and the CPU seconds of each diagnosis with its worker processes (on a loaded machine the wall time
+    varies with the other load, the CPU time much less); ms per speed reconstruction (the no-``v`` logs' inner loop)
+    against its sample-by-sample reference."""
     channels = ("all_channels", "required_only")
     seconds = {path: {key: [] for key in channels} for path in GAP_PATHS}
+    cpu = {path: {key: [] for key in channels} for path in GAP_PATHS}
     newton, sequential = [], []
     for k in range(args.repeats):
         for key in channels:
             log = _gap_log(args.seed + k, key == "all_channels")
             for path, compiled in GAP_PATHS.items():
-                seconds[path][key].append(_diagnose_seconds(log, compiled))
+                wall, used = _diagnose_seconds(log, compiled)
+                seconds[path][key].append(wall)
+                cpu[path][key].append(used)
         a, b = _speed_reconstruction_ms(_gap_log(args.seed + k, False))
         newton.append(a)
         sequential.append(b)
     med = {path: {key: statistics.median(v) for key, v in by.items()} for path, by in seconds.items()}
+    med_cpu = {path: {key: statistics.median(v) for key, v in by.items()} for path, by in cpu.items()}
     out = {"gap_diagnose_seconds": med["compiled"], "gap_diagnose_seconds_numpy": med["numpy"],
            "gap_speedup": {key: med["numpy"][key] / med["compiled"][key] for key in channels},
            "gap_diagnose_seconds_all": seconds["compiled"], "gap_diagnose_seconds_numpy_all": seconds["numpy"],
+           # CPU seconds of the diagnosis and its worker processes: what a loaded machine changes least
+           "gap_diagnose_cpu_seconds": med_cpu["compiled"], "gap_diagnose_cpu_seconds_numpy": med_cpu["numpy"],
            "speed_reconstruction_ms": {"newton": statistics.median(newton),
                                        "sequential": statistics.median(sequential)}}
     out["speed_reconstruction_ms"]["ratio"] = out["speed_reconstruction_ms"]["sequential"] / \
@@ -351,8 +370,9 @@ def bench_gap(args: argparse.Namespace) -> dict[str, Any]:
     print(f"gap: one 5 s log diagnosed in {s['all_channels']:.1f} s with all channels (numpy path "
           f"{o['all_channels']:.1f} s, {x['all_channels']:.1f}x), {s['required_only']:.1f} s with t, T_b, omega only "
           f"(numpy path {o['required_only']:.1f} s, {x['required_only']:.1f}x) ({GAP_JOBS} processes, median of "
-          f"{args.repeats}); speed reconstruction {r['newton']:.2f} ms per call, sample-by-sample "
-          f"{r['sequential']:.2f} ms ({r['ratio']:.1f}x)")
+          f"{args.repeats}; CPU {med_cpu['compiled']['all_channels']:.1f} / {med_cpu['compiled']['required_only']:.1f} "
+          f"s); speed reconstruction {r['newton']:.2f} ms per call, sample-by-sample {r['sequential']:.2f} ms "
+          f"({r['ratio']:.1f}x)")
     return out
 
 

@@ -50,13 +50,18 @@ def fit_loss(r: np.ndarray, loss: str) -> np.ndarray:
 def distinct_starts(starts: np.ndarray, cost: np.ndarray, k: int) -> list[np.ndarray]:
     """The ``k`` best of ``starts`` by ``cost`` whose road parts (B, C, E, theta) differ: a fit started from the
     nominal model's road can stay in that road's basin, so the further starts come from other road shapes."""
-    chosen: list[np.ndarray] = []
+    return [starts[i].copy() for i in _distinct_rows(starts, cost, k)]
+
+
+def _distinct_rows(starts: np.ndarray, cost: np.ndarray, k: int) -> list[int]:
+    """The rows of ``starts`` that :func:`distinct_starts` returns, in its order."""
+    chosen: list[int] = []
     for i in np.argsort(cost, kind="stable"):
         if not np.isfinite(cost[i]) or len(chosen) == k:
             break
-        if all(not np.allclose(road_of(starts[i]), road_of(c)) for c in chosen):
-            chosen.append(starts[i].copy())
-    return chosen or [starts[0].copy()]
+        if all(not np.allclose(road_of(starts[i]), road_of(starts[c])) for c in chosen):
+            chosen.append(int(i))
+    return chosen or [0]
 
 
 def fit(effects: Sequence[str], names: Sequence[str], starts: np.ndarray, d: Data, cfg: DiagnoseConfig,
@@ -75,14 +80,21 @@ def fit(effects: Sequence[str], names: Sequence[str], starts: np.ndarray, d: Dat
     fidx = np.flatnonzero([n not in fixed for n in names])
     if fidx.size == 0:
         return starts[int(np.argmin(cost))].copy()
-    results = [least_squares_run(effects, names, x0, fidx, lo, hi, train, d, cfg)
-               for x0 in distinct_starts(starts, cost, runs)]
+    # each run starts with the residuals at its start, already evaluated above (a row of a batch equals the same
+    # parameter set evaluated alone: the windows are simulated element by element)
+    results = [least_squares_run(effects, names, starts[i].copy(), fidx, lo, hi, train, d, cfg, r[i].ravel())
+               for i in _distinct_rows(starts, cost, runs)]
     return min(results, key=lambda res: res[1])[0]
 
 
 def least_squares_run(effects: Sequence[str], names: Sequence[str], x0: np.ndarray, fidx: np.ndarray, lo, hi,
-                   train: np.ndarray, d: Data, cfg: DiagnoseConfig) -> tuple[np.ndarray, float]:
-    """One trust-region least-squares run from ``x0`` over the parameters ``fidx``: (solution, final loss)."""
+                      train: np.ndarray, d: Data, cfg: DiagnoseConfig,
+                      r0: np.ndarray | None = None) -> tuple[np.ndarray, float]:
+    """One trust-region least-squares run from ``x0`` over the parameters ``fidx``: (solution, final loss).
+
+    :param r0: the residuals (flattened, training windows) at ``x0`` when known: the run does not evaluate them
+        again.
+    """
     steps = fd_steps([names[i] for i in fidx])
     cache: dict = {}
 
@@ -93,7 +105,7 @@ def least_squares_run(effects: Sequence[str], names: Sequence[str], x0: np.ndarr
 
     def evaluate(Z):
         R = window_residuals(effects, names, np.array([full(z) for z in Z]), d, train).reshape(len(Z), -1)
-        return np.where(np.isfinite(R), R, 1e3)
+        return _finite(R)
 
     def fun(z):
         key = z.tobytes()
@@ -118,10 +130,17 @@ def least_squares_run(effects: Sequence[str], names: Sequence[str], x0: np.ndarr
         return ((R - R0) / h[:, None]).T
 
     z0 = np.clip(x0[fidx], lo[fidx] + 1e-12, hi[fidx] - 1e-12)
+    if r0 is not None and np.array_equal(z0, x0[fidx]):  # a start inside its bounds is evaluated where it is
+        cache[z0.tobytes()] = _finite(r0)
     sol = least_squares(fun, z0, jac=jac, bounds=(lo[fidx], hi[fidx]),
                         x_scale=x_scales([names[i] for i in fidx]), max_nfev=cfg.max_nfev, method="trf",
                         loss=cfg.fit_loss, f_scale=FIT_LOSS_SCALE)
     return full(sol.x), float(sol.cost)
+
+
+def _finite(R: np.ndarray) -> np.ndarray:
+    """Residuals with every non-finite value replaced by a large finite one (a diverged window simulation)."""
+    return np.where(np.isfinite(R), R, 1e3)
 
 
 def score(effect: str, effects: Sequence[str], names, x, d: Data, seconds: float) -> CandidateFit:

@@ -15,7 +15,8 @@ def test_bench_gap_reports_both_paths_and_their_ratio(monkeypatch, tmp_path):
 
     def fake_seconds(log, compiled):
         calls.append((log.v is not None, compiled))
-        return (2.0 if compiled else 9.0) if log.v is not None else (3.0 if compiled else 6.0)
+        wall = (2.0 if compiled else 9.0) if log.v is not None else (3.0 if compiled else 6.0)
+        return wall, 1.5 * wall  # CPU seconds of the process and its workers
 
     monkeypatch.setattr(bench_targets, "_diagnose_seconds", fake_seconds)
     monkeypatch.setattr(bench_targets, "_speed_reconstruction_ms", lambda log: (1.0, 4.0))
@@ -26,6 +27,8 @@ def test_bench_gap_reports_both_paths_and_their_ratio(monkeypatch, tmp_path):
     assert out["gap_diagnose_seconds"] == {"all_channels": 2.0, "required_only": 3.0}
     assert out["gap_diagnose_seconds_numpy"] == {"all_channels": 9.0, "required_only": 6.0}
     assert out["gap_speedup"] == {"all_channels": pytest.approx(4.5), "required_only": pytest.approx(2.0)}
+    assert out["gap_diagnose_cpu_seconds"] == {"all_channels": 3.0, "required_only": 4.5}
+    assert out["gap_diagnose_cpu_seconds_numpy"] == {"all_channels": 13.5, "required_only": 9.0}
     json.dumps(out)  # --json writes it
 
 
@@ -38,3 +41,23 @@ def test_the_numpy_path_is_a_config_switch_that_reaches_the_windows():
     log, _ = simulate_log([], WET, "open-loop", seed=1, duration=1.5)
     assert prepare(log, PAPER_PARAMS, DiagnoseConfig()).compiled
     assert not prepare(log, PAPER_PARAMS, DiagnoseConfig(compiled=False)).compiled
+
+
+def test_the_cpu_seconds_count_the_worker_processes(monkeypatch):
+    """A diagnosis whose CPU runs in a child process that has ended is counted (the pool's workers end with it)."""
+    import multiprocessing
+
+    def burn():
+        t = bench_targets._cpu_seconds()
+        while bench_targets._cpu_seconds() - t < 0.3:
+            pass
+
+    def diagnose_in_a_child(log, cfg):
+        proc = multiprocessing.get_context("fork").Process(target=burn)
+        proc.start()
+        proc.join()
+        assert cfg.jobs == bench_targets.GAP_JOBS
+
+    monkeypatch.setattr("fricenv.gap.diagnose.diagnose", diagnose_in_a_child)
+    cpu = bench_targets._diagnose_seconds(None, True)[1]
+    assert cpu >= 0.3  # the child's 0.3 s, though this process only waited
