@@ -19,7 +19,9 @@ Every figure is a median over --repeats; ratios divide by Pendulum-v1 measured i
 needs the reference measures it too). --json PATH writes single_steps_per_s, pendulum_steps_per_s,
 vector_steps_per_s {"1", "64", "1024"}, estimator_update_us {name: mean}, ppo_steps_per_s, ratio_to_pendulum
 (and gap_diagnose_seconds {all_channels, required_only} of the compiled path, gap_diagnose_seconds_numpy of the
-numpy path, gap_speedup = numpy / compiled, speed_reconstruction_ms for the gap target).
+numpy path, gap_speedup = numpy / compiled, gap_diagnose_cpu_seconds and gap_diagnose_cpu_seconds_numpy: the CPU
+seconds of each diagnosis with its worker processes, the figure to compare on a loaded machine, and
+speed_reconstruction_ms for the gap target).
 More targets plug in with one line in TARGETS (or fricenv.bench_targets.TARGETS).
 """
 
