@@ -24,8 +24,9 @@ from scipy.ndimage import median_filter
 
 from fricenv.gap.stats import estimate_noise
 
-__all__ = ["FILTERED_AC", "OUTLIER_Z", "ChannelCondition", "band_noise", "condition_channel", "correlation_time",
-           "fill_missing", "filter_lag", "frame_times", "looks_filtered"]
+__all__ = ["FILTERED_AC", "OUTLIER_Z", "ChannelCondition", "advanced", "band_noise", "condition_channel",
+           "correlation_time", "fill_missing", "filter_lag", "frame_times", "lag_against", "looks_filtered",
+           "shared_lag"]
 
 OUTLIER_Z = 8.0  # distance from the running median beyond which an isolated sample is an outlier [noise std]
 OUTLIER_SPAN = 7  # running-median span [samples]
@@ -64,11 +65,18 @@ class ChannelCondition:
     outliers: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
     quant_step: float = 0.0
     filtered: bool = False
+    filter: dict | None = None  # the sensor filter read from the noise roll-off (filter_lag), None: none seen
+    lag_s: float = 0.0  # the lag the channel was advanced by [s] (0: not)
 
     def summary(self) -> dict:
         """The report's per-channel line (``where["sensors"]``)."""
-        return {"missing_share": self.missing, "outliers": int(self.outliers.size), "filtered": self.filtered,
-                "quantisation_step": self.quant_step, "noise_std": self.noise}
+        out = {"missing_share": self.missing, "outliers": int(self.outliers.size), "filtered": self.filtered,
+               "quantisation_step": self.quant_step, "noise_std": self.noise}
+        if self.filter is not None:
+            out["filter"] = dict(self.filter)
+        if self.lag_s > 0:
+            out["lag_s"] = self.lag_s
+        return out
 
 
 def fill_missing(x: np.ndarray) -> np.ndarray:
@@ -182,6 +190,17 @@ def condition_channel(x: np.ndarray, floor: float, quiet: int = 0, may_be_filter
                             quant_step=q, filtered=filtered)
 
 
+def advanced(x: np.ndarray, shift: float) -> np.ndarray:
+    """``x`` read ``shift`` samples later, ``y[k] = x(k + shift)`` (linear interpolation between samples): a channel
+    that lags its signal by ``shift`` samples realigned. ``y[k]`` is missing where the sample nearest ``k + shift``
+    is, or where ``k + shift`` lies beyond the last sample."""
+    x = np.asarray(x, dtype=float)
+    at = np.arange(x.size) + float(shift)
+    y = np.interp(at, np.arange(x.size), fill_missing(x))
+    near = np.clip(np.rint(at).astype(int), 0, x.size - 1)
+    return np.where(np.isfinite(x[near]) & (at <= x.size - 1 + 1e-9), y, np.nan)
+
+
 def looks_filtered(x: np.ndarray, order: int = 2) -> bool:
     """Whether a channel looks low-pass filtered: the lag-1 autocorrelation of its ``order``-th differences lies
     ``FILTERED_MARGIN`` above white noise's ``-order / (order + 1)`` (a higher order suppresses a smooth signal that
@@ -277,7 +296,7 @@ def _rolloff(f: np.ndarray, fc: float, order: int, fs: float) -> np.ndarray:
     return out
 
 
-def filter_lag(x: np.ndarray, fs: float, f_lo: float, f_use: float) -> dict | None:
+def filter_lag(x: np.ndarray, fs: float, f_lo: float, f_use: float, min_cutoff: float = 0.0) -> dict | None:
     """The lag of a low-pass sensor filter, from the roll-off of the channel's noise (issue 15: a filtered
     force-moment sensor shifts the wrench against the pose like a vision delay, which the motion cannot tell apart).
 
@@ -286,8 +305,12 @@ def filter_lag(x: np.ndarray, fs: float, f_lo: float, f_use: float) -> dict | No
     (images folded back, :func:`_rolloff`). A sensor filter is causal and minimum-phase, so its magnitude fixes its
     phase: the lag is the analog Butterworth's mean group delay over ``(0, f_use]`` (the band the diagnosis uses).
 
-    :return: ``{"lag_s", "cutoff_hz", "order"}``, or None when no roll-off shows in the band (the fit explains less
-        than ``LAG_MIN_FIT`` of the log-spectrum's variance, or the cut-off lies beyond the band's top).
+    :param min_cutoff: a fitted cut-off below this is no filter's [Hz] (0: any; a roll-off that starts below the band
+        cannot be told from the signal's own spectrum falling).
+    :return: ``{"lag_s", "cutoff_hz", "order", "white_std"}`` (``white_std``: the std of white noise at rate ``fs``
+        whose density is the fitted pass-band level, the noise before the filter), or None when no roll-off shows in
+        the band (the fit explains less than ``LAG_MIN_FIT`` of the log-spectrum's variance, or the cut-off lies
+        beyond the band's top or below ``min_cutoff``).
     """
     from scipy.signal import butter, freqs, welch
 
@@ -308,10 +331,66 @@ def filter_lag(x: np.ndarray, fs: float, f_lo: float, f_use: float) -> dict | No
                 best = (cost, fc, order)
     cost, fc, order = best
     explained = 1.0 - cost / max(float(np.sum((lp - lp.mean()) ** 2)), 1e-300)
-    if explained < LAG_MIN_FIT or fc > LAG_TOP * fs:
+    if explained < LAG_MIN_FIT or fc > LAG_TOP * fs or fc < min_cutoff:
         return None
     b, a = butter(order, 2 * np.pi * fc, analog=True)
     w = 2 * np.pi * np.linspace(0.0, f_use, 50)
     _, h = freqs(b, a, worN=w)
     lag = float(-(np.unwrap(np.angle(h))[-1] - np.angle(h[0])) / w[-1])  # mean group delay over (0, f_use]
-    return {"lag_s": lag, "cutoff_hz": float(fc), "order": int(order)}
+    # the pass-band density: the mean of the spectrum over the roll-off (unbiased, unlike the log fit's level)
+    white = float(np.sqrt(np.mean(pxx[band] / _rolloff(fb, fc, order, fs)) * fs / 2.0))
+    return {"lag_s": lag, "cutoff_hz": float(fc), "order": int(order), "white_std": white}
+
+
+def lag_against(y: np.ndarray, ref: np.ndarray, fs: float, band: tuple[float, float], max_lag: float) -> float:
+    """The delay of channel ``y`` behind a reference ``ref`` of the same motion from unfiltered channels: the shift
+    in ``[0, max_lag]`` (steps of a tenth of a sample) after which ``y``, band-passed to ``band`` [Hz] without phase
+    (forward-backward Butterworth), is closest to a multiple of the band-passed reference (least squares) [s]."""
+    from scipy.signal import butter, sosfiltfilt
+
+    sos = butter(2, band, btype="band", fs=fs, output="sos")
+    yb, rb = sosfiltfilt(sos, fill_missing(y)), sosfiltfilt(sos, fill_missing(ref))
+    shifts = np.arange(0.0, max_lag * fs + 1e-9, 0.1)
+    cost = np.full(shifts.size, np.inf)
+    for i, sh in enumerate(shifts):
+        ya = advanced(np.where(np.isfinite(y), yb, np.nan), sh)
+        ok = np.isfinite(ya)
+        den = float(np.dot(rb[ok], rb[ok]))
+        if np.count_nonzero(ok) > 10 and den > 0:
+            cost[i] = float(np.mean((ya[ok] - np.dot(ya[ok], rb[ok]) / den * rb[ok]) ** 2))
+    return float(shifts[int(np.argmin(cost))] / fs) if np.isfinite(cost).any() else float("inf")
+
+
+def shared_lag(conds: dict[str, ChannelCondition], fs: float, f_lo: float, f_use: float,
+               bounds: dict[str, float] | None = None) -> dict[str, ChannelCondition]:
+    """Channels low-passed by a sensor filter, read from their noise roll-off and realigned (issue 15: an IMU
+    driver's filter on ``v`` and ``a_x`` delays them against the torque by tens of milliseconds, a model error that
+    inflates the noise level read from the model's residual until real effects drown, and imitates a brake delay).
+
+    Each channel that looks filtered (``filtered``, the difference test of :func:`condition_channel`) has its
+    roll-off fitted above ``f_lo`` (:func:`filter_lag`, cut-off at least ``f_lo``). The signal's
+    own power can only add to the low end of the band, which lowers a fitted cut-off and lengthens the lag, never
+    the reverse, so every estimate is an upper bound of the lag: each channel with a roll-off is given the smallest
+    of their lags (one logger filters them alike) and of the ``bounds`` (other upper bounds, e.g.
+    :func:`lag_against` a reference that an actuator effect can only delay further). Such a channel keeps its
+    ``filter`` fit and is advanced by the lag (:func:`advanced`): the model is compared with the signal the sensor
+    saw, and its noise level, read later from the model's residual, no longer holds the lag's error. A channel
+    without a roll-off is returned as it was.
+
+    :param conds: the conditioned channels that a logger may low-pass (a channel the difference test passed as
+        unfiltered is never shifted: a signal's own spectrum can show a roll-off).
+    :param fs: sample rate [Hz]; :param f_lo: bottom of the fitted band [Hz]; :param f_use: the lag is the mean group
+        delay over ``(0, f_use]`` [Hz]; :param bounds: other upper bounds of the lag [s].
+    """
+    from dataclasses import replace
+
+    fits = {c: filter_lag(k.values, fs, f_lo, f_use, min_cutoff=f_lo) for c, k in conds.items() if k.filtered}
+    fits = {c: f for c, f in fits.items() if f is not None}
+    out = dict(conds)
+    if not fits:
+        return out
+    lag = max(0.0, min([f["lag_s"] for f in fits.values()] + list((bounds or {}).values())))
+    for c, f in fits.items():
+        values = advanced(conds[c].values, lag * fs)
+        out[c] = replace(conds[c], values=values, filled=fill_missing(values), filtered=True, filter=f, lag_s=lag)
+    return out
