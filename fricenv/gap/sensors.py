@@ -43,6 +43,7 @@ LAG_ORDERS = (1, 2, 3, 4)  # Butterworth orders tried for a sensor filter's nois
 LAG_TOP = 0.45  # the roll-off is read up to this share of the sample rate [-]
 LAG_ALIASES = 3  # spectral images folded back into the band (a filter ahead of a slower logger) [-]
 LAG_MIN_FIT = 0.5  # fitted roll-off must explain this share of the log-spectrum's variance in the band [-]
+LAG_MIN_SAMPLES = 0.25  # a shared lag below this is none (shared_lag) [samples]
 
 
 @dataclass
@@ -287,32 +288,55 @@ def correlation_time(r: np.ndarray) -> float:
     return float(min(tau, MAX_CORRELATION_TIME))
 
 
-def _rolloff(f: np.ndarray, fc: float, order: int, fs: float) -> np.ndarray:
-    """Butterworth power response ``1 / (1 + (f / fc)^(2 n))`` with the images of ``LAG_ALIASES`` sample rates
-    folded back (the filter may run faster than the logger samples)."""
+def _rolloff(f: np.ndarray, fc: float, order: int, fs: float, digital: bool = False) -> np.ndarray:
+    """Butterworth power response: the analog ``1 / (1 + (f / fc)^(2 n))`` with the images of ``LAG_ALIASES`` sample
+    rates folded back (the filter may run faster than the logger samples), or with ``digital`` the bilinear
+    (``scipy.signal.butter``) filter run at the logger rate ``fs`` itself."""
+    if digital:
+        from scipy.signal import butter, sosfreqz
+
+        _, h = sosfreqz(butter(order, min(fc, 0.499 * fs), fs=fs, output="sos"), worN=f, fs=fs)
+        return np.maximum(np.abs(h) ** 2, 1e-300)
     out = np.zeros_like(f)
     for k in range(-LAG_ALIASES, LAG_ALIASES + 1):
         out += 1.0 / (1.0 + (np.abs(f + k * fs) / fc) ** (2 * order))
     return out
 
 
-def filter_lag(x: np.ndarray, fs: float, f_lo: float, f_use: float, min_cutoff: float = 0.0) -> dict | None:
+def _group_delay(fc: float, order: int, fs: float, f_use: float, digital: bool) -> float:
+    """Mean group delay of the Butterworth of :func:`_rolloff` over ``(0, f_use]`` [s]."""
+    from scipy.signal import butter, freqs, freqz
+
+    if digital:
+        b, a = butter(order, min(fc, 0.499 * fs), fs=fs)
+        _, h = freqz(b, a, worN=np.linspace(0.0, f_use, 50), fs=fs)
+    else:
+        b, a = butter(order, 2 * np.pi * fc, analog=True)
+        _, h = freqs(b, a, worN=2 * np.pi * np.linspace(0.0, f_use, 50))
+    return float(-(np.unwrap(np.angle(h))[-1] - np.angle(h[0])) / (2 * np.pi * f_use))
+
+
+def filter_lag(x: np.ndarray, fs: float, f_lo: float, f_use: float, min_cutoff: float = 0.0,
+               families: tuple[bool, ...] = (False,)) -> dict | None:
     """The lag of a low-pass sensor filter, from the roll-off of the channel's noise (issue 15: a filtered
-    force-moment sensor shifts the wrench against the pose like a vision delay, which the motion cannot tell apart).
+    force-moment sensor shifts the wrench against the pose like a vision delay, which the motion cannot tell apart;
+    a filtered ``v`` or ``a_x`` lags the torque like a brake delay).
 
     The noise power spectral density (Welch) in ``[f_lo, LAG_TOP fs]``, above the signal, is fitted in log scale by a
     white density times a Butterworth power response of order ``n`` in :data:`LAG_ORDERS` and cut-off ``fc``
-    (images folded back, :func:`_rolloff`). A sensor filter is causal and minimum-phase, so its magnitude fixes its
-    phase: the lag is the analog Butterworth's mean group delay over ``(0, f_use]`` (the band the diagnosis uses).
+    (:func:`_rolloff`: analog with images folded back, and with ``True`` in ``families`` also the digital filter
+    at the logger rate, whose response falls faster near the Nyquist frequency). A sensor filter is causal and
+    minimum-phase, so its magnitude fixes its phase: the lag is the fitted filter's mean group delay over
+    ``(0, f_use]`` (the band the diagnosis uses).
 
     :param min_cutoff: a fitted cut-off below this is no filter's [Hz] (0: any; a roll-off that starts below the band
         cannot be told from the signal's own spectrum falling).
-    :return: ``{"lag_s", "cutoff_hz", "order", "white_std"}`` (``white_std``: the std of white noise at rate ``fs``
-        whose density is the fitted pass-band level, the noise before the filter), or None when no roll-off shows in
-        the band (the fit explains less than ``LAG_MIN_FIT`` of the log-spectrum's variance, or the cut-off lies
-        beyond the band's top or below ``min_cutoff``).
+    :param families: the filter families tried (False: analog, True: digital at ``fs``).
+    :return: ``{"lag_s", "cutoff_hz", "order", "digital"}``, or None when no roll-off shows in the band (the fit
+        explains less than ``LAG_MIN_FIT`` of the log-spectrum's variance, or the cut-off lies beyond the band's top
+        or below ``min_cutoff``).
     """
-    from scipy.signal import butter, freqs, welch
+    from scipy.signal import welch
 
     y = fill_missing(np.asarray(x, dtype=float))
     nper = int(min(y.size, max(64, 2 ** int(np.ceil(np.log2(4.0 * fs / f_lo))))))
@@ -322,24 +346,20 @@ def filter_lag(x: np.ndarray, fs: float, f_lo: float, f_use: float, min_cutoff: 
         return None
     fb, lp = f[band], np.log(pxx[band])
     best = None
-    for order in LAG_ORDERS:
-        for fc in np.geomspace(0.5 * f_lo, fs, 200):
-            model = np.log(_rolloff(fb, fc, order, fs))
-            resid = lp - model - np.mean(lp - model)
-            cost = float(np.sum(resid**2))
-            if best is None or cost < best[0]:
-                best = (cost, fc, order)
-    cost, fc, order = best
+    for digital in families:
+        for order in LAG_ORDERS:
+            for fc in np.geomspace(0.5 * f_lo, fs, 200 if not digital else 100):
+                model = np.log(_rolloff(fb, fc, order, fs, digital))
+                resid = lp - model - np.mean(lp - model)
+                cost = float(np.sum(resid**2))
+                if best is None or cost < best[0]:
+                    best = (cost, fc, order, digital)
+    cost, fc, order, digital = best
     explained = 1.0 - cost / max(float(np.sum((lp - lp.mean()) ** 2)), 1e-300)
     if explained < LAG_MIN_FIT or fc > LAG_TOP * fs or fc < min_cutoff:
         return None
-    b, a = butter(order, 2 * np.pi * fc, analog=True)
-    w = 2 * np.pi * np.linspace(0.0, f_use, 50)
-    _, h = freqs(b, a, worN=w)
-    lag = float(-(np.unwrap(np.angle(h))[-1] - np.angle(h[0])) / w[-1])  # mean group delay over (0, f_use]
-    # the pass-band density: the mean of the spectrum over the roll-off (unbiased, unlike the log fit's level)
-    white = float(np.sqrt(np.mean(pxx[band] / _rolloff(fb, fc, order, fs)) * fs / 2.0))
-    return {"lag_s": lag, "cutoff_hz": float(fc), "order": int(order), "white_std": white}
+    return {"lag_s": _group_delay(fc, order, fs, f_use, digital), "cutoff_hz": float(fc), "order": int(order),
+            "digital": bool(digital)}
 
 
 def lag_against(y: np.ndarray, ref: np.ndarray, fs: float, band: tuple[float, float], max_lag: float) -> float:
@@ -370,12 +390,14 @@ def shared_lag(conds: dict[str, ChannelCondition], fs: float, f_lo: float, f_use
     Each channel that looks filtered (``filtered``, the difference test of :func:`condition_channel`) has its
     roll-off fitted above ``f_lo`` (:func:`filter_lag`, cut-off at least ``f_lo``). The signal's
     own power can only add to the low end of the band, which lowers a fitted cut-off and lengthens the lag, never
-    the reverse, so every estimate is an upper bound of the lag: each channel with a roll-off is given the smallest
-    of their lags (one logger filters them alike) and of the ``bounds`` (other upper bounds, e.g.
-    :func:`lag_against` a reference that an actuator effect can only delay further). Such a channel keeps its
-    ``filter`` fit and is advanced by the lag (:func:`advanced`): the model is compared with the signal the sensor
-    saw, and its noise level, read later from the model's residual, no longer holds the lag's error. A channel
-    without a roll-off is returned as it was.
+    the reverse, so every estimate is an upper bound of the lag. When at least one channel shows a roll-off (the
+    log has a sensor filter), every channel that looks filtered (one logger filters them alike) is advanced
+    (:func:`advanced`) by the smallest of the fitted lags and of the ``bounds`` (other upper bounds, e.g.
+    :func:`lag_against` a reference that an actuator effect can only delay further), and keeps its own roll-off
+    fit as ``filter`` (None where its own spectrum showed none): the model is compared with the signal the sensor
+    saw, and the noise level read later from the model's residual no longer holds the lag's error. Without any
+    roll-off, or when the lag is below ``LAG_MIN_SAMPLES`` (a bound says the roll-off was the signal's own), the
+    channels are returned as they were.
 
     :param conds: the conditioned channels that a logger may low-pass (a channel the difference test passed as
         unfiltered is never shifted: a signal's own spectrum can show a roll-off).
@@ -384,13 +406,17 @@ def shared_lag(conds: dict[str, ChannelCondition], fs: float, f_lo: float, f_use
     """
     from dataclasses import replace
 
-    fits = {c: filter_lag(k.values, fs, f_lo, f_use, min_cutoff=f_lo) for c, k in conds.items() if k.filtered}
+    fits = {c: filter_lag(k.values, fs, f_lo, f_use, min_cutoff=f_lo, families=(False, True))
+            for c, k in conds.items() if k.filtered}
     fits = {c: f for c, f in fits.items() if f is not None}
     out = dict(conds)
     if not fits:
         return out
     lag = max(0.0, min([f["lag_s"] for f in fits.values()] + list((bounds or {}).values())))
-    for c, f in fits.items():
-        values = advanced(conds[c].values, lag * fs)
-        out[c] = replace(conds[c], values=values, filled=fill_missing(values), filtered=True, filter=f, lag_s=lag)
+    if lag * fs < LAG_MIN_SAMPLES:  # a bound says there is no lag to speak of: the roll-off was the signal's
+        return out
+    for c, k in conds.items():
+        if k.filtered:
+            values = advanced(k.values, lag * fs)
+            out[c] = replace(k, values=values, filled=fill_missing(values), filter=fits.get(c), lag_s=lag)
     return out
