@@ -396,8 +396,10 @@ def shared_lag(conds: dict[str, ChannelCondition], fs: float, f_lo: float, f_use
     :func:`lag_against` a reference that an actuator effect can only delay further), and keeps its own roll-off
     fit as ``filter`` (None where its own spectrum showed none): the model is compared with the signal the sensor
     saw, and the noise level read later from the model's residual no longer holds the lag's error. Without any
-    roll-off, or when the lag is below ``LAG_MIN_SAMPLES`` (a bound says the roll-off was the signal's own), the
-    channels are returned as they were.
+    roll-off, or when the lag is below ``LAG_MIN_SAMPLES`` (a bound says the roll-off was the signal's own), no
+    channel is ``filtered``: the difference test alone takes a rough signal (a deceleration under ABS cycles) for a
+    filter, and a filtered channel's noise level, read from the model's residual, would then hold the model's error
+    (up to 60 times the sensor noise on the independent simulator's unfiltered ``a_x``).
 
     :param conds: the conditioned channels that a logger may low-pass (a channel the difference test passed as
         unfiltered is never shifted: a signal's own spectrum can show a roll-off).
@@ -409,12 +411,10 @@ def shared_lag(conds: dict[str, ChannelCondition], fs: float, f_lo: float, f_use
     fits = {c: filter_lag(k.values, fs, f_lo, f_use, min_cutoff=f_lo, families=(False, True))
             for c, k in conds.items() if k.filtered}
     fits = {c: f for c, f in fits.items() if f is not None}
+    lag = min([f["lag_s"] for f in fits.values()] + list((bounds or {}).values())) if fits else 0.0
+    if lag * fs < LAG_MIN_SAMPLES:  # no roll-off, or a bound says the roll-off was the signal's: not filtered
+        return {c: replace(k, filtered=False) for c, k in conds.items()}
     out = dict(conds)
-    if not fits:
-        return out
-    lag = max(0.0, min([f["lag_s"] for f in fits.values()] + list((bounds or {}).values())))
-    if lag * fs < LAG_MIN_SAMPLES:  # a bound says there is no lag to speak of: the roll-off was the signal's
-        return out
     for c, k in conds.items():
         if k.filtered:
             values = advanced(k.values, lag * fs)

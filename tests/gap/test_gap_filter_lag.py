@@ -117,7 +117,20 @@ def test_prepare_realigns_a_filtered_log_and_leaves_an_unfiltered_one_unchanged(
     log = _log(sig, filtered=False)
     d = prepare(log, qc.PAPER_PARAMS, cfg)
     for c in ("v", "a_x"):
-        assert "lag_s" not in d.sensors[c] and "filter" not in d.sensors[c]
+        assert "lag_s" not in d.sensors[c] and "filter" not in d.sensors[c] and not d.sensors[c]["filtered"]
         ok = np.isfinite(d.meas[c])
         np.testing.assert_allclose(d.meas[c][ok], getattr(log, c)[ok], rtol=0, atol=1e-12)
         assert d.sensors[c]["noise_std"] == condition_channel(getattr(log, c), 1e-3, d.free_end).noise
+
+
+def test_a_rough_unfiltered_channel_that_fails_the_difference_test_is_not_filtered_without_a_roll_off():
+    """A deceleration with fast cycles (ABS) correlates its differences like a filter would; without a roll-off in
+    its noise (or with a bound that says there is no lag) it is not filtered, and is not shifted."""
+    t = np.arange(3000) / FS
+    x = np.sign(np.sin(2 * np.pi * 6.0 * t)) * np.minimum(1.0, (t % 1.0) * 4) + \
+        np.random.default_rng(9).normal(0.0, 0.05, t.size)
+    cond = condition_channel(x, 1e-3)
+    assert cond.filtered  # the difference test alone is fooled
+    out = shared_lag({"a_x": cond}, FS, 2.0, 1.0, bounds={"a_x": 0.0})
+    assert not out["a_x"].filtered and out["a_x"].lag_s == 0.0
+    np.testing.assert_array_equal(out["a_x"].values, cond.values)
