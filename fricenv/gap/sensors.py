@@ -44,6 +44,7 @@ LAG_TOP = 0.45  # the roll-off is read up to this share of the sample rate [-]
 LAG_ALIASES = 3  # spectral images folded back into the band (a filter ahead of a slower logger) [-]
 LAG_MIN_FIT = 0.5  # fitted roll-off must explain this share of the log-spectrum's variance in the band [-]
 LAG_MIN_SAMPLES = 0.25  # a shared lag below this is none (shared_lag) [samples]
+LAG_BAND_STEP = 1.5  # shared_lag also fits the roll-off above this multiple of the band's bottom [-]
 
 
 @dataclass
@@ -388,7 +389,8 @@ def shared_lag(conds: dict[str, ChannelCondition], fs: float, f_lo: float, f_use
     inflates the noise level read from the model's residual until real effects drown, and imitates a brake delay).
 
     Each channel that looks filtered (``filtered``, the difference test of :func:`condition_channel`) has its
-    roll-off fitted above ``f_lo`` (:func:`filter_lag`, cut-off at least ``f_lo``). The signal's
+    roll-off fitted above ``f_lo`` and above ``LAG_BAND_STEP f_lo`` (:func:`filter_lag`, cut-off at least the
+    band's bottom; the fit of smaller lag is kept). The signal's
     own power can only add to the low end of the band, which lowers a fitted cut-off and lengthens the lag, never
     the reverse, so every estimate is an upper bound of the lag. When at least one channel shows a roll-off (the
     log has a sensor filter), every channel that looks filtered (one logger filters them alike) is advanced
@@ -408,9 +410,13 @@ def shared_lag(conds: dict[str, ChannelCondition], fs: float, f_lo: float, f_use
     """
     from dataclasses import replace
 
-    fits = {c: filter_lag(k.values, fs, f_lo, f_use, min_cutoff=f_lo, families=(False, True))
-            for c, k in conds.items() if k.filtered}
-    fits = {c: f for c, f in fits.items() if f is not None}
+    fits = {}
+    for c, k in conds.items():
+        found = [filter_lag(k.values, fs, lo, f_use, min_cutoff=lo, families=(False, True))
+                 for lo in (f_lo, LAG_BAND_STEP * f_lo) if lo < LAG_TOP * fs] if k.filtered else []
+        found = [f for f in found if f is not None]
+        if found:
+            fits[c] = min(found, key=lambda f: f["lag_s"])
     lag = min([f["lag_s"] for f in fits.values()] + list((bounds or {}).values())) if fits else 0.0
     if lag * fs < LAG_MIN_SAMPLES:  # no roll-off, or a bound says the roll-off was the signal's: not filtered
         return {c: replace(k, filtered=False) for c, k in conds.items()}
