@@ -13,6 +13,11 @@ isolated outliers, quantisation and low-pass filtering, and the honest noise lev
   diagnosis takes that channel's noise from the calibrated model's residual instead and inflates it by the
   residual's integrated autocorrelation time (:func:`correlation_time`): a window of ``H`` correlated samples holds
   only ``H / tau`` independent ones, the effective sample size that the significance tests assume.
+- **Filter lag.** A sensor's low-pass also delays the channel (tens of milliseconds for an IMU driver's filter):
+  :func:`filter_lag` reads the filter from the roll-off of the channel's noise, :func:`lag_against` the channel's
+  delay behind a reference built from unfiltered channels, and :func:`shared_lag` realigns the channels that look
+  filtered by the smallest of these upper bounds (:func:`advanced`). The difference test alone is not enough to call
+  a channel filtered in a quarter-car log: a rough signal (a deceleration under ABS cycles) fails it too.
 """
 
 from __future__ import annotations
