@@ -49,6 +49,9 @@ LAG_TOP = 0.45  # the roll-off is read up to this share of the sample rate [-]
 LAG_ALIASES = 3  # spectral images folded back into the band (a filter ahead of a slower logger) [-]
 LAG_MIN_FIT = 0.5  # fitted roll-off must explain this share of the log-spectrum's variance in the band [-]
 LAG_MIN_SAMPLES = 0.25  # a shared lag below this is none (shared_lag) [samples]
+# ... and below this [s]: the torque bound of an unfiltered a_x under ABS cycles reads up to ~15 ms (fricenv's
+# simulator), an IMU driver's filter lags by several tens of milliseconds
+LAG_MIN_S = 0.02
 LAG_BAND_STEP = 1.5  # shared_lag also fits the roll-off above this multiple of the band's bottom [-]
 
 
@@ -403,7 +406,8 @@ def shared_lag(conds: dict[str, ChannelCondition], fs: float, f_lo: float, f_use
     :func:`lag_against` a reference that an actuator effect can only delay further), and keeps its own roll-off
     fit as ``filter`` (None where its own spectrum showed none): the model is compared with the signal the sensor
     saw, and the noise level read later from the model's residual no longer holds the lag's error. Without any
-    roll-off, or when the lag is below ``LAG_MIN_SAMPLES`` (a bound says the roll-off was the signal's own), no
+    roll-off, or when the lag is below ``LAG_MIN_SAMPLES`` or ``LAG_MIN_S`` (a bound says the roll-off was the
+    signal's own), no
     channel is ``filtered``: the difference test alone takes a rough signal (a deceleration under ABS cycles) for a
     filter, and a filtered channel's noise level, read from the model's residual, would then hold the model's error
     (up to 60 times the sensor noise on the independent simulator's unfiltered ``a_x``).
@@ -423,7 +427,7 @@ def shared_lag(conds: dict[str, ChannelCondition], fs: float, f_lo: float, f_use
         if found:
             fits[c] = min(found, key=lambda f: f["lag_s"])
     lag = min([f["lag_s"] for f in fits.values()] + list((bounds or {}).values())) if fits else 0.0
-    if lag * fs < LAG_MIN_SAMPLES:  # no roll-off, or a bound says the roll-off was the signal's: not filtered
+    if lag * fs < LAG_MIN_SAMPLES or lag < LAG_MIN_S:  # no roll-off, or a bound says it was the signal's own
         return {c: replace(k, filtered=False) for c, k in conds.items()}
     out = dict(conds)
     for c, k in conds.items():
