@@ -13,6 +13,11 @@ isolated outliers, quantisation and low-pass filtering, and the honest noise lev
   diagnosis takes that channel's noise from the calibrated model's residual instead and inflates it by the
   residual's integrated autocorrelation time (:func:`correlation_time`): a window of ``H`` correlated samples holds
   only ``H / tau`` independent ones, the effective sample size that the significance tests assume.
+- **Filter lag.** A sensor's low-pass also delays the channel (tens of milliseconds for an IMU driver's filter):
+  :func:`filter_lag` reads the filter from the roll-off of the channel's noise, :func:`lag_against` the channel's
+  delay behind a reference built from unfiltered channels, and :func:`shared_lag` realigns the channels that look
+  filtered by the smallest of these upper bounds (:func:`advanced`). The difference test alone is not enough to call
+  a channel filtered in a quarter-car log: a rough signal (a deceleration under ABS cycles) fails it too.
 """
 
 from __future__ import annotations
@@ -24,8 +29,9 @@ from scipy.ndimage import median_filter
 
 from fricenv.gap.stats import estimate_noise
 
-__all__ = ["FILTERED_AC", "OUTLIER_Z", "ChannelCondition", "band_noise", "condition_channel", "correlation_time",
-           "fill_missing", "filter_lag", "frame_times", "looks_filtered"]
+__all__ = ["FILTERED_AC", "OUTLIER_Z", "ChannelCondition", "advanced", "band_noise", "condition_channel",
+           "correlation_time", "fill_missing", "filter_lag", "frame_times", "lag_against", "looks_filtered",
+           "shared_lag"]
 
 OUTLIER_Z = 8.0  # distance from the running median beyond which an isolated sample is an outlier [noise std]
 OUTLIER_SPAN = 7  # running-median span [samples]
@@ -42,6 +48,11 @@ LAG_ORDERS = (1, 2, 3, 4)  # Butterworth orders tried for a sensor filter's nois
 LAG_TOP = 0.45  # the roll-off is read up to this share of the sample rate [-]
 LAG_ALIASES = 3  # spectral images folded back into the band (a filter ahead of a slower logger) [-]
 LAG_MIN_FIT = 0.5  # fitted roll-off must explain this share of the log-spectrum's variance in the band [-]
+LAG_MIN_SAMPLES = 0.25  # a shared lag below this is none (shared_lag) [samples]
+# ... and below this [s]: the torque bound of an unfiltered a_x under ABS cycles reads up to ~15 ms (fricenv's
+# simulator), an IMU driver's filter lags by several tens of milliseconds
+LAG_MIN_S = 0.02
+LAG_BAND_STEP = 1.5  # shared_lag also fits the roll-off above this multiple of the band's bottom [-]
 
 
 @dataclass
@@ -64,11 +75,18 @@ class ChannelCondition:
     outliers: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
     quant_step: float = 0.0
     filtered: bool = False
+    filter: dict | None = None  # the sensor filter read from the noise roll-off (filter_lag), None: none seen
+    lag_s: float = 0.0  # the lag the channel was advanced by [s] (0: not)
 
     def summary(self) -> dict:
         """The report's per-channel line (``where["sensors"]``)."""
-        return {"missing_share": self.missing, "outliers": int(self.outliers.size), "filtered": self.filtered,
-                "quantisation_step": self.quant_step, "noise_std": self.noise}
+        out = {"missing_share": self.missing, "outliers": int(self.outliers.size), "filtered": self.filtered,
+               "quantisation_step": self.quant_step, "noise_std": self.noise}
+        if self.filter is not None:
+            out["filter"] = dict(self.filter)
+        if self.lag_s > 0:
+            out["lag_s"] = self.lag_s
+        return out
 
 
 def fill_missing(x: np.ndarray) -> np.ndarray:
@@ -182,6 +200,17 @@ def condition_channel(x: np.ndarray, floor: float, quiet: int = 0, may_be_filter
                             quant_step=q, filtered=filtered)
 
 
+def advanced(x: np.ndarray, shift: float) -> np.ndarray:
+    """``x`` read ``shift`` samples later, ``y[k] = x(k + shift)`` (linear interpolation between samples): a channel
+    that lags its signal by ``shift`` samples realigned. ``y[k]`` is missing where the sample nearest ``k + shift``
+    is, or where ``k + shift`` lies beyond the last sample."""
+    x = np.asarray(x, dtype=float)
+    at = np.arange(x.size) + float(shift)
+    y = np.interp(at, np.arange(x.size), fill_missing(x))
+    near = np.clip(np.rint(at).astype(int), 0, x.size - 1)
+    return np.where(np.isfinite(x[near]) & (at <= x.size - 1 + 1e-9), y, np.nan)
+
+
 def looks_filtered(x: np.ndarray, order: int = 2) -> bool:
     """Whether a channel looks low-pass filtered: the lag-1 autocorrelation of its ``order``-th differences lies
     ``FILTERED_MARGIN`` above white noise's ``-order / (order + 1)`` (a higher order suppresses a smooth signal that
@@ -268,28 +297,55 @@ def correlation_time(r: np.ndarray) -> float:
     return float(min(tau, MAX_CORRELATION_TIME))
 
 
-def _rolloff(f: np.ndarray, fc: float, order: int, fs: float) -> np.ndarray:
-    """Butterworth power response ``1 / (1 + (f / fc)^(2 n))`` with the images of ``LAG_ALIASES`` sample rates
-    folded back (the filter may run faster than the logger samples)."""
+def _rolloff(f: np.ndarray, fc: float, order: int, fs: float, digital: bool = False) -> np.ndarray:
+    """Butterworth power response: the analog ``1 / (1 + (f / fc)^(2 n))`` with the images of ``LAG_ALIASES`` sample
+    rates folded back (the filter may run faster than the logger samples), or with ``digital`` the bilinear
+    (``scipy.signal.butter``) filter run at the logger rate ``fs`` itself."""
+    if digital:
+        from scipy.signal import butter, sosfreqz
+
+        _, h = sosfreqz(butter(order, min(fc, 0.499 * fs), fs=fs, output="sos"), worN=f, fs=fs)
+        return np.maximum(np.abs(h) ** 2, 1e-300)
     out = np.zeros_like(f)
     for k in range(-LAG_ALIASES, LAG_ALIASES + 1):
         out += 1.0 / (1.0 + (np.abs(f + k * fs) / fc) ** (2 * order))
     return out
 
 
-def filter_lag(x: np.ndarray, fs: float, f_lo: float, f_use: float) -> dict | None:
+def _group_delay(fc: float, order: int, fs: float, f_use: float, digital: bool) -> float:
+    """Mean group delay of the Butterworth of :func:`_rolloff` over ``(0, f_use]`` [s]."""
+    from scipy.signal import butter, freqs, freqz
+
+    if digital:
+        b, a = butter(order, min(fc, 0.499 * fs), fs=fs)
+        _, h = freqz(b, a, worN=np.linspace(0.0, f_use, 50), fs=fs)
+    else:
+        b, a = butter(order, 2 * np.pi * fc, analog=True)
+        _, h = freqs(b, a, worN=2 * np.pi * np.linspace(0.0, f_use, 50))
+    return float(-(np.unwrap(np.angle(h))[-1] - np.angle(h[0])) / (2 * np.pi * f_use))
+
+
+def filter_lag(x: np.ndarray, fs: float, f_lo: float, f_use: float, min_cutoff: float = 0.0,
+               families: tuple[bool, ...] = (False,)) -> dict | None:
     """The lag of a low-pass sensor filter, from the roll-off of the channel's noise (issue 15: a filtered
-    force-moment sensor shifts the wrench against the pose like a vision delay, which the motion cannot tell apart).
+    force-moment sensor shifts the wrench against the pose like a vision delay, which the motion cannot tell apart;
+    a filtered ``v`` or ``a_x`` lags the torque like a brake delay).
 
     The noise power spectral density (Welch) in ``[f_lo, LAG_TOP fs]``, above the signal, is fitted in log scale by a
     white density times a Butterworth power response of order ``n`` in :data:`LAG_ORDERS` and cut-off ``fc``
-    (images folded back, :func:`_rolloff`). A sensor filter is causal and minimum-phase, so its magnitude fixes its
-    phase: the lag is the analog Butterworth's mean group delay over ``(0, f_use]`` (the band the diagnosis uses).
+    (:func:`_rolloff`: analog with images folded back, and with ``True`` in ``families`` also the digital filter
+    at the logger rate, whose response falls faster near the Nyquist frequency). A sensor filter is causal and
+    minimum-phase, so its magnitude fixes its phase: the lag is the fitted filter's mean group delay over
+    ``(0, f_use]`` (the band the diagnosis uses).
 
-    :return: ``{"lag_s", "cutoff_hz", "order"}``, or None when no roll-off shows in the band (the fit explains less
-        than ``LAG_MIN_FIT`` of the log-spectrum's variance, or the cut-off lies beyond the band's top).
+    :param min_cutoff: a fitted cut-off below this is no filter's [Hz] (0: any; a roll-off that starts below the band
+        cannot be told from the signal's own spectrum falling).
+    :param families: the filter families tried (False: analog, True: digital at ``fs``).
+    :return: ``{"lag_s", "cutoff_hz", "order", "digital"}``, or None when no roll-off shows in the band (the fit
+        explains less than ``LAG_MIN_FIT`` of the log-spectrum's variance, or the cut-off lies beyond the band's top
+        or below ``min_cutoff``).
     """
-    from scipy.signal import butter, freqs, welch
+    from scipy.signal import welch
 
     y = fill_missing(np.asarray(x, dtype=float))
     nper = int(min(y.size, max(64, 2 ** int(np.ceil(np.log2(4.0 * fs / f_lo))))))
@@ -299,19 +355,83 @@ def filter_lag(x: np.ndarray, fs: float, f_lo: float, f_use: float) -> dict | No
         return None
     fb, lp = f[band], np.log(pxx[band])
     best = None
-    for order in LAG_ORDERS:
-        for fc in np.geomspace(0.5 * f_lo, fs, 200):
-            model = np.log(_rolloff(fb, fc, order, fs))
-            resid = lp - model - np.mean(lp - model)
-            cost = float(np.sum(resid**2))
-            if best is None or cost < best[0]:
-                best = (cost, fc, order)
-    cost, fc, order = best
+    for digital in families:
+        for order in LAG_ORDERS:
+            for fc in np.geomspace(0.5 * f_lo, fs, 200 if not digital else 100):
+                model = np.log(_rolloff(fb, fc, order, fs, digital))
+                resid = lp - model - np.mean(lp - model)
+                cost = float(np.sum(resid**2))
+                if best is None or cost < best[0]:
+                    best = (cost, fc, order, digital)
+    cost, fc, order, digital = best
     explained = 1.0 - cost / max(float(np.sum((lp - lp.mean()) ** 2)), 1e-300)
-    if explained < LAG_MIN_FIT or fc > LAG_TOP * fs:
+    if explained < LAG_MIN_FIT or fc > LAG_TOP * fs or fc < min_cutoff:
         return None
-    b, a = butter(order, 2 * np.pi * fc, analog=True)
-    w = 2 * np.pi * np.linspace(0.0, f_use, 50)
-    _, h = freqs(b, a, worN=w)
-    lag = float(-(np.unwrap(np.angle(h))[-1] - np.angle(h[0])) / w[-1])  # mean group delay over (0, f_use]
-    return {"lag_s": lag, "cutoff_hz": float(fc), "order": int(order)}
+    return {"lag_s": _group_delay(fc, order, fs, f_use, digital), "cutoff_hz": float(fc), "order": int(order),
+            "digital": bool(digital)}
+
+
+def lag_against(y: np.ndarray, ref: np.ndarray, fs: float, band: tuple[float, float], max_lag: float) -> float:
+    """The delay of channel ``y`` behind a reference ``ref`` of the same motion from unfiltered channels: the shift
+    in ``[0, max_lag]`` (steps of a tenth of a sample) after which ``y``, band-passed to ``band`` [Hz] without phase
+    (forward-backward Butterworth), is closest to a multiple of the band-passed reference (least squares) [s]."""
+    from scipy.signal import butter, sosfiltfilt
+
+    sos = butter(2, band, btype="band", fs=fs, output="sos")
+    yb, rb = sosfiltfilt(sos, fill_missing(y)), sosfiltfilt(sos, fill_missing(ref))
+    shifts = np.arange(0.0, max_lag * fs + 1e-9, 0.1)
+    cost = np.full(shifts.size, np.inf)
+    for i, sh in enumerate(shifts):
+        ya = advanced(np.where(np.isfinite(y), yb, np.nan), sh)
+        ok = np.isfinite(ya)
+        den = float(np.dot(rb[ok], rb[ok]))
+        if np.count_nonzero(ok) > 10 and den > 0:
+            cost[i] = float(np.mean((ya[ok] - np.dot(ya[ok], rb[ok]) / den * rb[ok]) ** 2))
+    return float(shifts[int(np.argmin(cost))] / fs) if np.isfinite(cost).any() else float("inf")
+
+
+def shared_lag(conds: dict[str, ChannelCondition], fs: float, f_lo: float, f_use: float,
+               bounds: dict[str, float] | None = None) -> dict[str, ChannelCondition]:
+    """Channels low-passed by a sensor filter, read from their noise roll-off and realigned (issue 15: an IMU
+    driver's filter on ``v`` and ``a_x`` delays them against the torque by tens of milliseconds, a model error that
+    inflates the noise level read from the model's residual until real effects drown, and imitates a brake delay).
+
+    Each channel that looks filtered (``filtered``, the difference test of :func:`condition_channel`) has its
+    roll-off fitted above ``f_lo`` and above ``LAG_BAND_STEP f_lo`` (:func:`filter_lag`, cut-off at least the
+    band's bottom; the fit of smaller lag is kept). The signal's
+    own power can only add to the low end of the band, which lowers a fitted cut-off and lengthens the lag, never
+    the reverse, so every estimate is an upper bound of the lag. When at least one channel shows a roll-off (the
+    log has a sensor filter), every channel that looks filtered (one logger filters them alike) is advanced
+    (:func:`advanced`) by the smallest of the fitted lags and of the ``bounds`` (other upper bounds, e.g.
+    :func:`lag_against` a reference that an actuator effect can only delay further), and keeps its own roll-off
+    fit as ``filter`` (None where its own spectrum showed none): the model is compared with the signal the sensor
+    saw, and the noise level read later from the model's residual no longer holds the lag's error. Without any
+    roll-off, or when the lag is below ``LAG_MIN_SAMPLES`` or ``LAG_MIN_S`` (a bound says the roll-off was the
+    signal's own), no
+    channel is ``filtered``: the difference test alone takes a rough signal (a deceleration under ABS cycles) for a
+    filter, and a filtered channel's noise level, read from the model's residual, would then hold the model's error
+    (up to 60 times the sensor noise on the independent simulator's unfiltered ``a_x``).
+
+    :param conds: the conditioned channels that a logger may low-pass (a channel the difference test passed as
+        unfiltered is never shifted: a signal's own spectrum can show a roll-off).
+    :param fs: sample rate [Hz]; :param f_lo: bottom of the fitted band [Hz]; :param f_use: the lag is the mean group
+        delay over ``(0, f_use]`` [Hz]; :param bounds: other upper bounds of the lag [s].
+    """
+    from dataclasses import replace
+
+    fits = {}
+    for c, k in conds.items():
+        found = [filter_lag(k.values, fs, lo, f_use, min_cutoff=lo, families=(False, True))
+                 for lo in (f_lo, LAG_BAND_STEP * f_lo) if lo < LAG_TOP * fs] if k.filtered else []
+        found = [f for f in found if f is not None]
+        if found:
+            fits[c] = min(found, key=lambda f: f["lag_s"])
+    lag = min([f["lag_s"] for f in fits.values()] + list((bounds or {}).values())) if fits else 0.0
+    if lag * fs < LAG_MIN_SAMPLES or lag < LAG_MIN_S:  # no roll-off, or a bound says it was the signal's own
+        return {c: replace(k, filtered=False) for c, k in conds.items()}
+    out = dict(conds)
+    for c, k in conds.items():
+        if k.filtered:
+            values = advanced(k.values, lag * fs)
+            out[c] = replace(k, values=values, filled=fill_missing(values), filter=fits.get(c), lag_s=lag)
+    return out

@@ -19,7 +19,7 @@ from fricenv.effects.quarter_car import EffectSimulator, ModelBatch
 from fricenv.gap.config import DiagnoseConfig
 from fricenv.gap.params import ROAD_NAMES
 from fricenv.gap.pool import default_jobs
-from fricenv.gap.sensors import condition_channel
+from fricenv.gap.sensors import LAG_TOP, condition_channel, lag_against, shared_lag
 from fricenv.gap.speed import filtered_transient_slip, reconstruct_speed
 from fricenv.logs import QuarterCarLog
 from fricenv.plants import quarter_car as qc
@@ -38,6 +38,13 @@ FREE_ROLL_TORQUE = 0.02  # free rolling: |T_b| below this share of max |T_b| [-]
 SAVGOL = (11, 2)  # speed smoother: window [samples], polynomial order
 NOISE_FLOOR = {"omega": 1e-3, "v": 1e-3, "a_x": 1e-3}  # smallest accepted noise std per channel (SI)
 FILTERED_CHANNELS = ("v", "a_x")  # channels a logger may low-pass (IMU, speed estimate); omega is a pulse count
+# A low-passed channel's filter is read from its noise spectrum above LAG_BAND_HZ (the braking dynamics' own power
+# lies mostly below), and its lag is the filter's mean group delay over (0, LAG_USE_HZ] (the band of the motion a
+# prediction window sees) [Hz].
+LAG_BAND_HZ = 2.0
+LAG_USE_HZ = 1.0
+LAG_XCORR_BAND = (0.3, 4.0)  # band in which a_x is aligned with the torque's deceleration [Hz]
+LAG_MAX_S = 0.15  # longest sensor lag looked for [s]
 MIN_HORIZON = 3  # shortest prediction window [samples] (a 0.1 s window at 25 Hz would hold 2.5)
 MIN_WINDOWS = 6  # fewest prediction windows a diagnosis needs (3 per fold for the cross-fitting) [-]
 # Transient slip at a window start: False = the slip of the window's start state (the wheel-speed nuisance fit then
@@ -102,14 +109,32 @@ def horizon_samples(cfg: DiagnoseConfig, dt: float) -> int:
     return max(MIN_HORIZON, round(float(cfg.horizon_s / dt)))
 
 
-def _conditioned(log: QuarterCarLog, free_end: int) -> dict:
-    """Every logged channel's :class:`fricenv.gap.sensors.ChannelCondition` (``free_end``: the quiet start)."""
+def _conditioned(log: QuarterCarLog, free_end: int, p: qc.QuarterCarParams) -> dict:
+    """Every logged channel's :class:`fricenv.gap.sensors.ChannelCondition` (``free_end``: the quiet start); the
+    channels a logger may low-pass are realigned by their filter's lag when their noise shows its roll-off
+    (:func:`fricenv.gap.sensors.shared_lag`, band from ``LAG_BAND_HZ``, lag over ``(0, LAG_USE_HZ]``)."""
     out = {}
     for c in ("omega", "v", "a_x"):
         x = getattr(log, c)
         if x is not None:
             out[c] = condition_channel(np.asarray(x, dtype=float), NOISE_FLOOR[c], free_end, c in FILTERED_CHANNELS)
+    fs = 1.0 / log.dt
+    lowpass = {c: k for c, k in out.items() if c in FILTERED_CHANNELS}
+    if lowpass and LAG_BAND_HZ < LAG_TOP * fs:
+        out.update(shared_lag(lowpass, fs, LAG_BAND_HZ, LAG_USE_HZ, _torque_lag(log, out, p)))
     return out
+
+
+def _torque_lag(log: QuarterCarLog, cond: dict, p: qc.QuarterCarParams) -> dict:
+    """An upper bound of ``a_x``'s sensor lag: its delay behind the deceleration that the logged torque and the
+    unfiltered wheel speed give, ``a_x ~ -(T_b + J omega') / (r m)`` (wheel and vehicle equations (1)-(2) without
+    the small drag; ``omega'`` by a centred Savitzky-Golay derivative). An actuator effect (lag, delay) delays the
+    applied torque further, never less, so this bounds the filter's lag from above (:func:`lag_against`)."""
+    if "a_x" not in cond or len(log) < 4 * SAVGOL[0]:
+        return {}
+    wd = savgol_filter(cond["omega"].filled, SAVGOL[0], SAVGOL[1], deriv=1, delta=log.dt)
+    ref = -(np.asarray(log.T_b, dtype=float) + p.J * wd) / (p.r * p.m)
+    return {"a_x": lag_against(cond["a_x"].values, ref, 1.0 / log.dt, LAG_XCORR_BAND, LAG_MAX_S)}
 
 
 def _window_counts(meas: dict, starts: np.ndarray, H: int) -> np.ndarray:
@@ -136,7 +161,7 @@ def prepare(log: QuarterCarLog, p: qc.QuarterCarParams, cfg: DiagnoseConfig) -> 
     tmax = max(float(np.max(np.abs(T))), 1e-9)
     braking = np.flatnonzero(np.abs(T) > FREE_ROLL_TORQUE * tmax)
     free_end = int(braking[0]) if braking.size else n
-    cond = _conditioned(log, free_end)
+    cond = _conditioned(log, free_end, p)
     sigma = {c: k.noise for c, k in cond.items()}
     v_smooth = None
     if "v" in cond:
