@@ -37,6 +37,17 @@ snow's 1.0 only 79 % of dry's). Tuned on noise seeds 1-20 of the test logs (``te
 test_curve_shape.py``); on fresh seeds 300-309 dry, wet, snow and ice are placed on every seed, dry->ice and
 ice->dry followed.
 
+The reported peak slip (S5). Between shapes whose peaks lie far apart the safest bank peak still loses much: a
+policy that brakes at dry's 0.19 on wet gets 92 % of wet's friction, and its slips never pass below wet's peak,
+so the data never tell wet from dry (measured, issue 17 session 10: a PPO + EKF/RLS policy of training seed 11 held
+slip 0.18-0.22 on wet at 20 m/s for 2 s with the fit on dry, ratio 1.09). So the reported peak slip is, per set of
+plausible shapes, the slip that keeps most friction on the worst of them, ``argmax_S min_j g_j(S)``
+(:attr:`ShapeBank.minimax_slip`, one entry per set), when that keeps more than ``MINIMAX_GAIN`` (5 % of the peak
+friction) more than the safest bank peak; otherwise the safest bank peak as before. Dry or wet: 0.128, 97.4 % of
+either peak; braking there puts the data on dry's rising and wet's falling side, and the fit decides. Dry or snow,
+dry or ice: the bank peak (dry's 0.19, ice's 0.39). The reported shape (:meth:`ShapeFit.best`) and its peak
+friction are those of (S4); :meth:`ShapeFit.plausible` gives the set.
+
 A friction jump (the best pair's theta over the fast memory, forgetting ``fast_forgetting``, and over the whole
 memory differ by more than ``jump_ratio``) restarts the memory from the fast copy, i.e. from the data after it.
 
