@@ -121,6 +121,8 @@ def _core_rows(omega, a_x, T_b, k, gated, gc, gx, gP, started, rejected, gj, y, 
         torque, w, health = -T_b[i], omega[i], _OK
         if gated:
             w, health = _gate_row(i, omega[i], torque_prev[i], gc, gx, gP, started, rejected, gj)
+            if health == _REINIT:  # the gate restarted: the RLS forgets the old road (as EkfRlsCore.step)
+                P_rls[i] = RLS_P0
         torque_prev[i] = torque
         wr = w * R_w
         if np.isnan(y[i]):  # 1. velocity filter, eqs. (4)-(6) with the a_x loop
@@ -265,11 +267,13 @@ class BatchedEkfRls:
         health = np.full(self.n, int(Health.NOT_EXCITED))
         return {k: a.copy() for k, a in self.last.items()}, health
 
-    def _shape(self, active: np.ndarray, S: np.ndarray, mu_util: np.ndarray, mu_map: np.ndarray
-               ) -> tuple[np.ndarray, np.ndarray]:
+    def _shape(self, active: np.ndarray, S: np.ndarray, mu_util: np.ndarray, mu_map: np.ndarray,
+               restarted: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Step 6, the curve-shape fit: (peak friction, peak slip), the map's friction until the fit has data."""
         if self.shape_fit is None:
             return mu_map, np.full(self.n, self.prior_peak_slip)
+        if restarted.any():  # the gate restarted (a friction jump): the fit forgets the old road, as the single one
+            self.shape_fit.reset(restarted)
         Fz = self.core.Fz_total
         self.shape_fit.update(np.abs(Fz * S) / Fz, mu_util, self.y, active)  # |phi| / F_z, as the single one
         peak_slip, mu_fit = self.shape_fit.outputs()
@@ -291,7 +295,8 @@ class BatchedEkfRls:
         with np.errstate(divide="ignore", invalid="ignore"):
             s_bar = np.where(self.s_den > 0, self.s_num / self.s_den, 0.0)
         mu_util = np.abs(F) / self.core.Fz_total
-        mu, peak_slip = self._shape(active, S, mu_util, self.core.mu_map.batch(self.k_s, s_bar))
+        mu, peak_slip = self._shape(active, S, mu_util, self.core.mu_map.batch(self.k_s, s_bar),
+                                    health == int(Health.REINITIALISED))
         new = {"v": self.y, "slip": -S, "F_x": -F, "k_s": self.k_s, "mu": mu, "mu_peak": self.mu_peak,
                "mu_utilized": mu_util, "peak_slip": peak_slip}
         every = active.all()

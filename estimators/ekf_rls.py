@@ -315,6 +315,9 @@ class EkfRlsCore:
         verdicts = [Verdict.ACCEPT] * n
         if self.wheel_gate is not None:  # outliers: the gate's prediction replaces a rejected wheel speed
             omega, verdicts = self.wheel_gate(omega, self.torque_prev)
+        restarted = Verdict.REINIT in verdicts  # a friction jump (estimators.jump) or a lost track: the RLS and the
+        if restarted:  # shape fit forget the old road at once (their own detectors need about 0.4 s)
+            self.P_rls = RLS_P0
         self.torque_prev = np.array(torque, dtype=float)
         wr = omega * cfg.R_w
         T_total = float(torque.sum())
@@ -365,6 +368,8 @@ class EkfRlsCore:
         # 6. the curve's shape (estimators.curve_shape): peak slip, and the peak friction once the fit is used
         peak_slip = np.nan
         if self.shape_fit is not None:
+            if restarted:
+                self.shape_fit.reset()
             self.shape_fit.update(np.array([abs(phi) / self.Fz_total]), np.array([mu_util]), np.array([y]),
                                   np.array([True]))
             slip_fit, mu_fit = self.shape_fit.outputs()
