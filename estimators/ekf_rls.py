@@ -208,9 +208,7 @@ class WheelSpeedGate:
         self.x: list[np.ndarray] | None = None  # per wheel (omega, b)
         self.P: list[np.ndarray] = []
         self.rejected = [0] * self.n
-        self.armed = [False] * self.n  # the last rejected sample implied a physical tire term (estimators.jump)
-        self.jump_ref = [0.0] * self.n  # the speed the next implied term is measured from [rad/s]
-        self.jump_sign = [0.0] * self.n  # the sign of the last rejected innovation
+        self.jump = np.zeros((self.n, 3))  # per wheel: armed, reference speed, sign (estimators.jump)
 
     def _start(self, i: int, omega: float, b: float = 0.0) -> None:
         self.x[i] = np.array([omega, b])
@@ -236,18 +234,16 @@ class WheelSpeedGate:
             before = self.rejected[i]
             verdict, self.rejected[i] = gate(nis(e, S), before, self.params)
             if verdict != Verdict.ACCEPT:  # a friction jump (estimators.jump): restart at the implied tire term
-                ref = self.x[i][0] if before == 0 else self.jump_ref[i]
-                jump, chain, b = jump_test(before, self.armed[i], self.jump_sign[i], ref, float(omega[i]),
-                                              float(torque_prev[i]), e, self.dt, self.I_w, float(self.b_bound[i]))
-                self.armed[i], self.jump_ref[i], self.jump_sign[i] = chain, float(omega[i]), float(np.sign(e))
-                if jump:
-                    verdict, self.rejected[i] = Verdict.REINIT, 0
+                ref = self.x[i][0] if before == 0 else self.jump[i, 1]
+                jump, chain, b = jump_test(before, bool(self.jump[i, 0] > 0), self.jump[i, 2], ref, float(omega[i]),
+                                           float(torque_prev[i]), e, self.dt, self.I_w, float(self.b_bound[i]))
+                self.jump[i] = (float(chain), float(omega[i]), np.sign(e))
+                verdict, self.rejected[i] = (Verdict.REINIT, 0) if jump else (verdict, self.rejected[i])
             if verdict == Verdict.REJECT:  # the covariance is held: a bad run must not widen the gate to itself
-                self.x[i] = x
-                used[i] = x[0]
+                self.x[i], used[i] = x, x[0]
             elif verdict == Verdict.REINIT:
                 self._start(i, float(omega[i]), b if jump else 0.0)
-                self.armed[i] = False
+                self.jump[i, 0] = 0.0
             else:
                 K = P[:, 0] / S
                 self.x[i] = x + K * e
@@ -316,8 +312,7 @@ class EkfRlsCore:
         if self.wheel_gate is not None:  # outliers: the gate's prediction replaces a rejected wheel speed
             omega, verdicts = self.wheel_gate(omega, self.torque_prev)
         restarted = Verdict.REINIT in verdicts  # a friction jump (estimators.jump) or a lost track: the RLS and the
-        if restarted:  # shape fit forget the old road at once (their own detectors need about 0.4 s)
-            self.P_rls = RLS_P0
+        self.P_rls = RLS_P0 if restarted else self.P_rls  # shape fit forget the old road at once (0.4 s before)
         self.torque_prev = np.array(torque, dtype=float)
         wr = omega * cfg.R_w
         T_total = float(torque.sum())
@@ -368,8 +363,7 @@ class EkfRlsCore:
         # 6. the curve's shape (estimators.curve_shape): peak slip, and the peak friction once the fit is used
         peak_slip = np.nan
         if self.shape_fit is not None:
-            if restarted:
-                self.shape_fit.reset()
+            self.shape_fit.reset(np.array([restarted]))  # nothing unless the gate restarted
             self.shape_fit.update(np.array([abs(phi) / self.Fz_total]), np.array([mu_util]), np.array([y]),
                                   np.array([True]))
             slip_fit, mu_fit = self.shape_fit.outputs()
