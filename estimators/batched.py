@@ -30,6 +30,7 @@ import numpy as np
 from estimators.base import Health
 from estimators.curve_shape import ShapeFit
 from estimators.ekf_rls import KS0, PHI_MIN_SLIP, RLS_P0, QuarterCarEkfRls
+from estimators.jump import jump_test
 from estimators.mhe_batched import BATCHED_MHE
 from fricenv.plants.quarter_car import QuarterCarParams
 
@@ -40,10 +41,10 @@ _INVALID, _OUTLIER, _REINIT = int(Health.INVALID_INPUT), int(Health.OUTLIER), in
 _OK, _NOT_EXCITED = int(Health.OK), int(Health.NOT_EXCITED)
 
 
-def _gate_row(i, omega, torque_prev, gc, x, P, started, rejected) -> tuple[float, int]:
+def _gate_row(i, omega, torque_prev, gc, x, P, started, rejected, jump) -> tuple[float, int]:
     """:class:`~estimators.ekf_rls.WheelSpeedGate` for sub-env ``i``: the wheel speed to use and the health it
-    implies (``_OK`` when accepted). ``gc`` from :meth:`BatchedGate.constants`. Plain Python compiled by
-    :func:`_core_kernel`."""
+    implies (``_OK`` when accepted). ``gc`` from :meth:`BatchedGate.constants`; ``jump[i]``: (armed, reference
+    speed, sign) of the friction-jump rule (:mod:`estimators.jump`). Plain Python compiled by :func:`_core_kernel`."""
     dt, I_w, R, b_var0, q_b, bound, max_rej = gc[0], gc[1], gc[2], gc[3], gc[4], gc[5], gc[6]
     if not started[i]:
         started[i], x[i, 0], x[i, 1] = True, omega, 0.0
@@ -60,8 +61,12 @@ def _gate_row(i, omega, torque_prev, gc, x, P, started, rejected) -> tuple[float
         x[i, 0], x[i, 1] = x0 + k0 * e, x1 + k1 * e
         P[i, 0, 0], P[i, 0, 1], P[i, 1, 0], P[i, 1, 1] = p00 - k0 * p00, p01 - k0 * p01, p10 - k1 * p00, p11 - k1 * p01
         return omega, _OK
-    if rejected[i] >= max_rej:  # the (max_rejections + 1)-th in a row: restart from the measurement
-        rejected[i], x[i, 0], x[i, 1] = 0, omega, 0.0
+    ref = x[i, 0] if rejected[i] == 0 else jump[i, 1]
+    is_jump, chain, b = jump_test(rejected[i], jump[i, 0] > 0, jump[i, 2], ref, omega, torque_prev, e, dt, I_w,
+                                     gc[7])
+    jump[i, 0], jump[i, 1], jump[i, 2] = 1.0 if chain else 0.0, omega, np.sign(e)
+    if is_jump or rejected[i] >= max_rej:  # a friction jump, or the (max_rejections + 1)-th in a row: restart
+        rejected[i], x[i, 0], x[i, 1], jump[i, 0] = 0, omega, b if is_jump else 0.0, 0.0
         P[i, 0, 0], P[i, 0, 1], P[i, 1, 0], P[i, 1, 1] = R, 0.0, 0.0, b_var0
         return omega, _REINIT
     rejected[i] += 1  # rejected: the prediction replaces the speed, the covariance is held
@@ -102,7 +107,7 @@ def _ekf_row(i, a_x, torque, S, k, x, P, H, A, Q, T, U) -> float:
     return F
 
 
-def _core_rows(omega, a_x, T_b, k, gated, gc, gx, gP, started, rejected, y, c, R_g, x, P, k_s, P_rls, s_num,
+def _core_rows(omega, a_x, T_b, k, gated, gc, gx, gP, started, rejected, gj, y, c, R_g, x, P, k_s, P_rls, s_num,
                s_den, mu_peak, torque_prev, H, A, Q, out) -> None:
     """Steps 1-4 of :class:`~estimators.ekf_rls.EkfRlsCore` for every sub-env, in place; ``out`` gets (S, F,
     health) per sub-env. ``k``: (dt, R_w, d, m_eff, m, I_w, C_s, a_x loop factor, dead zone, lam, F_z, phi_min
@@ -115,7 +120,9 @@ def _core_rows(omega, a_x, T_b, k, gated, gc, gx, gP, started, rejected, y, c, R
             continue
         torque, w, health = -T_b[i], omega[i], _OK
         if gated:
-            w, health = _gate_row(i, omega[i], torque_prev[i], gc, gx, gP, started, rejected)
+            w, health = _gate_row(i, omega[i], torque_prev[i], gc, gx, gP, started, rejected, gj)
+            if health == _REINIT:  # the gate restarted: the RLS forgets the old road (as EkfRlsCore.step)
+                P_rls[i] = RLS_P0
         torque_prev[i] = torque
         wr = w * R_w
         if np.isnan(y[i]):  # 1. velocity filter, eqs. (4)-(6) with the a_x loop
@@ -154,7 +161,8 @@ def _core_kernel():
         import numba
 
         jit = numba.njit(cache=True, error_model="numpy")
-        deps = {f.__name__: jit(f) for f in (_gate_row, _ekf_row)}
+        gate_row = types.FunctionType(_gate_row.__code__, {**globals(), "jump_test": jit(jump_test)}, "_gate_row")
+        deps = {"_gate_row": jit(gate_row), "_ekf_row": jit(_ekf_row)}
         _COMPILED_CORE.append(jit(types.FunctionType(_core_rows.__code__, {**globals(), **deps}, "_core_rows")))
     return _COMPILED_CORE[0]
 
@@ -165,9 +173,10 @@ class _NoGate:
     def __init__(self, n: int):
         self.x, self.P = np.zeros((n, 2)), np.zeros((n, 2, 2))
         self.started, self.rejected = np.zeros(n, dtype=bool), np.zeros(n, dtype=np.int64)
+        self.jump = np.zeros((n, 3))
 
     def constants(self) -> np.ndarray:
-        return np.zeros(7)
+        return np.zeros(8)
 
 
 class BatchedGate:
@@ -185,15 +194,18 @@ class BatchedGate:
         self.P = np.zeros((n, 2, 2))
         self.started = np.zeros(n, dtype=bool)
         self.rejected = np.zeros(n, dtype=np.int64)
+        self.jump = np.zeros((n, 3))  # (armed, reference speed, sign) of the friction-jump rule (estimators.jump)
 
     def reset(self, mask: np.ndarray) -> None:
         self.started[mask] = False
         self.rejected[mask] = 0
+        self.jump[mask] = 0.0
 
     def constants(self) -> np.ndarray:
-        """(dt, I_w, R, b's initial variance, q_b, NIS bound, max rejections) for the compiled step."""
+        """(dt, I_w, R, b's initial variance, q_b, NIS bound, max rejections, jump bound) for the compiled step."""
         t = self.t
-        return np.array([t.dt, t.I_w, t.R, t.b_std0[0] ** 2, t.Q[1, 1], t.params.bound, t.params.max_rejections])
+        return np.array([t.dt, t.I_w, t.R, t.b_std0[0] ** 2, t.Q[1, 1], t.params.bound, t.params.max_rejections,
+                         t.b_bound[0]])
 
 
 class BatchedEkfRls:
@@ -255,11 +267,13 @@ class BatchedEkfRls:
         health = np.full(self.n, int(Health.NOT_EXCITED))
         return {k: a.copy() for k, a in self.last.items()}, health
 
-    def _shape(self, active: np.ndarray, S: np.ndarray, mu_util: np.ndarray, mu_map: np.ndarray
-               ) -> tuple[np.ndarray, np.ndarray]:
+    def _shape(self, active: np.ndarray, S: np.ndarray, mu_util: np.ndarray, mu_map: np.ndarray,
+               restarted: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Step 6, the curve-shape fit: (peak friction, peak slip), the map's friction until the fit has data."""
         if self.shape_fit is None:
             return mu_map, np.full(self.n, self.prior_peak_slip)
+        if restarted.any():  # the gate restarted (a friction jump): the fit forgets the old road, as the single one
+            self.shape_fit.reset(restarted)
         Fz = self.core.Fz_total
         self.shape_fit.update(np.abs(Fz * S) / Fz, mu_util, self.y, active)  # |phi| / F_z, as the single one
         peak_slip, mu_fit = self.shape_fit.outputs()
@@ -274,14 +288,15 @@ class BatchedEkfRls:
         out = np.zeros((self.n, 3))  # S, F, health
         g = self.gate or self._no_gate
         _core_kernel()(omega, a_x, T_b, self.consts, self.gate is not None, g.constants(), g.x, g.P, g.started,
-                       g.rejected, self.y, self.c, self.R_g, self.x, self.P, self.k_s, self.P_rls, self.s_num,
+                       g.rejected, g.jump, self.y, self.c, self.R_g, self.x, self.P, self.k_s, self.P_rls, self.s_num,
                        self.s_den, self.mu_peak, self.torque_prev, self.core.H[0], self.core.A, self.core.Q, out)
         S, F, health = out[:, 0], out[:, 1], out[:, 2].astype(int)
         active = health != int(Health.INVALID_INPUT)
         with np.errstate(divide="ignore", invalid="ignore"):
             s_bar = np.where(self.s_den > 0, self.s_num / self.s_den, 0.0)
         mu_util = np.abs(F) / self.core.Fz_total
-        mu, peak_slip = self._shape(active, S, mu_util, self.core.mu_map.batch(self.k_s, s_bar))
+        mu, peak_slip = self._shape(active, S, mu_util, self.core.mu_map.batch(self.k_s, s_bar),
+                                    health == int(Health.REINITIALISED))
         new = {"v": self.y, "slip": -S, "F_x": -F, "k_s": self.k_s, "mu": mu, "mu_peak": self.mu_peak,
                "mu_utilized": mu_util, "peak_slip": peak_slip}
         every = active.all()

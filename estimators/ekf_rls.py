@@ -59,6 +59,7 @@ import numpy as np
 from estimators.base import Estimate, Estimator, EstimatorConfigError, Health, check_dt
 from estimators.curve_shape import DEFAULT_BANK, ShapeBank, ShapeFit, ShapeFitParams
 from estimators.ekf import ekf_predict, ekf_update
+from estimators.jump import JUMP_MU_MAX, jump_test
 from estimators.outliers import DEFAULT_GATE, GateParams, Verdict, check_gate, gate, nis
 from fricenv.plants.quarter_car import PAPER_PARAMS, QuarterCarParams
 from fricenv.plants.sui_johansen import OMEGA_NOISE_STD
@@ -180,7 +181,8 @@ class WheelSpeedGate:
     torque), measured with noise ``omega_std``. A wheel speed whose NIS fails the gate is replaced by the
     prediction (the filters run on it as if it had not come) and the covariance is held at its last one-step value
     (the random walk of b would open the gate to a dropout within 7 samples); the ``max_rejections + 1``-th in a row
-    restarts that wheel's filter from the measurement.
+    restarts that wheel's filter from the measurement, and so does a second rejected sample that a friction jump
+    explains (:mod:`estimators.jump`), with b at the tire term it implies.
 
     :param n: number of wheels.
     :param I_w: wheel inertia [kg m^2].
@@ -197,6 +199,7 @@ class WheelSpeedGate:
         self.params = params
         self.R = float(omega_std) ** 2
         self.b_std0 = np.asarray(Fz, dtype=float) * R_w / I_w  # [rad/s^2]
+        self.b_bound = JUMP_MU_MAX * self.b_std0  # largest tire term a road can produce (estimators.jump) [rad/s^2]
         self.Q = np.diag([0.0, WHEEL_B_STD**2])
         self.F = np.array([[1.0, -self.dt], [0.0, 1.0]])
         self.reset()
@@ -205,9 +208,10 @@ class WheelSpeedGate:
         self.x: list[np.ndarray] | None = None  # per wheel (omega, b)
         self.P: list[np.ndarray] = []
         self.rejected = [0] * self.n
+        self.jump = np.zeros((self.n, 3))  # per wheel: armed, reference speed, sign (estimators.jump)
 
-    def _start(self, i: int, omega: float) -> None:
-        self.x[i] = np.array([omega, 0.0])
+    def _start(self, i: int, omega: float, b: float = 0.0) -> None:
+        self.x[i] = np.array([omega, b])
         self.P[i] = np.diag([self.R, self.b_std0[i] ** 2])
 
     def __call__(self, omega: np.ndarray, torque_prev: np.ndarray) -> tuple[np.ndarray, list[Verdict]]:
@@ -227,12 +231,19 @@ class WheelSpeedGate:
             P = self.F @ self.P[i] @ self.F.T + self.Q
             e = float(omega[i]) - x[0]
             S = P[0, 0] + self.R
-            verdict, self.rejected[i] = gate(nis(e, S), self.rejected[i], self.params)
+            before = self.rejected[i]
+            verdict, self.rejected[i] = gate(nis(e, S), before, self.params)
+            if verdict != Verdict.ACCEPT:  # a friction jump (estimators.jump): restart at the implied tire term
+                ref = self.x[i][0] if before == 0 else self.jump[i, 1]
+                jump, chain, b = jump_test(before, bool(self.jump[i, 0] > 0), self.jump[i, 2], ref, float(omega[i]),
+                                           float(torque_prev[i]), e, self.dt, self.I_w, float(self.b_bound[i]))
+                self.jump[i] = (float(chain), float(omega[i]), np.sign(e))
+                verdict, self.rejected[i] = (Verdict.REINIT, 0) if jump else (verdict, self.rejected[i])
             if verdict == Verdict.REJECT:  # the covariance is held: a bad run must not widen the gate to itself
-                self.x[i] = x
-                used[i] = x[0]
+                self.x[i], used[i] = x, x[0]
             elif verdict == Verdict.REINIT:
-                self._start(i, float(omega[i]))
+                self._start(i, float(omega[i]), b if jump else 0.0)
+                self.jump[i, 0] = 0.0
             else:
                 K = P[:, 0] / S
                 self.x[i] = x + K * e
@@ -300,6 +311,8 @@ class EkfRlsCore:
         verdicts = [Verdict.ACCEPT] * n
         if self.wheel_gate is not None:  # outliers: the gate's prediction replaces a rejected wheel speed
             omega, verdicts = self.wheel_gate(omega, self.torque_prev)
+        restarted = Verdict.REINIT in verdicts  # a friction jump (estimators.jump) or a lost track: the RLS and the
+        self.P_rls = RLS_P0 if restarted else self.P_rls  # shape fit forget the old road at once (0.4 s before)
         self.torque_prev = np.array(torque, dtype=float)
         wr = omega * cfg.R_w
         T_total = float(torque.sum())
@@ -350,6 +363,7 @@ class EkfRlsCore:
         # 6. the curve's shape (estimators.curve_shape): peak slip, and the peak friction once the fit is used
         peak_slip = np.nan
         if self.shape_fit is not None:
+            self.shape_fit.reset(np.array([restarted]))  # nothing unless the gate restarted
             self.shape_fit.update(np.array([abs(phi) / self.Fz_total]), np.array([mu_util]), np.array([y]),
                                   np.array([True]))
             slip_fit, mu_fit = self.shape_fit.outputs()

@@ -13,8 +13,13 @@ slip_hat    -       1          -1     1      estimated wheel slip
 mu_hat      -       1          -2     2      estimated friction coefficient in use
 theta_hat   -       1          0      2      estimated road coefficient theta (peak factor of the Magic Formula)
 peak_slip_  -       1          0      1      estimated slip of the friction peak (``peak_slip_hat``; estimators that
-hat                                          report one: ``ekf-rls`` with its curve-shape fit, and the oracle)
-health      -       1          0      5      :class:`estimators.base.Health` of the last update (0 = OK, 4 = OUTLIER)
+hat                                          report one: ``ekf-rls`` with its curve-shape fit, and the oracle; while
+                                             the fit cannot tell far-apart peaks apart, the slip that keeps most
+                                             friction on the worst plausible curve, (S5) of
+                                             :mod:`estimators.curve_shape`)
+health      -       1          0      5      :class:`estimators.base.Health` of the last update (0 = OK, 4 = OUTLIER,
+                                             5 = REINITIALISED, for ``ekf-rls`` also a friction jump,
+                                             :mod:`estimators.jump`)
 ==========  ======  =========  =====  =====  ===============================================================
 
 Timing. The estimator interface's ``update(y_k, u_k)`` takes the torque *held from k to k+1*, which is known only

@@ -1,5 +1,5 @@
 """The batched EKF/RLS (compiled) equals N single estimators (to 1e-9) across per-env resets, outliers and invalid
-samples, with and without the wheel-speed gate."""
+samples and friction jumps, with and without the wheel-speed gate."""
 
 from __future__ import annotations
 
@@ -15,7 +15,8 @@ N, STEPS, DT = 6, 400, 0.01
 
 
 def _signals(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Braking-like wheel speed, a_x and torque per sub-env, with spikes (outliers) and a dropout run."""
+    """Braking-like wheel speed, a_x and torque per sub-env, with spikes (outliers), a dropout run and a wheel that
+    locks (a friction jump, :mod:`estimators.jump`)."""
     t = np.arange(STEPS) * DT
     v = 25.0 - 6.0 * t[:, None] * rng.uniform(0.5, 1.5, N)
     slip = 0.05 + 0.04 * np.sin(7.0 * t[:, None] + rng.uniform(0, 6, N))
@@ -26,6 +27,8 @@ def _signals(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarr
     spikes = rng.random((STEPS, N)) < 0.02
     omega[spikes] += rng.choice([-30.0, 30.0], spikes.sum())
     omega[200:215, 1] = 0.0  # a dropout longer than max_rejections: rejections then a re-initialisation
+    lock = np.arange(1, STEPS - 300 + 1)  # a wheel that locks at 800 rad/s^2 (a friction drop): the gate's jump rule
+    omega[300:, 5] = np.maximum(omega[299, 5] - 8.0 * lock, 0.0) + rng.normal(0, 0.05, lock.size)
     omega[50, 2] = np.nan  # an invalid sample
     return omega, a_x, T_b
 
