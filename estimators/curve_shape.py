@@ -93,6 +93,9 @@ SPEED_BIAS_STEP = 0.1  # spacing of the candidate speed errors profiled out of t
 SPEED_BIAS_MAX = 0.4  # largest candidate speed error (2.6 sigma of a reset from one noisy wheel speed) [m/s]
 MINIMAX_STEP = 0.001  # slip grid of the reported peak slip (S5) [-]
 MINIMAX_GAIN = 0.05  # (S5) leaves the bank's peaks when that keeps this share of the peak friction more [-]
+PENDING_SAMPLES = 40  # after a caller's restart, scored samples the peak friction waits for the jump test [-]
+OVER_MARGIN = 3.0  # (S6): the friction in use exceeds the peak friction by this many sigma_mu ... [-]
+OVER_SAMPLES = 3  # ... this many scored samples in a row: a friction jump [-]
 
 
 @dataclass(frozen=True)
@@ -210,6 +213,8 @@ class ShapeFit:
         self._best_bias = np.zeros(self.n, dtype=np.int64)  # its speed error
         self._informed = np.zeros(self.n, dtype=bool)  # n_eff has reached min_samples
         self._plausible = np.zeros(self.n, dtype=np.int64)  # the plausible shapes of (S4), bit j for shape j
+        self._pending = np.zeros(self.n, dtype=np.int64)  # samples a caller's restart (:meth:`restart`) waits
+        self._over = np.zeros(self.n, dtype=np.int64)  # scored samples in a row above the peak friction (S6)
         self.reset()
         off = np.zeros(self.n)  # an inactive sample changes no state: it loads the compiled update now, not in the
         self.update(off, off, off, np.zeros(self.n, dtype=bool))  # first timed step
@@ -226,6 +231,15 @@ class ShapeFit:
         self._best_bias[m] = len(self.biases) // 2
         self._informed[m] = False
         self._plausible[m] = 0
+        self._pending[m] = 0
+        self._over[m] = 0
+
+    def restart(self, mask: np.ndarray) -> None:
+        """A friction jump seen by the caller (the EKF/RLS's gate restarted) for the estimators in ``mask``: the
+        peak friction is withheld (NaN: the caller's own) until the fit's jump test restarts the memory, or for
+        ``PENDING_SAMPLES`` scored samples (module docstring)."""
+        m = np.asarray(mask, dtype=bool) & self._informed
+        self._pending[m] = PENDING_SAMPLES
 
     def update(self, slip: np.ndarray, mu: np.ndarray, speed: np.ndarray, active: np.ndarray) -> None:
         """Score one sample per estimator: |slip|, friction in use, filtered speed [m/s], each (N,); estimators
@@ -235,7 +249,7 @@ class ShapeFit:
         _kernel()(np.asarray(slip, dtype=float), np.asarray(mu, dtype=float), np.asarray(speed, dtype=float),
                   np.asarray(active, dtype=bool), bank.B, bank.C, bank.E, bank.g_max, bank.kept, self.biases,
                   self._tuning, self.a, self.b, self.c, *self.fast, self.theta, self.cost, self.n_eff, self.n_fast,
-                  self._best, self._best_bias, self._informed, self._plausible)
+                  self._best, self._best_bias, self._informed, self._plausible, self._pending, self._over)
 
     def best(self) -> np.ndarray:
         """Index of the winning shape per estimator (N,), the prior (0) until the fit is used."""
@@ -255,7 +269,7 @@ class ShapeFit:
         k, j = self._best, self._best_bias
         theta = self.theta[self._rows, k, j]
         slip = np.where(self._informed, self.bank.minimax_slip[self._plausible], self.bank.peak_slip[0])
-        return slip, np.where(self._informed, theta, np.nan)
+        return slip, np.where(self._informed & (self._pending == 0), theta, np.nan)
 
 
 def _refresh_row(i, a, b, c, theta, cost, n_eff, kept, tuning, best, best_bias, informed, plausible
@@ -289,7 +303,7 @@ def _refresh_row(i, a, b, c, theta, cost, n_eff, kept, tuning, best, best_bias, 
 
 
 def _update_rows(slip, mu, speed, active, B, C, E, g_max, kept, biases, tuning, a, b, c, fa, fb, fc, theta, cost,
-                 n_eff, n_fast, best, best_bias, informed, plausible) -> None:
+                 n_eff, n_fast, best, best_bias, informed, plausible, pending, over) -> None:
     """:meth:`ShapeFit.update` for every estimator, in place: (S0)-(S4) and the jump restart. ``tuning`` holds
     (lam, fast lam, sigma_mu, sigma_v, slip_min, min_samples, jump_ratio, ambiguity, jump min samples, speed
     floor, coupling). Plain Python compiled by :func:`_kernel`."""
@@ -317,10 +331,16 @@ def _update_rows(slip, mu, speed, active, B, C, E, g_max, kept, biases, tuning, 
         k, j = _refresh_row(i, a, b, c, theta, cost, n_eff, kept, tuning, best, best_bias, informed, plausible)
         # a friction jump: the winner's theta over the fast memory and the whole memory differ by more than ratio
         slow, fast = theta[i, k, j], fb[i, k, j] / fa[i, k, j] if fa[i, k, j] > 0 else 0.0
-        if n_fast[i] >= tuning[8] and slow > 0 and fast > 0 and (fast > ratio * slow or slow > ratio * fast):
+        jump = n_fast[i] >= tuning[8] and slow > 0 and fast > 0 and (fast > ratio * slow or slow > ratio * fast)
+        # (S6) the friction in use above the reported peak friction by more than the noise, OVER_SAMPLES in a row
+        peak = theta[i, best[i], best_bias[i]]
+        over[i] = over[i] + 1 if informed[i] and m > peak + OVER_MARGIN * sigma_mu else 0
+        if jump or over[i] >= OVER_SAMPLES:
             a[i], b[i], c[i] = fa[i], fb[i], fc[i]  # the memory restarts from the data after the jump
             n_eff[i] = n_fast[i]
+            over[i] = 0
             _refresh_row(i, a, b, c, theta, cost, n_eff, kept, tuning, best, best_bias, informed, plausible)
+        pending[i] = 0 if jump else max(pending[i] - 1, 0)
 
 
 _COMPILED_KERNEL: list = []  # the compiled update, built on first use (numba is not imported with the module)

@@ -363,7 +363,7 @@ class EkfRlsCore:
         # 6. the curve's shape (estimators.curve_shape): peak slip, and the peak friction once the fit is used
         peak_slip = np.nan
         if self.shape_fit is not None:
-            self.shape_fit.reset(np.array([restarted]))  # nothing unless the gate restarted
+            self.shape_fit.restart(np.array([restarted]))  # nothing unless the gate restarted
             self.shape_fit.update(np.array([abs(phi) / self.Fz_total]), np.array([mu_util]), np.array([y]),
                                   np.array([True]))
             slip_fit, mu_fit = self.shape_fit.outputs()
