@@ -35,10 +35,7 @@ data tell the shapes apart this is the best fit; when they do not (e.g. slips th
 shape that is least wrong whichever of them is true (dry and snow: dry's 0.19 keeps 98.8 % of snow's friction,
 snow's 1.0 only 79 % of dry's). Tuned on noise seeds 1-20 of the test logs (``tests/estimators/
 test_curve_shape.py``); on fresh seeds 300-309 dry, wet, snow and ice are placed on every seed, ice->dry followed.
-dry->ice: followed on every seed before the EKF/RLS restarted this fit at a gate restart (issue 17 session 10);
-since, on 9 of 10 fresh seeds and 16 of 20 tuning seeds (the others 0.12-0.23 of the samples on ice's peak: the
-open-loop test log locks the wheel after the jump and the restarted fit leaves every shape plausible; the fit's own
-jump detector, restarting from its fast copy, placed ice there). ``python -m tests.shape_validation``.
+dry->ice and ice->dry followed on every fresh and tuning seed. ``python -m tests.shape_validation``.
 
 The reported peak slip (S5). Between shapes whose peaks lie far apart the safest bank peak still loses much: a
 policy that brakes at dry's 0.19 on wet gets 92 % of wet's friction, and its slips never pass below wet's peak,
@@ -51,8 +48,20 @@ either peak; braking there puts the data on dry's rising and wet's falling side,
 dry or ice: the bank peak (dry's 0.19, ice's 0.39). The reported shape (:meth:`ShapeFit.best`) and its peak
 friction are those of (S4); :meth:`ShapeFit.plausible` gives the set.
 
-A friction jump (the best pair's theta over the fast memory, forgetting ``fast_forgetting``, and over the whole
-memory differ by more than ``jump_ratio``) restarts the memory from the fast copy, i.e. from the data after it.
+A friction jump restarts the memory from the fast copy (forgetting ``fast_forgetting``), i.e. from the data after
+it. The fit sees one when the best pair's theta over the fast memory and over the whole memory differ by more than
+``jump_ratio``, or when
+
+    (S6)  mu > theta_reported + OVER_MARGIN sigma_mu   on OVER_SAMPLES scored samples in a row
+
+(the friction in use above the road's peak friction, impossible on one road: after ice -> dry under a gentle
+policy the wheel spins up without a gate restart, the slips stay on dry's rising side, the fast and slow theta
+differ by less than ``jump_ratio``, and the fit held wet at a peak friction of 0.37 while 0.71 was in use, PPO +
+EKF/RLS training seed 0 at 20 m/s, issue 17 session 10). A jump seen by the caller (:meth:`ShapeFit.restart`, the
+EKF/RLS's gate restarting) does not zero the memory: on a wheel that locks after dry -> ice, data from slip 1 alone
+leave every shape plausible (dry->ice then placed on 0.12 of the samples, fresh seed 300). It withholds the
+peak friction (NaN: the caller's own, whose RLS restarted) until the fit's jump test restarts the memory from the
+fast copy, which holds the slips the wheel swept on its way to the lock, or for ``PENDING_SAMPLES``.
 
 Outputs: the reported shape's peak slip and its ``theta`` (the peak friction) once ``n_eff`` (the forgotten count
 of scored samples) reaches ``MIN_SAMPLES``; before, the prior shape (the bank's first, dry asphalt) and no peak
