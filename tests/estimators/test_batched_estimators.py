@@ -23,7 +23,6 @@ def _signals(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarr
     omega = v * (1.0 - slip) / PAPER_PARAMS.r + rng.normal(0, 0.05, (STEPS, N))
     a_x = -6.0 + rng.normal(0, 0.05, (STEPS, N))
     a_x[STEPS // 2:, 3:5] /= 6.0  # a friction jump (6x less force): the curve-shape fit restarts its memory
-    a_x[:STEPS // 2, 0] /= 6.0  # a jump to 6x more force, no gate restart: the fit's (S6) restarts its memory
     T_b = 800.0 + 300.0 * np.sin(11.0 * t[:, None] + rng.uniform(0, 6, N))
     spikes = rng.random((STEPS, N)) < 0.02
     omega[spikes] += rng.choice([-30.0, 30.0], spikes.sum())
