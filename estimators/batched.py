@@ -272,8 +272,8 @@ class BatchedEkfRls:
         """Step 6, the curve-shape fit: (peak friction, peak slip), the map's friction until the fit has data."""
         if self.shape_fit is None:
             return mu_map, np.full(self.n, self.prior_peak_slip)
-        if restarted.any():  # the gate restarted (a friction jump): the fit forgets the old road, as the single one
-            self.shape_fit.reset(restarted)
+        if restarted.any():  # the gate restarted (a friction jump): the fit withholds the old road's, as the single one
+            self.shape_fit.restart(restarted)
         Fz = self.core.Fz_total
         self.shape_fit.update(np.abs(Fz * S) / Fz, mu_util, self.y, active)  # |phi| / F_z, as the single one
         peak_slip, mu_fit = self.shape_fit.outputs()

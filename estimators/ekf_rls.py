@@ -311,8 +311,8 @@ class EkfRlsCore:
         verdicts = [Verdict.ACCEPT] * n
         if self.wheel_gate is not None:  # outliers: the gate's prediction replaces a rejected wheel speed
             omega, verdicts = self.wheel_gate(omega, self.torque_prev)
-        restarted = Verdict.REINIT in verdicts  # a friction jump (estimators.jump) or a lost track: the RLS and the
-        self.P_rls = RLS_P0 if restarted else self.P_rls  # shape fit forget the old road at once (0.4 s before)
+        restarted = Verdict.REINIT in verdicts  # a friction jump (estimators.jump) or a lost track: the RLS forgets
+        self.P_rls = RLS_P0 if restarted else self.P_rls  # the old road at once, the shape fit withholds it (step 6)
         self.torque_prev = np.array(torque, dtype=float)
         wr = omega * cfg.R_w
         T_total = float(torque.sum())
@@ -363,7 +363,7 @@ class EkfRlsCore:
         # 6. the curve's shape (estimators.curve_shape): peak slip, and the peak friction once the fit is used
         peak_slip = np.nan
         if self.shape_fit is not None:
-            self.shape_fit.reset(np.array([restarted]))  # nothing unless the gate restarted
+            self.shape_fit.restart(np.array([restarted]))  # nothing unless the gate restarted
             self.shape_fit.update(np.array([abs(phi) / self.Fz_total]), np.array([mu_util]), np.array([y]),
                                   np.array([True]))
             slip_fit, mu_fit = self.shape_fit.outputs()

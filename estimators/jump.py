@@ -21,8 +21,9 @@ which a road can produce only if ``|b_implied| <= b_bound = JUMP_MU_MAX F_z R_w 
 ``JUMP_MU_MAX`` times the load). A second rejected sample in a row whose innovation has the sign of the first, in a run
 whose every sample a road can produce, is a friction jump: the gate restarts from it with b at its implied value
 (``Health.REINITIALISED``: 20 ms after the jump, not 100 ms). Any restart of the gate also restarts the EKF/RLS's
-memory of the road (:meth:`estimators.ekf_rls.EkfRlsCore.step`: the RLS covariance and the curve-shape fit), whose
-own detectors held dry's peak friction for about 0.4 s after the jump (the same trace). An isolated spike passes no such test (the sample
+memory of the road (:meth:`estimators.ekf_rls.EkfRlsCore.step`: the RLS covariance restarts, and the curve-shape
+fit withholds its peak friction until its own jump test restarts its memory, :meth:`estimators.curve_shape.ShapeFit.
+restart`), whose own detectors held dry's peak friction for about 0.4 s after the jump (the same trace). An isolated spike passes no such test (the sample
 after it agrees with the old prediction and is accepted); a spike of a tenth or ten times the speed, or a drop to
 zero at speed, implies a tire force many times the load. A run of equal bad readings at low speed (a dropout to
 zero below about 5 m/s) does look like a wheel that locked, and is then taken as one: for a brake controller the
