@@ -49,6 +49,16 @@ def test_results_in_task_order_and_one_progress_step_per_task(jobs):
     assert sink.events[1:] == [("advance", 1)] * 3 + [("finish",)]
 
 
+@pytest.fixture
+def ctrl_c_raises():
+    """SIGINT raises KeyboardInterrupt during the test, as in an interactive shell. A process started in the background
+    (``nohup``, ``&``) inherits SIGINT ignored, and Python then installs no handler: the interrupt tests would
+    send a signal nobody hears."""
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield
+    signal.signal(signal.SIGINT, previous)
+
+
 def _alive(pid: int) -> bool:
     try:
         os.kill(pid, 0)
@@ -57,6 +67,7 @@ def _alive(pid: int) -> bool:
     return True
 
 
+@pytest.mark.usefixtures("ctrl_c_raises")
 def test_interrupt_terminates_the_worker_processes(tmp_path):
     """Ctrl-C in the main process while two workers sleep: the KeyboardInterrupt propagates and both workers are
     gone (terminated, not left to finish their two-minute task)."""

@@ -11,7 +11,7 @@ import pytest
 
 from fricenv.gap.pool import map_tasks, shared_pool, start_tasks
 
-from .test_gap_pool import _alive
+from .test_gap_pool import _alive, ctrl_c_raises  # noqa: F401  (a fixture)
 
 
 def _pid_after(pause: float) -> int:
@@ -40,6 +40,7 @@ def test_without_a_shared_pool_every_map_starts_its_own_workers():
     assert not set(first) & set(second)
 
 
+@pytest.mark.usefixtures("ctrl_c_raises")
 def test_interrupt_inside_a_shared_pool_ends_its_workers():
     main = threading.get_ident()
     with shared_pool(2):
