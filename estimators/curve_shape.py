@@ -34,8 +34,8 @@ shape, ``argmax_i min_j kept[i, j]`` with ``kept[i, j] = g_j(peak slip of i)`` (
 data tell the shapes apart this is the best fit; when they do not (e.g. slips that never pass a peak), it is the
 shape that is least wrong whichever of them is true (dry and snow: dry's 0.19 keeps 98.8 % of snow's friction,
 snow's 1.0 only 79 % of dry's). Tuned on noise seeds 1-20 of the test logs (``tests/estimators/
-test_curve_shape.py``); on fresh seeds 300-309 dry, wet, snow and ice are placed on every seed, ice->dry followed.
-dry->ice and ice->dry followed on every fresh and tuning seed. ``python -m tests.shape_validation``.
+test_curve_shape.py``); on fresh seeds 300-309 dry, wet, snow and ice are placed on every seed, and dry->ice and
+ice->dry are followed on every fresh and tuning seed (``python -m tests.shape_validation``).
 
 The reported peak slip (S5). Between shapes whose peaks lie far apart the safest bank peak still loses much: a
 policy that brakes at dry's 0.19 on wet gets 92 % of wet's friction, and its slips never pass below wet's peak,
