@@ -233,16 +233,18 @@ class WheelSpeedGate:
             S = P[0, 0] + self.R
             before = self.rejected[i]
             verdict, self.rejected[i] = gate(nis(e, S), before, self.params)
+            b_restart = 0.0  # the tire term a restart starts from: 0, or the one a friction jump implies
             if verdict != Verdict.ACCEPT:  # a friction jump (estimators.jump): restart at the implied tire term
                 ref = self.x[i][0] if before == 0 else self.jump[i, 1]
                 jump, chain, b = jump_test(before, bool(self.jump[i, 0] > 0), self.jump[i, 2], ref, float(omega[i]),
                                            float(torque_prev[i]), e, self.dt, self.I_w, float(self.b_bound[i]))
                 self.jump[i] = (float(chain), float(omega[i]), np.sign(e))
-                verdict, self.rejected[i] = (Verdict.REINIT, 0) if jump else (verdict, self.rejected[i])
+                if jump:
+                    verdict, self.rejected[i], b_restart = Verdict.REINIT, 0, b
             if verdict == Verdict.REJECT:  # the covariance is held: a bad run must not widen the gate to itself
                 self.x[i], used[i] = x, x[0]
             elif verdict == Verdict.REINIT:
-                self._start(i, float(omega[i]), b if jump else 0.0)
+                self._start(i, float(omega[i]), b_restart)
                 self.jump[i, 0] = 0.0
             else:
                 K = P[:, 0] / S

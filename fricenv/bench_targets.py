@@ -335,6 +335,11 @@ def _cpu_seconds() -> float:
                                                  resource.getrusage(resource.RUSAGE_CHILDREN)))
 
 
+def _medians(times: dict[str, dict[str, list[float]]]) -> dict[str, dict[str, float]]:
+    """The median of each list of a ``{path: {channels: [seconds, ...]}}`` table."""
+    return {path: {key: statistics.median(v) for key, v in by.items()} for path, by in times.items()}
+
+
 def bench_gap(args: argparse.Namespace) -> dict[str, Any]:
     """Wall seconds to diagnose one 5 s log on 2 cores (all channels, and t, T_b, omega only) with the compiled
     window simulator and with the numpy one (the path before issue 18) in the same run, interleaved, and their
@@ -355,8 +360,7 @@ def bench_gap(args: argparse.Namespace) -> dict[str, Any]:
         a, b = _speed_reconstruction_ms(_gap_log(args.seed + k, False))
         newton.append(a)
         sequential.append(b)
-    med = {path: {key: statistics.median(v) for key, v in by.items()} for path, by in seconds.items()}
-    med_cpu = {path: {key: statistics.median(v) for key, v in by.items()} for path, by in cpu.items()}
+    med, med_cpu = _medians(seconds), _medians(cpu)
     out = {"gap_diagnose_seconds": med["compiled"], "gap_diagnose_seconds_numpy": med["numpy"],
            "gap_speedup": {key: med["numpy"][key] / med["compiled"][key] for key in channels},
            "gap_diagnose_seconds_all": seconds["compiled"], "gap_diagnose_seconds_numpy_all": seconds["numpy"],

@@ -398,24 +398,25 @@ def shared_lag(conds: dict[str, ChannelCondition], fs: float, f_lo: float, f_use
 
     Each channel that looks filtered (``filtered``, the difference test of :func:`condition_channel`) has its
     roll-off fitted above ``f_lo`` and above ``LAG_BAND_STEP f_lo`` (:func:`filter_lag`, cut-off at least the
-    band's bottom; the fit of smaller lag is kept). The signal's
-    own power can only add to the low end of the band, which lowers a fitted cut-off and lengthens the lag, never
-    the reverse, so every estimate is an upper bound of the lag. When at least one channel shows a roll-off (the
+    band's bottom; the fit of smaller lag is kept). The signal's own power can only add to the low end of the band,
+    which lowers a fitted cut-off and lengthens the lag, never the reverse, so every estimate is an upper bound of
+    the lag. When at least one channel shows a roll-off (the
     log has a sensor filter), every channel that looks filtered (one logger filters them alike) is advanced
     (:func:`advanced`) by the smallest of the fitted lags and of the ``bounds`` (other upper bounds, e.g.
     :func:`lag_against` a reference that an actuator effect can only delay further), and keeps its own roll-off
     fit as ``filter`` (None where its own spectrum showed none): the model is compared with the signal the sensor
     saw, and the noise level read later from the model's residual no longer holds the lag's error. Without any
     roll-off, or when the lag is below ``LAG_MIN_SAMPLES`` or ``LAG_MIN_S`` (a bound says the roll-off was the
-    signal's own), no
-    channel is ``filtered``: the difference test alone takes a rough signal (a deceleration under ABS cycles) for a
+    signal's own), no channel is ``filtered``: the difference test alone takes a rough signal (a deceleration under ABS cycles) for a
     filter, and a filtered channel's noise level, read from the model's residual, would then hold the model's error
     (up to 60 times the sensor noise on the independent simulator's unfiltered ``a_x``).
 
     :param conds: the conditioned channels that a logger may low-pass (a channel the difference test passed as
         unfiltered is never shifted: a signal's own spectrum can show a roll-off).
-    :param fs: sample rate [Hz]; :param f_lo: bottom of the fitted band [Hz]; :param f_use: the lag is the mean group
-        delay over ``(0, f_use]`` [Hz]; :param bounds: other upper bounds of the lag [s].
+    :param fs: sample rate [Hz].
+    :param f_lo: bottom of the fitted band [Hz].
+    :param f_use: the lag is the mean group delay over ``(0, f_use]`` [Hz].
+    :param bounds: other upper bounds of the lag, by name [s].
     """
     from dataclasses import replace
 
