@@ -22,6 +22,10 @@ class DiagnoseConfig:
     horizon_s: float = 0.1  # [s]
     folds: int = 2  # cross-fitting folds: window i belongs to fold i % folds; each fold is held out once [-]
     max_nfev: int = 30  # least-squares iterations per start [-]
+    # Relative step size at which a least-squares run stops (scipy's ``xtol``). Past the optimum the trust region
+    # shrinks by 4x per rejected step; scipy's default 1e-8 spent about half of a run's simulations there, moving
+    # parameters by less than their last reported digit (issue 18) [-]
+    fit_xtol: float = 1e-5
     # Least-squares runs per candidate fit, from the best starts with distinct roads: a run started in the nominal
     # road's basin can stop there (a non-smooth point of the windowed residuals) far from the effect's optimum [-]
     fit_starts: int = 2

@@ -133,7 +133,7 @@ def least_squares_run(effects: Sequence[str], names: Sequence[str], x0: np.ndarr
     if r0 is not None and np.array_equal(z0, x0[fidx]):  # a start inside its bounds is evaluated where it is
         cache[z0.tobytes()] = _finite(r0)
     sol = least_squares(fun, z0, jac=jac, bounds=(lo[fidx], hi[fidx]),
-                        x_scale=x_scales([names[i] for i in fidx]), max_nfev=cfg.max_nfev, method="trf",
+                        x_scale=x_scales([names[i] for i in fidx]), max_nfev=cfg.max_nfev, xtol=cfg.fit_xtol, method="trf",
                         loss=cfg.fit_loss, f_scale=FIT_LOSS_SCALE)
     return full(sol.x), float(sol.cost)
 

@@ -13,6 +13,8 @@ significantly on held-out data, up to ``MAX_EFFECTS``:
   by held-out gain over the set, not by single-fit rank.
 - **Joint fit.** Started from the set's own parameters and the candidate's single fit (a single fit stretched to the
   far bound of its range is no start: the registry's start list is used instead), on top of the road starts.
+- **Screen.** Each joint model is fitted from its best start first; only one past half the addition threshold, or
+  that would call its candidate confounded, is fitted again from every start, which gives exactly the unscreened fit.
 - **Test.** The joint model against the set: the paired held-out z of :func:`fricenv.gap.stats.paired_z` above
   ``cfg.sig_z`` (the improvement on windows the fits did not see, over its spread under the measurement noise,
   less what the extra per-window nuisance states win on pure noise), a lower nuisance-adjusted held-out error, and no
@@ -25,6 +27,7 @@ significantly on held-out data, up to ``MAX_EFFECTS``:
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import replace
 
 from fricenv.effects import registry
 from fricenv.gap.candidates import run_fits, test_against
@@ -36,10 +39,13 @@ from fricenv.gap.verdict import at_range_edge
 from fricenv.gap.windows import Data
 from fricenv.plants import quarter_car as qc
 
-__all__ = ["MAX_EFFECTS", "TRIED_PER_STEP", "confounded", "effects_of", "forward_select", "split_params"]
+__all__ = ["MAX_EFFECTS", "SCREEN_SHARE", "TRIED_PER_STEP", "confounded", "effects_of", "forward_select", "split_params"]
 
 MAX_EFFECTS = 3  # largest selected set [-]
 TRIED_PER_STEP = 6  # candidates fitted jointly with the set per forward step (expected, then best single first) [-]
+# Share of the addition threshold ``cfg.sig_z`` that a joint model fitted from its best start must pass over the set
+# to be fitted again from every start: a second start that moves a joint fit past the test is still tried [-]
+SCREEN_SHARE = 0.5
 
 
 def effects_of(f: CandidateFit) -> list[str]:
@@ -64,20 +70,42 @@ def _seeds(current: CandidateFit, c: CandidateFit, d: Data) -> dict:
     return seeds
 
 
-def _extend(current: CandidateFit, extra: Sequence[CandidateFit], folds: list[Data], d: Data, cfg: DiagnoseConfig,
-            jobs: int, nominal: CandidateFit, known: dict) -> list[CandidateFit]:
-    """The current set plus each of ``extra``, fitted per fold (seeded by :func:`_seeds`) and cross-fitted; a set
-    in ``known`` (frozenset of effect names -> cross-fitted model) is not refitted."""
+def _fit_joints(current: CandidateFit, extra: Sequence[CandidateFit], folds: list[Data], d: Data,
+                cfg: DiagnoseConfig, jobs: int, nominal: CandidateFit) -> list[CandidateFit]:
+    """The current set plus each of ``extra``, fitted per fold (seeded by :func:`_seeds`), cross-fitted and tested
+    against the nominal model."""
     base = effects_of(current)
-    todo = [c for c in extra if frozenset(base + [c.effect]) not in known]
     roads = current.x_folds or (current.x,) * len(folds)
     tasks = [(base + [c.effect], road_of(x), f, cfg, _seeds(current, c, d))
-             for c in todo for f, x in zip(folds, roads)]
+             for c in extra for f, x in zip(folds, roads)]
     fits = run_fits(tasks, jobs, "forward selection") if tasks else []
     k = len(folds)
-    for i, c in enumerate(todo):
-        joint = cross_fitted(fits[i * k:(i + 1) * k], d)
+    joints = [cross_fitted(fits[i * k:(i + 1) * k], d) for i in range(len(extra))]
+    for joint in joints:
         test_against(nominal, joint, d)
+    return joints
+
+
+def _extend(current: CandidateFit, extra: Sequence[CandidateFit], folds: list[Data], d: Data, cfg: DiagnoseConfig,
+            jobs: int, nominal: CandidateFit, known: dict) -> list[CandidateFit]:
+    """The current set plus each of ``extra``, fitted per fold and cross-fitted; a set in ``known`` (frozenset of
+    effect names -> cross-fitted model) is not refitted.
+
+    Screened (issue 18): each joint model is first fitted from its best start alone. Only one past ``SCREEN_SHARE``
+    of the addition threshold over the set, or that would make its candidate :func:`confounded` with the set, is
+    fitted again from all ``cfg.fit_starts`` starts, which gives exactly the unscreened fit (the best start's run
+    is the first of them).
+    """
+    base = effects_of(current)
+    todo = [c for c in extra if frozenset(base + [c.effect]) not in known]
+    quick = replace(cfg, fit_starts=1) if cfg.fit_starts > 1 else cfg
+    joints = _fit_joints(current, todo, folds, d, quick, jobs, nominal)
+    again = [i for i, (c, j) in enumerate(zip(todo, joints))
+             if quick is not cfg and (paired_z(current, j, d) > SCREEN_SHARE * cfg.sig_z
+                                      or confounded(current, c, j, d, cfg))]
+    for i, joint in zip(again, _fit_joints(current, [todo[i] for i in again], folds, d, cfg, jobs, nominal)):
+        joints[i] = joint
+    for c, joint in zip(todo, joints):
         known[frozenset(base + [c.effect])] = joint
     return [known[frozenset(base + [c.effect])] for c in extra]
 

@@ -6,10 +6,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from scipy.signal import butter, group_delay, sosfilt, sosfilt_zi
+from scipy.signal import butter, group_delay, sosfilt, sosfilt_zi, sosfreqz
 
 from fricenv.gap.config import DiagnoseConfig
-from fricenv.gap.sensors import advanced, condition_channel, filter_lag, lag_against, shared_lag
+from fricenv.gap.sensors import LAG_TOP, _rolloff, advanced, condition_channel, filter_lag, lag_against, shared_lag
 from fricenv.gap.windows import prepare
 from fricenv.logs import QuarterCarLog
 from fricenv.plants import quarter_car as qc
@@ -63,6 +63,18 @@ def test_butterworth_lag_is_read_back_from_the_noise_roll_off(order):
     fit = filter_lag(x, FS, 2.0, 1.0, min_cutoff=2.0, families=(False, True))
     assert fit is not None
     assert fit["lag_s"] == pytest.approx(_true_lag(order), rel=0.2)
+
+
+@pytest.mark.parametrize("fs", [25.0, 100.0, 1000.0])
+def test_digital_roll_off_in_closed_form_equals_scipy_butter_response(fs):
+    """The closed-form response of the bilinear Butterworth (pre-warped cut-off) is scipy's filter's, in the band
+    the roll-off is read in, for every order and for cut-offs up to the clamp at 0.499 fs."""
+    f = np.linspace(0.5, LAG_TOP * fs, 200)
+    for order in (1, 2, 3, 4):
+        for fc in np.geomspace(0.5, fs, 25):
+            _, h = sosfreqz(butter(order, min(fc, 0.499 * fs), fs=fs, output="sos"), worN=f, fs=fs)
+            expected = np.log(np.maximum(np.abs(h) ** 2, 1e-300))
+            assert np.allclose(np.log(_rolloff(f, fc, order, fs, digital=True)), expected, rtol=0, atol=1e-9)
 
 
 def test_white_noise_shows_no_roll_off():
