@@ -6,9 +6,10 @@ from dataclasses import dataclass
 
 from fricenv.effects.quarter_car import DEFAULT_SUBSTEPS, EFFECTS
 
-__all__ = ["DEFAULT_CONFIG", "FIT_LOSSES", "DiagnoseConfig"]
+__all__ = ["DEFAULT_CONFIG", "FIT_JACOBIANS", "FIT_LOSSES", "DiagnoseConfig"]
 
 FIT_LOSSES = ("linear", "soft_l1", "cauchy")  # losses of the least-squares fits (scipy's names)
+FIT_JACOBIANS = ("projected", "difference")  # Jacobians of the least-squares fits (DiagnoseConfig.fit_jacobian)
 
 
 @dataclass(frozen=True)
@@ -26,6 +27,11 @@ class DiagnoseConfig:
     # shrinks by 4x per rejected step; scipy's default 1e-8 spent about half of a run's simulations there, moving
     # parameters by less than their last reported digit (issue 18) [-]
     fit_xtol: float = 1e-5
+    # Jacobian of the least-squares fits: "projected" differentiates each window at its fitted start states and
+    # projects out what those states absorb (variable projection; one simulation per parameter, compiled diagnosis
+    # only), "difference" takes forward differences of the nuisance-fitted residuals (a Gauss-Newton fit per
+    # perturbed parameter set: the path before issue 18, and the numpy path's)
+    fit_jacobian: str = "projected"
     # Least-squares runs per candidate fit, from the best starts with distinct roads: a run started in the nominal
     # road's basin can stop there (a non-smooth point of the windowed residuals) far from the effect's optimum [-]
     fit_starts: int = 2
@@ -54,6 +60,9 @@ class DiagnoseConfig:
         unknown = [c for c in self.candidates if c not in EFFECTS]
         if unknown:
             raise ValueError(f"unknown candidate effect(s) {', '.join(unknown)}; valid effects: {', '.join(EFFECTS)}")
+        if self.fit_jacobian not in FIT_JACOBIANS:
+            raise ValueError(f"DiagnoseConfig.fit_jacobian must be one of {', '.join(FIT_JACOBIANS)}, "
+                             f"got {self.fit_jacobian!r}")
         if self.fit_loss not in FIT_LOSSES:
             raise ValueError(f"DiagnoseConfig.fit_loss must be one of {', '.join(FIT_LOSSES)}, got {self.fit_loss!r}")
 

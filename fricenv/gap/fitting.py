@@ -16,7 +16,14 @@ from fricenv.gap.config import FIT_LOSSES, DiagnoseConfig
 from fricenv.gap.params import fd_steps, param_bounds, param_names, road_of, x_scales
 from fricenv.gap.sensors import correlation_time
 from fricenv.gap.stats import CandidateFit, window_counts, window_mse
-from fricenv.gap.windows import NOISE_FLOOR, Data, window_nuisances, window_residuals
+from fricenv.gap.windows import (
+    NOISE_FLOOR,
+    Data,
+    projected_jacobian_available,
+    window_jacobian,
+    window_nuisances,
+    window_residuals,
+)
 from fricenv.plants.tire import ROADS
 
 __all__ = ["FIT_LOSS_SCALE", "bounds", "distinct_starts", "effect_start_matrix", "fit", "fit_loss", "fit_nominal",
@@ -114,10 +121,16 @@ def least_squares_run(effects: Sequence[str], names: Sequence[str], x0: np.ndarr
             cache[key] = evaluate([z])[0]
         return cache[key]
 
+    projected = cfg.fit_jacobian == "projected" and projected_jacobian_available(effects, names, x0, d)
+
     def jac(z):
-        # forward differences, stepping inwards at an upper bound; all perturbations in one batch, with the
-        # residuals at z itself from the cache when scipy has just evaluated them (it almost always has)
+        # forward differences, stepping inwards at an upper bound
         h = np.where(z + steps > hi[fidx], -steps, steps)
+        if projected:  # at the fitted window states, what they absorb projected out (window_jacobian)
+            J = window_jacobian(effects, names, full(z), fidx, h, d, train)[1]
+            return np.where(np.isfinite(J), J, 0.0).reshape(-1, len(fidx))
+        # all perturbations in one batch, with the residuals at z itself from the cache when scipy has just
+        # evaluated them (it almost always has)
         Z = [z + h[i] * np.eye(len(z))[i] for i in range(len(z))]
         key = z.tobytes()
         if key in cache:
@@ -132,9 +145,9 @@ def least_squares_run(effects: Sequence[str], names: Sequence[str], x0: np.ndarr
     z0 = np.clip(x0[fidx], lo[fidx] + 1e-12, hi[fidx] - 1e-12)
     if r0 is not None and np.array_equal(z0, x0[fidx]):  # a start inside its bounds is evaluated where it is
         cache[z0.tobytes()] = _finite(r0)
-    sol = least_squares(fun, z0, jac=jac, bounds=(lo[fidx], hi[fidx]),
-                        x_scale=x_scales([names[i] for i in fidx]), max_nfev=cfg.max_nfev, xtol=cfg.fit_xtol, method="trf",
-                        loss=cfg.fit_loss, f_scale=FIT_LOSS_SCALE)
+    sol = least_squares(fun, z0, jac=jac, bounds=(lo[fidx], hi[fidx]), x_scale=x_scales([names[i] for i in fidx]),
+                        max_nfev=cfg.max_nfev, xtol=cfg.fit_xtol, method="trf", loss=cfg.fit_loss,
+                        f_scale=FIT_LOSS_SCALE)
     return full(sol.x), float(sol.cost)
 
 

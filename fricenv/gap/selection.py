@@ -39,7 +39,8 @@ from fricenv.gap.verdict import at_range_edge
 from fricenv.gap.windows import Data
 from fricenv.plants import quarter_car as qc
 
-__all__ = ["MAX_EFFECTS", "SCREEN_SHARE", "TRIED_PER_STEP", "confounded", "effects_of", "forward_select", "split_params"]
+__all__ = ["MAX_EFFECTS", "SCREEN_SHARE", "TRIED_PER_STEP", "confounded", "effects_of", "forward_select",
+           "split_params"]
 
 MAX_EFFECTS = 3  # largest selected set [-]
 TRIED_PER_STEP = 6  # candidates fitted jointly with the set per forward step (expected, then best single first) [-]

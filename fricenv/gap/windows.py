@@ -26,7 +26,8 @@ from fricenv.plants import quarter_car as qc
 from fricenv.plants.tire import longitudinal_slip
 
 __all__ = ["MIN_HORIZON", "MIN_WINDOWS", "NOISE_FLOOR", "Data", "LogTooShortError", "horizon_samples", "model_batch",
-           "prepare", "speed_states", "window_nuisances", "window_residuals"]
+           "prepare", "projected_jacobian_available", "speed_states", "window_jacobian", "window_nuisances",
+           "window_residuals"]
 
 V0_STEP = 0.02  # finite-difference step of the per-window speed nuisance (v logged) [m/s]
 LAMT_STEP = 0.005  # finite-difference step of the transient-slip nuisance [-]
@@ -382,3 +383,30 @@ def window_residuals(effects: Sequence[str], names: Sequence[str], X: np.ndarray
     if per_channel:
         return r, {c: (pred[c] - meas[c][None]) / d.sigma[c] for c in d.channels}  # NaN where missing
     return r
+
+
+def projected_jacobian_available(effects: Sequence[str], names: Sequence[str], x: np.ndarray, d: Data) -> bool:
+    """Whether :func:`window_jacobian` can run this model: the compiled nuisance fit runs it (:func:`_fused`)."""
+    return _fused(model_batch(effects, names, x, d.p), d)
+
+
+def window_jacobian(effects: Sequence[str], names: Sequence[str], x: np.ndarray, fidx: np.ndarray, h: np.ndarray,
+                    d: Data, widx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Normalised residuals of the parameter set ``x`` on windows ``widx`` and their derivatives with respect to the
+    parameters ``fidx``, the start states fitted per window as in :func:`window_residuals` and their response to the
+    parameters projected out (:func:`fricenv.gap.windows_kernel.sensitivities`; a compiled diagnosis only, see
+    :func:`projected_jacobian_available`).
+
+    :param h: (P,) the parameter steps of the differences at fixed start states.
+    :return: (r (W, M), equal to ``window_residuals(effects, names, x, d, widx)[0]``; J (W, M, P)).
+    """
+    from fricenv.gap import windows_kernel
+
+    X = np.repeat(np.asarray(x, dtype=float)[None], 1 + len(fidx), axis=0)
+    X[1 + np.arange(len(fidx)), fidx] += h
+    batch = model_batch(effects, names, X, d.p)
+    meas = _measured(d, widx)
+    nu = _nuisance(batch, d, d.starts[widx])
+    x0 = {"v": nu.state["v"], "omega": nu.state["omega"], "Ta": nu.Ta0, "lam_t": nu.state.get("lam_t")}
+    return windows_kernel.sensitivities(batch, d.Tb, d.starts[widx], x0, meas, d.sigma, nu.free, _steps(),
+                                        nu.max_move, LOWER, UPPER, GN_ITERS, d.dt, d.t0, d.substeps, d.p, h, d.threads)

@@ -21,7 +21,7 @@ from fricenv.effects import kernels
 from fricenv.effects.batch import ModelBatch
 from fricenv.plants import quarter_car as qc
 
-__all__ = ["STATES", "fit_windows"]
+__all__ = ["STATES", "fit_windows", "sensitivities"]
 
 STATES = ("v", "omega", "lam_t")  # the window start states, in the order of the kernel's state vector
 _STATE_ROW = {"v": 1, "omega": 0, "a_x": 2}  # channel -> row of the simulator's output
@@ -148,6 +148,107 @@ def _fit_windows(cmd, k0, par, x0, meas, sig, rows, free, steps, max_move, lower
         _trajectory(cmd, k0[w], par[k], s[0], s[1], Ta, lt, flags, dt, t0, substeps, consts, want_ax, out, e)
 
 
+@numba.njit(cache=True, error_model="numpy")
+def _start(s, x0i, fitted, has_lt, r_eff):
+    """The start of a perturbed parameter set's window: the base set's fitted states where fitted, its own estimates
+    (``x0i``: v, omega, lam_t, Ta) elsewhere."""
+    v = s[0] if fitted[0] else x0i[0]
+    w = s[1] if fitted[1] else x0i[1]
+    lt = (s[2] if fitted[2] else x0i[2]) if has_lt else _slip(v, w, r_eff)
+    return v, w, lt
+
+
+@numba.njit(cache=True, error_model="numpy", parallel=True)
+def _sensitivity_windows(cmd, k0, par, x0, meas, sig, rows, free, steps, max_move, lower, upper, iters, has_lt,
+                         flags, dt, t0, substeps, consts, want_ax, hpar, r_out, J_out):
+    """Per window: the base set's (row 0) Gauss-Newton fit of the start states, its normalised residuals ``r0`` and
+    state Jacobian ``J_s`` at the fitted states ``s*``, and for each further row ``i`` the projected difference
+    ``P (r_i(s*) - r0) / hpar[i - 1]``, ``P = I - J_s (J_s^T J_s)^-1 J_s^T`` (see :func:`sensitivities`)."""
+    W, C = k0.shape[0], meas.shape[0]
+    H = r_out.shape[1] // C
+    q = free.shape[0]
+    fitted = np.zeros(3, dtype=np.bool_)
+    for f in free:
+        fitted[f] = True
+    for w in numba.prange(W):
+        s = x0[0, w, :3].copy()
+        Ta = x0[0, w, 3]
+        buf = np.empty((3, 1 + q, H))
+        J = np.empty((C * H, q))
+        r0 = np.empty(C * H)
+        A = np.empty((q, q))
+        g = np.empty(q)
+        for _ in range(iters):
+            _replicas(cmd, k0[w], par[0], s, Ta, free, steps, has_lt, flags, dt, t0, substeps, consts, want_ax, buf)
+            _normal_equations(buf, meas[:, w], sig, rows, free, steps, J, r0, A, g)
+            _move(s, _solve(A, g), free, max_move, lower, upper)
+        # r0 and J_s at s*: the base replica is the window's prediction from its fitted states
+        _replicas(cmd, k0[w], par[0], s, Ta, free, steps, has_lt, flags, dt, t0, substeps, consts, want_ax, buf)
+        _normal_equations(buf, meas[:, w], sig, rows, free, steps, J, r0, A, g)
+        r_out[w] = r0
+        one = np.empty((3, 1, H))
+        dr = np.empty(C * H)
+        for i in range(1, par.shape[0]):
+            v, om, lt = _start(s, x0[i, w], fitted, has_lt, par[i, 8])
+            _trajectory(cmd, k0[w], par[i], v, om, x0[i, w, 3], lt, flags, dt, t0, substeps, consts, want_ax, one,
+                        0)
+            for c in range(C):
+                for t in range(H):
+                    m = meas[c, w, t]
+                    row = c * H + t
+                    x = ((one[rows[c], 0, t] - m) / sig[c] - r0[row]) / hpar[i - 1] if np.isfinite(m) else 0.0
+                    dr[row] = x if np.isfinite(x) else 0.0
+            coef = _solve(A, J.T @ dr)
+            J_out[w, :, i - 1] = dr - J @ coef
+
+
+def sensitivities(batch: ModelBatch, cmd: np.ndarray, starts: np.ndarray, x0: dict, meas: dict, sigma: dict,
+                  free: list[str], steps: dict, max_move: dict, lower: dict, upper: dict, iters: int, dt: float,
+                  t0: float, substeps: int, p: qc.QuarterCarParams, h: np.ndarray, threads: int = 1):
+    """The windows' residuals at the base parameter set (row 0 of ``batch``) and their derivatives along the
+    further rows, with the start states fitted per window (variable projection, Kaufman's Jacobian).
+
+    A window's residuals depend on the parameters directly and through its fitted start states ``s*``. At a
+    least-squares optimum over ``s`` the second path contributes the projection of the first onto the span of the
+    state Jacobian ``J_s``, so ``dr/dx_i = (I - J_s J_s^+) dr/dx_i |_s*``: one simulation per parameter from the
+    base set's fitted states, instead of a Gauss-Newton fit per perturbed set (a forward difference of
+    :func:`fit_windows`). States that are not fitted (the reconstructed speed without ``v``, the lag filter) are the
+    perturbed set's own, as in :func:`fit_windows`.
+
+    :param batch: 1 + P parameter sets: the base, then the base moved by ``h[i]`` in one parameter each.
+    :param h: (P,) the moves; the other arguments as :func:`fit_windows`.
+    :return: (r0 (W, M) the base set's normalised residuals, equal to :func:`fit_windows`'s; J (W, M, P)), ``M`` =
+        channels x H in the residuals' order, 0 where no measurement.
+    """
+    cmd = np.ascontiguousarray(cmd, dtype=float)
+    K, W = len(batch), len(starts)
+    k0 = np.ascontiguousarray(starts, dtype=np.int64)
+    xs = _start_states(x0, cmd, k0, K, W)
+    channels = list(meas)
+    H = next(iter(meas.values())).shape[1]
+    r0 = np.zeros((W, len(channels) * H))
+    J = np.zeros((W, len(channels) * H, K - 1))
+    numba.set_num_threads(max(1, min(int(threads), numba.config.NUMBA_NUM_THREADS)))
+    _sensitivity_windows(cmd, k0, kernels._params(batch), xs,
+                         np.ascontiguousarray(np.stack([meas[c] for c in channels])),
+                         np.array([sigma[c] for c in channels], dtype=float),
+                         np.array([_STATE_ROW[c] for c in channels], dtype=np.int64),
+                         np.array([STATES.index(n) for n in free], dtype=np.int64), _per_state(steps, 0.0),
+                         _per_state(max_move, 0.0), _per_state(lower, -np.inf), _per_state(upper, np.inf), int(iters),
+                         x0.get("lam_t") is not None, kernels._flags(batch), float(dt), float(t0), int(substeps),
+                         (p.m, p.J, p.Fz, p.g), "a_x" in channels, np.ascontiguousarray(h, dtype=float), r0, J)
+    return r0, J
+
+
+def _start_states(x0: dict, cmd: np.ndarray, k0: np.ndarray, K: int, W: int) -> np.ndarray:
+    """(K, W, 4) start states v, omega, lam_t (0 when the model has none) and Ta (None: the command at the start)."""
+    Ta = x0.get("Ta")
+    Ta = np.broadcast_to(cmd[np.clip(k0, 0, len(cmd) - 1)], (K, W)) if Ta is None else Ta
+    lt = x0["lam_t"] if x0.get("lam_t") is not None else np.zeros((K, W))
+    return np.ascontiguousarray(np.stack([np.broadcast_to(x0["v"], (K, W)), np.broadcast_to(x0["omega"], (K, W)),
+                                          lt, Ta], axis=-1), dtype=float)
+
+
 def _per_state(values: dict, default: float) -> np.ndarray:
     return np.array([float(values.get(name, default)) for name in STATES])
 
@@ -171,12 +272,8 @@ def fit_windows(batch: ModelBatch, cmd: np.ndarray, starts: np.ndarray, x0: dict
     cmd = np.ascontiguousarray(cmd, dtype=float)
     K, W = len(batch), len(starts)
     k0 = np.ascontiguousarray(starts, dtype=np.int64)
-    Ta = x0.get("Ta")
-    Ta = np.broadcast_to(cmd[np.clip(k0, 0, len(cmd) - 1)], (K, W)) if Ta is None else Ta
     has_lt = x0.get("lam_t") is not None
-    lt = x0["lam_t"] if has_lt else np.zeros((K, W))
-    xs = np.ascontiguousarray(np.stack([np.broadcast_to(x0["v"], (K, W)), np.broadcast_to(x0["omega"], (K, W)),
-                                        lt, Ta], axis=-1), dtype=float)
+    xs = _start_states(x0, cmd, k0, K, W)
     channels = list(meas)
     H = next(iter(meas.values())).shape[1]
     out = np.zeros((3, K * W, H))

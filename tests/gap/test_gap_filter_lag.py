@@ -9,7 +9,15 @@ import pytest
 from scipy.signal import butter, group_delay, sosfilt, sosfilt_zi, sosfreqz
 
 from fricenv.gap.config import DiagnoseConfig
-from fricenv.gap.sensors import LAG_TOP, _rolloff, advanced, condition_channel, filter_lag, lag_against, shared_lag
+from fricenv.gap.sensors import (
+    LAG_TOP,
+    _rolloff,
+    advanced,
+    condition_channel,
+    filter_lag,
+    lag_against,
+    shared_lag,
+)
 from fricenv.gap.windows import prepare
 from fricenv.logs import QuarterCarLog
 from fricenv.plants import quarter_car as qc
