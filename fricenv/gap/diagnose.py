@@ -22,7 +22,9 @@ Method (every error measure is computed on data not used for fitting):
 3. **Calibrate.** The nominal model's road ``(B, C, E, theta)`` is fitted on the training windows of each fold
    (multi-start from the road presets) by least squares with a robust loss (``fit_loss``, soft L1 beyond
    ``FIT_LOSS_SCALE`` noise std), so that the few windows of a lock-up, whose timing no model predicts, do not bend
-   the road away from the rest of the data. The road is always treated as unknown.
+   the road away from the rest of the data. The road is always treated as unknown. The fits' Jacobians come from
+   each window at its fitted start states with what those states absorb projected out (variable projection,
+   ``fit_jacobian``), and a run stops at a relative step of ``fit_xtol``.
 4. **Gap.** Held-out residuals over all logged channels, each divided by its noise level (the smaller of the
    difference-based estimate and the calibrated nominal model's training residual: both over-estimate). A window's
    mean squared normalised residual grows only logarithmically beyond ``WINDOW_MSE_CAP`` (:func:`soft_cap`). ``gap`` is the model part of the held-out

@@ -126,3 +126,32 @@ def test_an_effect_with_the_sets_signature_is_reported_confounded():
     assert selection.confounded(worse_set, single, better, d, cfg) == []
     not_alone = _fit("brake_gain", e + 0.01, z=1.0)  # not significant on its own: nothing to confound
     assert selection.confounded(current, not_alone, same, d, cfg) == []
+
+
+def test_joint_fits_are_screened_from_their_best_start_and_refitted_only_near_the_test(monkeypatch):
+    """Issue 18: every joint model is fitted from its best start first (``fit_starts=1``); only one past half the
+    addition threshold over the set, or one that would call its candidate confounded, is fitted again from all
+    starts, and that refit is what the selection sees."""
+    z_set = {"drag+a": 3.0, "drag+b": 1.0, "drag+c": 1.0}  # paired z of each joint model over the set
+    calls = []
+
+    def fake_fit_joints(current, extra, folds, d, cfg, jobs, nominal):
+        calls.append(([c.effect for c in extra], cfg.fit_starts))
+        return [CandidateFit(effect=f"drag+{c.effect}", names=ROAD_NAMES, x=np.full(4, cfg.fit_starts),
+                             train_mse=1.0, test_mse=1.0, window_mse=np.ones(4)) for c in extra]
+
+    def fake_paired_z(a, b, d):
+        return z_set[b.effect] if a.effect == "drag" else 0.0  # the joint never beats the single candidate
+
+    monkeypatch.setattr(selection, "_fit_joints", fake_fit_joints)
+    monkeypatch.setattr(selection, "paired_z", fake_paired_z)
+    current = CandidateFit(effect="drag", names=ROAD_NAMES, x=np.ones(4), train_mse=1.0, test_mse=1.0,
+                           window_mse=np.ones(4))
+    singles = [CandidateFit(effect=e, names=ROAD_NAMES, x=np.ones(4), train_mse=1.0, test_mse=1.0,
+                            window_mse=np.ones(4), z_paired=z) for e, z in (("a", 0.0), ("b", 1.0), ("c", 10.0))]
+    cfg = DiagnoseConfig(fit_starts=2)
+    known: dict = {}
+    joints = selection._extend(current, singles, [None, None], None, cfg, 1, current, known)
+    assert calls == [(["a", "b", "c"], 1), (["a", "c"], 2)]  # b: far from the test and not confounded
+    assert [j.x[0] for j in joints] == [2.0, 1.0, 2.0]
+    assert set(known) == {frozenset({"drag", e}) for e in "abc"}

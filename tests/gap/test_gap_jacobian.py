@@ -90,3 +90,26 @@ def test_a_fit_driven_by_the_projected_jacobian_recovers_the_brake_lag():
 def test_an_unknown_jacobian_is_rejected_with_the_valid_names():
     with pytest.raises(ValueError, match="fit_jacobian must be one of projected, difference"):
         DiagnoseConfig(fit_jacobian="exact").check()
+
+
+def test_the_least_squares_stop_saves_evaluations_without_moving_the_fit(monkeypatch):
+    """``fit_xtol = 1e-5`` against scipy's 1e-8: the same fitted lag to 0.5 %, in fewer residual evaluations (the
+    evaluations past the optimum only shrank the trust region)."""
+    import fricenv.gap.fitting as fitting
+
+    nfev = {}
+    original = fitting.least_squares
+
+    def counted(*args, **kwargs):
+        sol = original(*args, **kwargs)
+        nfev[kwargs["xtol"]] = nfev.get(kwargs["xtol"], 0) + sol.nfev
+        return sol
+
+    monkeypatch.setattr(fitting, "least_squares", counted)
+    d = fold_data(_data("abs", True), 0)
+    effects = ["brake_lag"]
+    names = param_names(effects)
+    start = np.concatenate([get_road("dry").as_array(), [0.6 * TAU]])[None]
+    taus = {xtol: fit(effects, names, start, d, DiagnoseConfig(fit_xtol=xtol))[-1] for xtol in (1e-8, 1e-5)}
+    assert taus[1e-5] == pytest.approx(taus[1e-8], rel=0.005)
+    assert nfev[1e-5] < nfev[1e-8]
