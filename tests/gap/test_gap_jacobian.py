@@ -95,7 +95,7 @@ def test_an_unknown_jacobian_is_rejected_with_the_valid_names():
 def test_the_least_squares_stop_saves_evaluations_without_moving_the_fit(monkeypatch):
     """``fit_xtol = 1e-5`` against scipy's 1e-8: the same fitted lag to 0.5 %, in fewer residual evaluations (the
     evaluations past the optimum only shrank the trust region)."""
-    import fricenv.gap.fitting as fitting
+    from fricenv.gap import fitting
 
     nfev = {}
     original = fitting.least_squares
