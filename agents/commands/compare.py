@@ -21,7 +21,7 @@ import argparse
 DEFAULT_ESTIMATORS = ("none", "ekf-rls", "oracle")
 DEFAULT_BASELINES = ("ppo-stack4", "recurrent-ppo")  # agents.evaluation.MEMORY_BASELINES
 DEFAULT_TRAIN_SEEDS = (0, 1, 2)
-DEFAULT_STEPS = 300_000
+DEFAULT_STEPS = 600_000  # PPO with minibatch 1024 needs the longer budget (agents/hyperparams/braking.json)
 DEFAULT_PAYLOAD_STEPS = 120_000
 
 
