@@ -9,7 +9,8 @@ from pathlib import Path
 
 import pytest
 
-from agents.evaluation import COMPARE_KEYS, TRAINING_KEYS, _training_jobs
+from agents import evaluation
+from agents.evaluation import COMPARE_KEYS, TRAINING_KEYS, _run_trainings, _training_jobs
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -23,6 +24,22 @@ def test_training_jobs_cover_every_row_and_seed(tmp_path):
     assert {j["seed"] for j in jobs.values()} == {0, 1, 2}
     with pytest.raises(ValueError, match="memory baseline"):
         _training_jobs(tmp_path, ["none"], ["lstm"], "ppo", 1000, [0])
+
+
+def test_the_longest_trainings_start_first_and_results_keep_the_jobs_order(tmp_path, monkeypatch):
+    """The RecurrentPPO trainings (about 5x a PPO one per step) start first, so that none runs alone at the end of
+    ``fricenv compare``; the metadata come back in the jobs' order."""
+    jobs = list(_training_jobs(tmp_path, ["none", "ekf-rls"], ["recurrent-ppo"], "ppo", 1000, [0, 1]).values())
+    started = []
+
+    def fake_map(fn, tasks, jobs_, label, ray=None):
+        started.extend(t[0]["out"].name for t in tasks)
+        return [{"run": t[0]["out"].name} for t in tasks]
+
+    monkeypatch.setattr(evaluation, "map_tasks", fake_map)
+    metas = _run_trainings(jobs, 2)
+    assert started[:2] == ["recurrent-ppo-s0", "recurrent-ppo-s1"]
+    assert [m["run"] for m in metas] == [j["out"].name for j in jobs]
 
 
 @pytest.mark.slow
