@@ -10,6 +10,10 @@ it the last bit of a one-state sum). A fit's path through a least-squares run ca
 into a visibly different optimum, so the diagnosis' results depend on this equality. The windows are simulated by
 :func:`fricenv.effects.kernels._trajectory`, the compiled ``EffectSimulator``. Imported only when a compiled
 diagnosis runs, so ``import fricenv`` does not load numba.
+
+:func:`sensitivities` (issue 18) runs the same fit for one parameter set and then the least-squares fits' Jacobian
+with respect to the parameters by variable projection: one simulation per parameter from the fitted start states,
+what those states absorb projected out (``tests/gap/test_gap_jacobian.py``).
 """
 
 from __future__ import annotations
