@@ -97,7 +97,7 @@ def sample_ppo(trial) -> dict[str, Any]:
     n_steps = trial.suggest_categorical("n_steps", [64, 128, 256])
     return {
         "n_envs": n_envs, "n_steps": n_steps,
-        "batch_size": min(trial.suggest_categorical("batch_size", [64, 128, 256, 512]), n_envs * n_steps),
+        "batch_size": min(trial.suggest_categorical("batch_size", [64, 128, 256, 512, 1024]), n_envs * n_steps),
         "n_epochs": trial.suggest_categorical("n_epochs", [5, 10, 20]),
         "learning_rate": trial.suggest_float("learning_rate", 5e-5, 3e-3, log=True),
         "gamma": trial.suggest_categorical("gamma", [0.9, 0.95, 0.98, 0.99]),
