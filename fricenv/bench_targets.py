@@ -344,9 +344,9 @@ def bench_gap(args: argparse.Namespace) -> dict[str, Any]:
     """Wall seconds to diagnose one 5 s log on 2 cores (all channels, and t, T_b, omega only) with the compiled
     window simulator and with the numpy one (its simulator and forward-difference Jacobian are the path before
     issue 18; the least-squares stop and the forward-selection screen are shared) in the same run, interleaved,
-    and their ratio, and the CPU seconds of each diagnosis with its worker processes (on a loaded machine the wall time
-    varies with the other load, the CPU time much less); ms per speed reconstruction (the no-``v`` logs' inner loop)
-    against its sample-by-sample reference."""
+    and their ratio, and the CPU seconds of each diagnosis with its worker processes (on a loaded machine the wall
+    time varies with the other load, the CPU time much less); ms per speed reconstruction (the no-``v`` logs' inner
+    loop) against its sample-by-sample reference."""
     channels = ("all_channels", "required_only")
     seconds = {path: {key: [] for key in channels} for path in GAP_PATHS}
     cpu = {path: {key: [] for key in channels} for path in GAP_PATHS}

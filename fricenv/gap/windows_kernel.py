@@ -127,6 +127,22 @@ def _move(s, move, free, max_move, lower, upper):
         s[f] = lower[f] if y < lower[f] else (upper[f] if y > upper[f] else y)  # noqa: FURB136
 
 
+@numba.njit(cache=True, error_model="numpy")
+def _work(C, H, q):
+    """Work arrays of one window's fit: replicas (3, 1 + q, H), J (C H, q), r0 (C H), A (q, q), g (q)."""
+    return np.empty((3, 1 + q, H)), np.empty((C * H, q)), np.empty(C * H), np.empty((q, q)), np.empty(q)
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _gauss_newton_move(cmd, k, p, s, Ta, meas_w, sig, rows, free, steps, max_move, lower, upper, has_lt, flags, dt,
+                       t0, substeps, consts, want_ax, buf, J, r0, A, g):
+    """One Gauss-Newton move of the free start states ``s`` of one window (in place): its replicas, the normal
+    equations (``J``, ``r0``, ``A``, ``g`` at the states before the move) and the clipped move."""
+    _replicas(cmd, k, p, s, Ta, free, steps, has_lt, flags, dt, t0, substeps, consts, want_ax, buf)
+    _normal_equations(buf, meas_w, sig, rows, free, steps, J, r0, A, g)
+    _move(s, _solve(A, g), free, max_move, lower, upper)
+
+
 @numba.njit(cache=True, error_model="numpy", parallel=True)
 def _fit_windows(cmd, k0, par, x0, meas, sig, rows, free, steps, max_move, lower, upper, iters, has_lt, flags, dt,
                  t0, substeps, consts, want_ax, out):
@@ -139,15 +155,10 @@ def _fit_windows(cmd, k0, par, x0, meas, sig, rows, free, steps, max_move, lower
         k, w = e // W, e % W
         s = x0[k, w, :3].copy()
         Ta = x0[k, w, 3]
-        buf = np.empty((3, 1 + q, H))
-        J = np.empty((meas.shape[0] * H, q))
-        r0 = np.empty(meas.shape[0] * H)
-        A = np.empty((q, q))
-        g = np.empty(q)
+        buf, J, r0, A, g = _work(meas.shape[0], H, q)
         for _ in range(iters):
-            _replicas(cmd, k0[w], par[k], s, Ta, free, steps, has_lt, flags, dt, t0, substeps, consts, want_ax, buf)
-            _normal_equations(buf, meas[:, w], sig, rows, free, steps, J, r0, A, g)
-            _move(s, _solve(A, g), free, max_move, lower, upper)
+            _gauss_newton_move(cmd, k0[w], par[k], s, Ta, meas[:, w], sig, rows, free, steps, max_move, lower, upper,
+                               has_lt, flags, dt, t0, substeps, consts, want_ax, buf, J, r0, A, g)
         lt = s[2] if has_lt else _slip(s[0], s[1], par[k, 8])
         _trajectory(cmd, k0[w], par[k], s[0], s[1], Ta, lt, flags, dt, t0, substeps, consts, want_ax, out, e)
 
@@ -177,15 +188,10 @@ def _sensitivity_windows(cmd, k0, par, x0, meas, sig, rows, free, steps, max_mov
     for w in numba.prange(W):
         s = x0[0, w, :3].copy()
         Ta = x0[0, w, 3]
-        buf = np.empty((3, 1 + q, H))
-        J = np.empty((C * H, q))
-        r0 = np.empty(C * H)
-        A = np.empty((q, q))
-        g = np.empty(q)
+        buf, J, r0, A, g = _work(C, H, q)
         for _ in range(iters):
-            _replicas(cmd, k0[w], par[0], s, Ta, free, steps, has_lt, flags, dt, t0, substeps, consts, want_ax, buf)
-            _normal_equations(buf, meas[:, w], sig, rows, free, steps, J, r0, A, g)
-            _move(s, _solve(A, g), free, max_move, lower, upper)
+            _gauss_newton_move(cmd, k0[w], par[0], s, Ta, meas[:, w], sig, rows, free, steps, max_move, lower, upper,
+                               has_lt, flags, dt, t0, substeps, consts, want_ax, buf, J, r0, A, g)
         # r0 and J_s at s*: the base replica is the window's prediction from its fitted states
         _replicas(cmd, k0[w], par[0], s, Ta, free, steps, has_lt, flags, dt, t0, substeps, consts, want_ax, buf)
         _normal_equations(buf, meas[:, w], sig, rows, free, steps, J, r0, A, g)
@@ -224,23 +230,11 @@ def sensitivities(batch: ModelBatch, cmd: np.ndarray, starts: np.ndarray, x0: di
     :return: (r0 (W, M) the base set's normalised residuals, equal to :func:`fit_windows`'s; J (W, M, P)), ``M`` =
         channels x H in the residuals' order, 0 where no measurement.
     """
-    cmd = np.ascontiguousarray(cmd, dtype=float)
-    K, W = len(batch), len(starts)
-    k0 = np.ascontiguousarray(starts, dtype=np.int64)
-    xs = _start_states(x0, cmd, k0, K, W)
-    channels = list(meas)
-    H = next(iter(meas.values())).shape[1]
-    r0 = np.zeros((W, len(channels) * H))
-    J = np.zeros((W, len(channels) * H, K - 1))
-    numba.set_num_threads(max(1, min(int(threads), numba.config.NUMBA_NUM_THREADS)))
-    _sensitivity_windows(cmd, k0, kernels._params(batch), xs,
-                         np.ascontiguousarray(np.stack([meas[c] for c in channels])),
-                         np.array([sigma[c] for c in channels], dtype=float),
-                         np.array([_STATE_ROW[c] for c in channels], dtype=np.int64),
-                         np.array([STATES.index(n) for n in free], dtype=np.int64), _per_state(steps, 0.0),
-                         _per_state(max_move, 0.0), _per_state(lower, -np.inf), _per_state(upper, np.inf), int(iters),
-                         x0.get("lam_t") is not None, kernels._flags(batch), float(dt), float(t0), int(substeps),
-                         (p.m, p.J, p.Fz, p.g), "a_x" in channels, np.ascontiguousarray(h, dtype=float), r0, J)
+    M = len(meas) * next(iter(meas.values())).shape[1]
+    r0 = np.zeros((len(starts), M))
+    J = np.zeros((len(starts), M, len(batch) - 1))
+    _sensitivity_windows(*_kernel_args(batch, cmd, starts, x0, meas, sigma, free, steps, max_move, lower, upper, iters,
+                                       dt, t0, substeps, p, threads), np.ascontiguousarray(h, dtype=float), r0, J)
     return r0, J
 
 
@@ -273,23 +267,32 @@ def fit_windows(batch: ModelBatch, cmd: np.ndarray, starts: np.ndarray, x0: dict
     :param dt, t0, substeps, p: as :func:`kernels.simulate_windows`; :param threads: threads sharing the pairs.
     :return: channel -> (K, W, H) predictions.
     """
-    cmd = np.ascontiguousarray(cmd, dtype=float)
     K, W = len(batch), len(starts)
-    k0 = np.ascontiguousarray(starts, dtype=np.int64)
-    has_lt = x0.get("lam_t") is not None
-    xs = _start_states(x0, cmd, k0, K, W)
     channels = list(meas)
     H = next(iter(meas.values())).shape[1]
     out = np.zeros((3, K * W, H))
-    numba.set_num_threads(max(1, min(int(threads), numba.config.NUMBA_NUM_THREADS)))
-    _fit_windows(cmd, k0, kernels._params(batch), xs, np.ascontiguousarray(np.stack([meas[c] for c in channels])),
-                 np.array([sigma[c] for c in channels], dtype=float),
-                 np.array([_STATE_ROW[c] for c in channels], dtype=np.int64),
-                 np.array([STATES.index(n) for n in free], dtype=np.int64), _per_state(steps, 0.0),
-                 _per_state(max_move, 0.0), _per_state(lower, -np.inf), _per_state(upper, np.inf), int(iters),
-                 has_lt, kernels._flags(batch), float(dt), float(t0), int(substeps), (p.m, p.J, p.Fz, p.g),
-                 "a_x" in channels, out)
+    _fit_windows(*_kernel_args(batch, cmd, starts, x0, meas, sigma, free, steps, max_move, lower, upper, iters, dt, t0,
+                               substeps, p, threads), out)
     return {c: out[_STATE_ROW[c]].reshape(K, W, H) for c in channels}
+
+
+def _kernel_args(batch: ModelBatch, cmd: np.ndarray, starts: np.ndarray, x0: dict, meas: dict, sigma: dict,
+                 free: list[str], steps: dict, max_move: dict, lower: dict, upper: dict, iters: int, dt: float,
+                 t0: float, substeps: int, p: qc.QuarterCarParams, threads: int) -> tuple:
+    """The arguments :func:`_fit_windows` and :func:`_sensitivity_windows` share, as arrays in the kernels' layout
+    (and numba's thread count set)."""
+    cmd = np.ascontiguousarray(cmd, dtype=float)
+    k0 = np.ascontiguousarray(starts, dtype=np.int64)
+    channels = list(meas)
+    numba.set_num_threads(max(1, min(int(threads), numba.config.NUMBA_NUM_THREADS)))
+    return (cmd, k0, kernels._params(batch), _start_states(x0, cmd, k0, len(batch), len(starts)),
+            np.ascontiguousarray(np.stack([meas[c] for c in channels])),
+            np.array([sigma[c] for c in channels], dtype=float),
+            np.array([_STATE_ROW[c] for c in channels], dtype=np.int64),
+            np.array([STATES.index(n) for n in free], dtype=np.int64), _per_state(steps, 0.0),
+            _per_state(max_move, 0.0), _per_state(lower, -np.inf), _per_state(upper, np.inf), int(iters),
+            x0.get("lam_t") is not None, kernels._flags(batch), float(dt), float(t0), int(substeps),
+            (p.m, p.J, p.Fz, p.g), "a_x" in channels)
 
 
 kernels._guard_cache(globals(), ("fricenv.effects.kernels",))  # the cache compiled in the window simulator
