@@ -38,6 +38,9 @@ OUTLIER_SPAN = 7  # running-median span [samples]
 OUTLIER_MAX_SHARE = 0.02  # largest share of flagged samples still read as glitches [-]
 QUIET_MIN = 20  # samples of a quiet stretch (free rolling) that the filtering test needs [-]
 FILTERED_AC = -0.35  # lag-1 autocorrelation of the first differences above which a channel looks filtered [-]
+# ... and above this on a quiet start of at least QUIET_MIN samples, a filter is certain (white noise gives -0.5 with
+# a spread of about 1 / sqrt(QUIET_MIN) = 0.22; a still signal cannot correlate the differences) [-]
+QUIET_FILTERED_AC = 0.0
 QUANT_MIN_LEVELS = 3  # a grid needs at least this many distinct levels [-]
 MAX_CORRELATION_TIME = 50.0  # upper bound of the integrated autocorrelation time [samples]
 FILTERED_MARGIN = 0.15  # lag-1 autocorrelation of k-th differences this far above white noise's: filtered [-]
@@ -75,6 +78,7 @@ class ChannelCondition:
     outliers: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
     quant_step: float = 0.0
     filtered: bool = False
+    quiet_ac: float | None = None  # the difference test's value on the quiet start (None: too short to read)
     filter: dict | None = None  # the sensor filter read from the noise roll-off (filter_lag), None: none seen
     lag_s: float = 0.0  # the lag the channel was advanced by [s] (0: not)
 
@@ -195,9 +199,10 @@ def condition_channel(x: np.ndarray, floor: float, quiet: int = 0, may_be_filter
     if out.size:
         raw = estimate_noise(_fresh(x))
         noise = max(raw if np.isfinite(raw) else floor, floor, q / np.sqrt(12.0))
-    filtered = may_be_filtered and q == 0.0 and difference_ac(x[:quiet] if quiet >= QUIET_MIN else x) > FILTERED_AC
+    quiet_ac = difference_ac(x[:quiet]) if quiet >= QUIET_MIN else None
+    filtered = may_be_filtered and q == 0.0 and (difference_ac(x) if quiet_ac is None else quiet_ac) > FILTERED_AC
     return ChannelCondition(values=x, filled=fill_missing(x), noise=noise, missing=missing, outliers=out,
-                            quant_step=q, filtered=filtered)
+                            quant_step=q, filtered=filtered, quiet_ac=quiet_ac)
 
 
 def advanced(x: np.ndarray, shift: float) -> np.ndarray:
@@ -430,12 +435,18 @@ def shared_lag(conds: dict[str, ChannelCondition], fs: float, f_lo: float, f_use
         found = [f for f in found if f is not None]
         if found:
             fits[c] = min(found, key=lambda f: f["lag_s"])
-    lag = min([f["lag_s"] for f in fits.values()] + list((bounds or {}).values())) if fits else 0.0
-    if lag * fs < LAG_MIN_SAMPLES or lag < LAG_MIN_S:  # no roll-off, or a bound says it was the signal's own
+    bounds = list((bounds or {}).values())
+    lag = min([f["lag_s"] for f in fits.values()] + bounds) if fits else 0.0
+    certain = any(k.filtered and k.quiet_ac is not None and k.quiet_ac > QUIET_FILTERED_AC for k in conds.values())
+    if certain and lag < LAG_MIN_S:  # the quiet start shows a filter: a bound below any filter's lag is wrong
+        lag = min([f["lag_s"] for f in fits.values()] + [b for b in bounds if np.isfinite(b) and b >= LAG_MIN_S],
+                  default=0.0)
+    if not certain and (lag * fs < LAG_MIN_SAMPLES or lag < LAG_MIN_S):  # no roll-off, or the signal's own
         return {c: replace(k, filtered=False) for c, k in conds.items()}
     out = dict(conds)
     for c, k in conds.items():
         if k.filtered:
-            values = advanced(k.values, lag * fs)
-            out[c] = replace(k, values=values, filled=fill_missing(values), filter=fits.get(c), lag_s=lag)
+            values = advanced(k.values, lag * fs) if lag * fs >= LAG_MIN_SAMPLES else k.values
+            out[c] = replace(k, values=values, filled=fill_missing(values), filter=fits.get(c),
+                             lag_s=lag if lag * fs >= LAG_MIN_SAMPLES else 0.0)
     return out

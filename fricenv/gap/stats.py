@@ -37,6 +37,9 @@ __all__ = [
 WINDOW_MSE_CAP = 25.0
 # Share of the held-out windows (the worst) left out when judging how much of the gap a candidate closes.
 TRIM_SHARE = 0.05
+# Smallest squared prediction difference between two models (normalised, summed over the held-out samples) that
+# the paired test divides by: one noise variance (:func:`paired_z`).
+MIN_PREDICTION_DIFF = 1.0
 
 
 @dataclass
@@ -168,7 +171,11 @@ def paired_z(base: CandidateFit, cand: CandidateFit, d: Data) -> float:
     difference, and about ``-||a - b|| / 2 + N(0, 1)`` when the base model is right. Per window the gain and the
     squared difference are soft-capped (:func:`soft_cap`), the window of largest gain is left out, as in
     :func:`improvement_z`, and the gain is less what ``cand``'s extra per-window nuisance states win on pure noise
-    (:func:`_window_gain`).
+    (:func:`_window_gain`). Two models whose predictions differ by less than one noise std over all the held-out
+    samples (``||r_b - r_c||^2 < MIN_PREDICTION_DIFF``) cannot be told apart: the spread is held at that floor, so
+    the ratio of two vanishing numbers (a candidate fitted back to the nominal model, its gain the start-state
+    fit's round-off) cannot pass a test. A real difference passes only if ``||a - b|| > 2 sig_z`` (the expected
+    gain ``||a - b||^2`` over its spread), far above the floor.
     """
     if base.resid is None or cand.resid is None:
         return 0.0
@@ -180,8 +187,8 @@ def paired_z(base: CandidateFit, cand: CandidateFit, d: Data) -> float:
         return 0.0
     drop = int(np.argmax(gain))
     keep = np.arange(gain.size) != drop
-    spread = 2.0 * np.sqrt(float(np.sum(diff2[keep])))
-    return float(np.sum(gain[keep]) / spread) if spread > 0 else 0.0
+    spread = 2.0 * np.sqrt(max(float(np.sum(diff2[keep])), MIN_PREDICTION_DIFF))
+    return float(np.sum(gain[keep]) / spread)
 
 
 
