@@ -280,7 +280,7 @@ def diagnose(log: QuarterCarLog, p: qc.QuarterCarParams = qc.PAPER_PARAMS,
     effects = [] if whole is None else _order(split_params(whole), expected)
     if expected:
         where["expected_effects"] = expected
-    verdict = effects[0]["effect"] if effects else s.verdict  # an expected calibration is listed (and named) first
+    verdict = effects[0]["effect"] if effects else s.verdict  # a discovery before an expected calibration
     return Diagnosis(verdict=verdict, gap_before=nominal.gap,
                      gap_after=nominal.gap if whole is None else whole.gap,
                      params=next((e["params"] for e in effects if e["effect"] == verdict), {}), where=where,
@@ -307,8 +307,10 @@ def _forward(s: _Selection, nominal: CandidateFit, folds: list[Data], d: Data, p
 
 
 def _order(effects: list[dict], expected: dict) -> list[dict]:
-    """The selected effects with the expected ones (a calibration) first."""
-    return [e for e in effects if e["effect"] in expected] + [e for e in effects if e["effect"] not in expected]
+    """The selected effects with the discoveries first and the expected ones (a calibration the log's provenance
+    predicts, such as the gain of a nominal pressure-to-torque factor) after them: the verdict names what the model
+    misses, and an expected calibration is the verdict only when nothing else was found."""
+    return [e for e in effects if e["effect"] not in expected] + [e for e in effects if e["effect"] in expected]
 
 
 def _where(nominal: CandidateFit, s: _Selection, d: Data, cfg: DiagnoseConfig) -> dict:

@@ -25,7 +25,8 @@ from fricenv.logs import QuarterCarLog
 from fricenv.plants import quarter_car as qc
 from fricenv.plants.tire import longitudinal_slip
 
-__all__ = ["MIN_HORIZON", "MIN_WINDOWS", "NOISE_FLOOR", "Data", "LogTooShortError", "horizon_samples", "model_batch",
+__all__ = ["MIN_HORIZON", "MIN_WINDOWS", "NOISE_FLOOR", "Data", "LogTooShortError", "applied_torque", "horizon_samples",
+           "model_batch",
            "prepare", "projected_jacobian_available", "speed_states", "window_jacobian", "window_nuisances",
            "window_residuals"]
 
@@ -143,6 +144,20 @@ def _window_counts(meas: dict, starts: np.ndarray, H: int) -> np.ndarray:
     return sum(np.count_nonzero(np.isfinite(m[rows]), axis=1) for m in meas.values())
 
 
+def applied_torque(log: QuarterCarLog) -> np.ndarray:
+    """The brake torque the simulator holds over each sample step.
+
+    A commanded torque (the contract's default) is what a controller held over the step: the logged sample itself
+    (zero-order hold). A torque computed from a measured brake pressure (``log.torque_from_pressure``) is a sample
+    of a continuous signal: between two samples it moves on, and the step's torque is the mean of the straight line
+    between them, ``(T_k + T_(k+1)) / 2``. Holding the sample instead would delay the torque by half a step (20 ms
+    at 25 Hz), as large as the brake delays the diagnosis looks for."""
+    T = np.asarray(log.T_b, dtype=float)
+    if not getattr(log, "torque_from_pressure", False) or T.size < 2:
+        return T
+    return np.r_[0.5 * (T[:-1] + T[1:]), T[-1]]
+
+
 def prepare(log: QuarterCarLog, p: qc.QuarterCarParams, cfg: DiagnoseConfig) -> Data:
     """The log cut into prediction windows, dealt into cross-fitting folds (fold 0 held out), with its noise levels,
     outliers and missing samples (:mod:`fricenv.gap.sensors`).
@@ -158,7 +173,7 @@ def prepare(log: QuarterCarLog, p: qc.QuarterCarParams, cfg: DiagnoseConfig) -> 
     if n < need:
         raise LogTooShortError(f"{log.source}: log too short for diagnosis: {n} samples, need at least {need} "
                                f"({need // H} prediction windows of {H} samples); log a longer braking segment")
-    T = np.asarray(log.T_b, dtype=float)
+    T = applied_torque(log)
     tmax = max(float(np.max(np.abs(T))), 1e-9)
     braking = np.flatnonzero(np.abs(T) > FREE_ROLL_TORQUE * tmax)
     free_end = int(braking[0]) if braking.size else n
