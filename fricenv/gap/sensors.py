@@ -38,9 +38,10 @@ OUTLIER_SPAN = 7  # running-median span [samples]
 OUTLIER_MAX_SHARE = 0.02  # largest share of flagged samples still read as glitches [-]
 QUIET_MIN = 20  # samples of a quiet stretch (free rolling) that the filtering test needs [-]
 FILTERED_AC = -0.35  # lag-1 autocorrelation of the first differences above which a channel looks filtered [-]
-# ... and above this on a quiet start of at least QUIET_MIN samples, a filter is certain (white noise gives -0.5 with
-# a spread of about 1 / sqrt(QUIET_MIN) = 0.22; a still signal cannot correlate the differences) [-]
-QUIET_FILTERED_AC = 0.0
+# A filter is certain when the test on a quiet start of m >= QUIET_CERTAIN_MIN differences reads above white noise's
+# -1/2 by QUIET_CERTAIN_Z times its spread 1 / sqrt(m) (a still signal cannot correlate the differences) [-]
+QUIET_CERTAIN_MIN = 8
+QUIET_CERTAIN_Z = 3.0
 QUANT_MIN_LEVELS = 3  # a grid needs at least this many distinct levels [-]
 MAX_CORRELATION_TIME = 50.0  # upper bound of the integrated autocorrelation time [samples]
 FILTERED_MARGIN = 0.15  # lag-1 autocorrelation of k-th differences this far above white noise's: filtered [-]
@@ -78,7 +79,7 @@ class ChannelCondition:
     outliers: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
     quant_step: float = 0.0
     filtered: bool = False
-    quiet_ac: float | None = None  # the difference test's value on the quiet start (None: too short to read)
+    certain: bool = False  # the quiet start shows a filter beyond doubt (QUIET_CERTAIN_Z)
     filter: dict | None = None  # the sensor filter read from the noise roll-off (filter_lag), None: none seen
     lag_s: float = 0.0  # the lag the channel was advanced by [s] (0: not)
 
@@ -199,10 +200,12 @@ def condition_channel(x: np.ndarray, floor: float, quiet: int = 0, may_be_filter
     if out.size:
         raw = estimate_noise(_fresh(x))
         noise = max(raw if np.isfinite(raw) else floor, floor, q / np.sqrt(12.0))
-    quiet_ac = difference_ac(x[:quiet]) if quiet >= QUIET_MIN else None
-    filtered = may_be_filtered and q == 0.0 and (difference_ac(x) if quiet_ac is None else quiet_ac) > FILTERED_AC
+    quiet_ac = difference_ac(x[:quiet]) if quiet > QUIET_CERTAIN_MIN else -0.5
+    filtered = may_be_filtered and q == 0.0 and \
+        (quiet_ac if quiet >= QUIET_MIN else difference_ac(x)) > FILTERED_AC
+    certain = filtered and quiet_ac > -0.5 + QUIET_CERTAIN_Z / np.sqrt(max(quiet - 1, 1))
     return ChannelCondition(values=x, filled=fill_missing(x), noise=noise, missing=missing, outliers=out,
-                            quant_step=q, filtered=filtered, quiet_ac=quiet_ac)
+                            quant_step=q, filtered=filtered, certain=certain)
 
 
 def advanced(x: np.ndarray, shift: float) -> np.ndarray:
@@ -437,7 +440,7 @@ def shared_lag(conds: dict[str, ChannelCondition], fs: float, f_lo: float, f_use
             fits[c] = min(found, key=lambda f: f["lag_s"])
     bounds = list((bounds or {}).values())
     lag = min([f["lag_s"] for f in fits.values()] + bounds) if fits else 0.0
-    certain = any(k.filtered and k.quiet_ac is not None and k.quiet_ac > QUIET_FILTERED_AC for k in conds.values())
+    certain = any(k.certain for k in conds.values())
     if certain and lag < LAG_MIN_S:  # the quiet start shows a filter: a bound below any filter's lag is wrong
         lag = min([f["lag_s"] for f in fits.values()] + [b for b in bounds if np.isfinite(b) and b >= LAG_MIN_S],
                   default=0.0)
