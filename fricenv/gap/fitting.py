@@ -32,6 +32,7 @@ __all__ = ["FIT_LOSS_SCALE", "bounds", "distinct_starts", "effect_start_matrix",
 # Residual scale (noise std) of the fits' robust loss; the change-point search bounds a sample's squared residual
 # at (2 FIT_LOSS_SCALE)^2. Either way one lock-up cannot place the road or the change.
 FIT_LOSS_SCALE = 3.0
+CHI2_1_MEDIAN = 0.4549364231195724  # median of a chi-squared variable with one degree of freedom [-]
 
 
 def bounds(names: Sequence[str], d: Data):
@@ -203,13 +204,23 @@ def fit_context(d: Data) -> FitContext:
     return FitContext(p=d.p, free_roll_ratio=ratio)
 
 
+def robust_rms(r: np.ndarray) -> float:
+    """RMS of zero-mean Gaussian samples ``r`` (NaN and exact zeros, the missing samples, ignored) read from their
+    median square (``chi2_1``'s median is 0.4549): a model error confined to a few windows (a brake transition that
+    the nominal model times wrong) leaves it where the noise puts it."""
+    x = np.asarray(r, dtype=float)
+    x = x[np.isfinite(x) & (x != 0.0)]
+    return float(np.sqrt(np.median(x * x) / CHI2_1_MEDIAN)) if x.size else float("nan")
+
+
 def refine_noise(nominal: CandidateFit, d: Data) -> None:
     """Noise level per channel: the smaller of the difference-based estimate and the calibrated nominal model's
     training residual (corrected for the fitted wheel-speed nuisance). Both over-estimate (the first by the signal's
     own curvature, the second by any model error), so the smaller is the better estimate.
 
     A channel that looks low-pass filtered (:mod:`fricenv.gap.sensors`) has a difference-based estimate far below
-    its real noise: it takes the residual's level, times the square root of the residual's integrated
+    its real noise: it takes the residual's level (:func:`robust_rms`: a model error at a few brake transitions
+    does not set it), times the square root of the residual's integrated
     autocorrelation time (its windows hold that many times fewer independent samples). No channel goes below its
     quantisation floor ``q / sqrt(12)`` or ``NOISE_FLOOR``."""
     train = np.flatnonzero(~d.test)
@@ -217,15 +228,15 @@ def refine_noise(nominal: CandidateFit, d: Data) -> None:
     sensors = d.sensors or {}
     for c in d.channels:
         r = r_ch[c][0]
-        rms = float(np.sqrt(np.nanmean(r ** 2))) * d.sigma[c]
-        if c == "omega" or c == "v":  # one fitted nuisance state per window in this channel
-            rms *= np.sqrt(d.horizon / (d.horizon - 1.0))
+        # one fitted nuisance state per window in this channel
+        dof = np.sqrt(d.horizon / (d.horizon - 1.0)) if c in ("omega", "v") else 1.0
+        rms = float(np.sqrt(np.nanmean(r ** 2))) * d.sigma[c] * dof
         info = sensors.get(c, {})
         floor = max(NOISE_FLOOR[c], info.get("quantisation_step", 0.0) / np.sqrt(12.0))
         if info.get("filtered") and np.isfinite(rms):
             tau = correlation_time(r)
             info["correlation_time"] = tau
-            d.sigma[c] = max(rms * np.sqrt(tau), floor)
+            d.sigma[c] = max(robust_rms(r) * d.sigma[c] * dof * np.sqrt(tau), floor)
         else:
             d.sigma[c] = max(min(d.sigma[c], rms), floor)
         if c in sensors:
