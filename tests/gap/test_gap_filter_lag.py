@@ -198,3 +198,31 @@ def test_true_two_effect_set_is_significant_on_a_filtered_log_only_once_realigne
     assert _true_set_z(case, tmp_path / "a") > sig_z
     monkeypatch.setattr(windows, "shared_lag", lambda conds, *a, **k: dict(conds))  # the channels as logged
     assert _true_set_z(case, tmp_path / "b") < sig_z
+
+
+def test_a_quiet_start_makes_a_filter_certain_and_white_noise_does_not():
+    """On a still stretch the differences of a low-passed channel correlate (about +0.6 here), white noise's read
+    -1/2: 12 quiet samples are enough to tell them apart (threshold -1/2 + 3 / sqrt(11) = 0.40)."""
+    rng = np.random.default_rng(4)
+    quiet = 12
+    filtered = _lowpass(np.r_[np.zeros(quiet), np.linspace(0.0, -6.0, 200)] + rng.normal(0.0, 0.1, quiet + 200))
+    white = np.r_[np.zeros(quiet), np.linspace(0.0, -6.0, 200)] + rng.normal(0.0, 0.1, quiet + 200)
+    assert condition_channel(filtered, 1e-3, quiet).certain
+    assert not condition_channel(white, 1e-3, quiet).certain
+    assert not condition_channel(filtered, 1e-3, 6).certain  # too short a quiet start: no certainty
+
+
+def test_a_certain_filter_is_kept_without_a_roll_off_and_realigned_by_its_bound():
+    """A filter the quiet start shows stays a filter even when the signal hides its noise roll-off: it is advanced by
+    the torque bound when one reads a filter's lag, and left in place (lag 0) but still ``filtered`` (its noise
+    then comes from the model's residual) when the only bound is too short for any filter."""
+    rng = np.random.default_rng(6)
+    x = _lowpass(np.r_[np.zeros(30), np.sin(np.linspace(0.0, 40.0, 400)) * 5.0] + rng.normal(0.0, 0.05, 430))
+    cond = condition_channel(x, 1e-3, 30)
+    assert cond.certain
+    kept = shared_lag({"a_x": cond}, FS, 2.0, 1.0, bounds={"a_x": 0.05})["a_x"]
+    assert kept.filtered and kept.lag_s == pytest.approx(0.05)
+    np.testing.assert_allclose(kept.values[:-5], advanced(cond.values, 0.05 * FS)[:-5])
+    none = shared_lag({"a_x": cond}, FS, 2.0, 1.0, bounds={"a_x": 0.0})["a_x"]
+    assert none.filtered and none.lag_s == 0.0
+    np.testing.assert_array_equal(none.values, cond.values)

@@ -248,3 +248,66 @@ def test_summary_line_names_the_other_effects_and_the_untestable_ones():
     line = summary_line(dg)
     assert "verdict: drag (c0=200); with relaxation_length;" in line
     assert line.endswith("not testable on this log: mu_change")
+
+
+def _resid_fit(effect: str, resid: np.ndarray) -> CandidateFit:
+    """A fitted model known only by its held-out normalised residuals (windows, samples)."""
+    wm = window_mse(resid, resid.shape[1])
+    return CandidateFit(effect=effect, names=("B",), x=np.ones(1), train_mse=1.0, test_mse=float(np.mean(wm)),
+                        window_mse=wm, resid=resid)
+
+
+def test_paired_z_cannot_pass_two_models_that_predict_alike():
+    """A candidate fitted back to the nominal model differs from it by round-off, here a residual 1e-7 smaller in
+    the residual's own direction (a start-state fit a hair further along). Gain and spread both vanish, and their
+    ratio was ``||r||``, a z of 20. Held at one noise variance of prediction difference, the test gives |z| < 1,
+    and a model that removes a real error of half a noise std still passes by far."""
+    from fricenv.gap.stats import paired_z
+
+    rng = np.random.default_rng(3)
+    e = rng.normal(0.0, 1.0, (40, 10))
+    d = SimpleNamespace(counts=np.full(40, 10))
+    base = _resid_fit("nominal", e)
+    assert abs(paired_z(base, _resid_fit("brake_delay", e * (1.0 - 1e-7)), d)) < 1.0
+    assert paired_z(_resid_fit("nominal", e + 0.5), base, d) > 3.0
+
+
+def test_robust_rms_reads_the_noise_under_errors_in_a_few_windows():
+    from fricenv.gap.fitting import robust_rms
+
+    rng = np.random.default_rng(8)
+    r = rng.normal(0.0, 0.7, (200, 8))
+    r[:10] += 6.0  # a model error in 5 % of the windows (brake transitions timed wrong)
+    assert robust_rms(r) == pytest.approx(0.7, rel=0.1)
+    assert np.sqrt(np.mean(r ** 2)) > 1.5  # the plain RMS holds the error
+    r[::7, ::3] = 0.0  # missing samples are 0 in a residual and are not noise
+    assert robust_rms(r) == pytest.approx(0.7, rel=0.1)
+
+
+def test_a_torque_from_pressure_is_held_at_the_step_mean_of_the_sampled_signal():
+    """A brake pressure logged at 25 Hz samples a continuous signal: over each step the simulator holds the mean of
+    the line between the step's two samples, within 4 % of the amplitude of the true mean over the step (the held sample is
+    off by a third of the amplitude: half a step, 20 ms, of timing). A commanded torque stays held."""
+    from fricenv.gap.windows import applied_torque
+
+    dt, n = 0.04, 60
+    t = np.arange(n) * dt
+    pressure = lambda s: 800.0 + 400.0 * np.sin(2 * np.pi * 2.5 * s)  # noqa: E731
+    fine = np.linspace(0.0, dt, 201)
+    step_mean = np.array([np.mean(pressure(k * dt + fine)) for k in range(n - 1)])
+    log = QuarterCarLog(t=t, T_b=pressure(t), omega=np.full(n, 60.0), torque_from_pressure=True)
+    applied = applied_torque(log)[:-1]
+    assert np.max(np.abs(applied - step_mean)) < 0.04 * 400.0
+    assert np.max(np.abs(log.T_b[:-1] - step_mean)) > 0.3 * 400.0
+    command = replace(log, torque_from_pressure=False)
+    np.testing.assert_array_equal(applied_torque(command), command.T_b)
+
+
+def test_a_discovery_is_named_before_an_expected_calibration():
+    from fricenv.gap.diagnose import _order
+
+    effects = [{"effect": "brake_gain", "params": {"gain": 0.8}}, {"effect": "brake_lag", "params": {"tau": 0.05}}]
+    expected = {"brake_gain": "a nominal pressure-to-torque factor"}
+    assert [e["effect"] for e in _order(effects, expected)] == ["brake_lag", "brake_gain"]
+    assert [e["effect"] for e in _order(effects[:1], expected)] == ["brake_gain"]
+    assert [e["effect"] for e in _order(effects, {})] == ["brake_gain", "brake_lag"]
