@@ -16,8 +16,10 @@ isolated outliers, quantisation and low-pass filtering, and the honest noise lev
 - **Filter lag.** A sensor's low-pass also delays the channel (tens of milliseconds for an IMU driver's filter):
   :func:`filter_lag` reads the filter from the roll-off of the channel's noise, :func:`lag_against` the channel's
   delay behind a reference built from unfiltered channels, and :func:`shared_lag` realigns the channels that look
-  filtered by the smallest of these upper bounds (:func:`advanced`). The difference test alone is not enough to call
-  a channel filtered in a quarter-car log: a rough signal (a deceleration under ABS cycles) fails it too.
+  filtered by the smallest of these upper bounds: a slow channel (a speed) is advanced by it (:func:`advanced`), a
+  fast one (a deceleration) has the filter of that delay undone (:func:`deconvolved`). The difference test alone
+  is not enough to call a channel filtered in a quarter-car log: a rough signal (a deceleration under ABS cycles)
+  fails it too, unless it reads far above white noise on the quiet start (``certain``).
 """
 
 from __future__ import annotations
@@ -56,6 +58,7 @@ LAG_MIN_SAMPLES = 0.25  # a shared lag below this is none (shared_lag) [samples]
 # ... and below this [s]: the torque bound of an unfiltered a_x under ABS cycles reads up to ~15 ms (fricenv's
 # simulator), an IMU driver's filter lags by several tens of milliseconds
 LAG_MIN_S = 0.02
+DECONV_MAX_GAIN = 10.0  # largest gain of the inverse sensor filter (deconvolved) [-]
 LAG_BAND_STEP = 1.5  # shared_lag also fits the roll-off above this multiple of the band's bottom [-]
 
 
@@ -382,6 +385,35 @@ def filter_lag(x: np.ndarray, fs: float, f_lo: float, f_use: float, min_cutoff: 
             "digital": bool(digital)}
 
 
+def _response(f: np.ndarray, fc: float, order: int, fs: float, digital: bool) -> np.ndarray:
+    """Complex frequency response of the Butterworth of :func:`_rolloff` (analog, or digital at ``fs``) at ``f``."""
+    from scipy.signal import butter, freqs, freqz
+
+    if digital:
+        b, a = butter(order, min(fc, 0.499 * fs), fs=fs)
+        return freqz(b, a, worN=f, fs=fs)[1]
+    b, a = butter(order, 2 * np.pi * fc, analog=True)
+    return freqs(b, a, worN=2 * np.pi * f)[1]
+
+
+def deconvolved(x: np.ndarray, fs: float, fc: float, order: int = 2, digital: bool = False) -> np.ndarray:
+    """``x`` with a low-pass sensor filter undone: the channel's spectrum divided by the filter's response (a
+    Butterworth of order ``order`` and cut-off ``fc``, :func:`_response`), the gain held at most ``DECONV_MAX_GAIN``
+    (where the filter has removed the signal, dividing would only raise the noise). Unlike a shift by the filter's
+    group delay, this also restores the amplitude of a fast change (a brake apply, an ABS cycle) that the filter
+    smoothed, which a model error would otherwise take for a brake lag. The log is mirrored at both ends before the
+    transform (no wrap-around step) and missing samples stay missing."""
+    x = np.asarray(x, dtype=float)
+    y = fill_missing(x)
+    n = y.size
+    ext = np.r_[y[::-1], y, y[::-1]]
+    f = np.fft.rfftfreq(ext.size, 1.0 / fs)
+    h = _response(f, fc, order, fs, digital)
+    inv = np.where(np.abs(h) * DECONV_MAX_GAIN >= 1.0, 1.0 / np.where(h == 0, 1.0, h), 0.0)
+    u = np.fft.irfft(np.fft.rfft(ext) * inv, ext.size)[n:2 * n]
+    return np.where(np.isfinite(x), u, np.nan)
+
+
 def lag_against(y: np.ndarray, ref: np.ndarray, fs: float, band: tuple[float, float], max_lag: float) -> float:
     """The delay of channel ``y`` behind a reference ``ref`` of the same motion from unfiltered channels: the shift
     in ``[0, max_lag]`` (steps of a tenth of a sample) after which ``y``, band-passed to ``band`` [Hz] without phase
@@ -402,7 +434,8 @@ def lag_against(y: np.ndarray, ref: np.ndarray, fs: float, band: tuple[float, fl
 
 
 def shared_lag(conds: dict[str, ChannelCondition], fs: float, f_lo: float, f_use: float,
-               bounds: dict[str, float] | None = None) -> dict[str, ChannelCondition]:
+               bounds: dict[str, float] | None = None, deconvolve: tuple[str, ...] = ()) \
+        -> dict[str, ChannelCondition]:
     """Channels low-passed by a sensor filter, read from their noise roll-off and realigned (issue 15: an IMU
     driver's filter on ``v`` and ``a_x`` delays them against the torque by tens of milliseconds, a model error that
     inflates the noise level read from the model's residual until real effects drown, and imitates a brake delay).
@@ -428,6 +461,10 @@ def shared_lag(conds: dict[str, ChannelCondition], fs: float, f_lo: float, f_use
     :param f_lo: bottom of the fitted band [Hz].
     :param f_use: the lag is the mean group delay over ``(0, f_use]`` [Hz].
     :param bounds: other upper bounds of the lag, by name [s].
+    :param deconvolve: the channels whose filter is undone (:func:`deconvolved`, the filter of
+        :func:`filter_of_lag`) rather than advanced by its lag: those with signal near the cut-off (a deceleration
+        that follows the brake torque), where a shift leaves the smoothing; a channel whose signal lies far below it
+        (a speed) is advanced, which leaves its noise as small as the filter made it.
     """
     from dataclasses import replace
 
@@ -448,8 +485,21 @@ def shared_lag(conds: dict[str, ChannelCondition], fs: float, f_lo: float, f_use
         return {c: replace(k, filtered=False) for c, k in conds.items()}
     out = dict(conds)
     for c, k in conds.items():
-        if k.filtered:
-            values = advanced(k.values, lag * fs) if lag * fs >= LAG_MIN_SAMPLES else k.values
-            out[c] = replace(k, values=values, filled=fill_missing(values), filter=fits.get(c),
-                             lag_s=lag if lag * fs >= LAG_MIN_SAMPLES else 0.0)
+        if k.filtered and lag * fs >= LAG_MIN_SAMPLES:
+            if c in deconvolve:
+                fc, order, digital = filter_of_lag(fits.get(c) or next(iter(fits.values()), None), lag, fs)
+                values = deconvolved(k.values, fs, fc, order, digital)
+            else:
+                values = advanced(k.values, lag * fs)
+            out[c] = replace(k, values=values, filled=fill_missing(values), filter=fits.get(c), lag_s=lag)
     return out
+
+
+def filter_of_lag(fit: dict | None, lag: float, fs: float) -> tuple[float, int, bool]:
+    """The sensor filter (cut-off, order, digital) whose mean group delay is ``lag``: the roll-off ``fit``'s order
+    and family with its cut-off scaled by its lag over ``lag`` (a Butterworth's delay goes as one over its cut-off;
+    the bound that set ``lag`` is the tighter estimate), or without a fit a second-order analog Butterworth, an IMU
+    driver's usual filter (low-frequency delay ``sqrt(2) / (2 pi fc)``)."""
+    if fit is None:
+        return float(np.sqrt(2.0) / (2.0 * np.pi * lag)), 2, False
+    return float(fit["cutoff_hz"] * fit["lag_s"] / lag), int(fit["order"]), bool(fit["digital"])

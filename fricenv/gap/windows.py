@@ -40,6 +40,7 @@ FREE_ROLL_TORQUE = 0.02  # free rolling: |T_b| below this share of max |T_b| [-]
 SAVGOL = (11, 2)  # speed smoother: window [samples], polynomial order
 NOISE_FLOOR = {"omega": 1e-3, "v": 1e-3, "a_x": 1e-3}  # smallest accepted noise std per channel (SI)
 FILTERED_CHANNELS = ("v", "a_x")  # channels a logger may low-pass (IMU, speed estimate); omega is a pulse count
+DECONVOLVED = ("a_x",)  # filtered channels whose filter is undone, not only its lag (sensors.shared_lag)
 # A low-passed channel's filter is read from its noise spectrum above LAG_BAND_HZ (the braking dynamics' own power
 # lies mostly below), and its lag is the filter's mean group delay over (0, LAG_USE_HZ] (the band of the motion a
 # prediction window sees) [Hz].
@@ -123,7 +124,7 @@ def _conditioned(log: QuarterCarLog, free_end: int, p: qc.QuarterCarParams) -> d
     fs = 1.0 / log.dt
     lowpass = {c: k for c, k in out.items() if c in FILTERED_CHANNELS}
     if lowpass and LAG_BAND_HZ < LAG_TOP * fs:
-        out.update(shared_lag(lowpass, fs, LAG_BAND_HZ, LAG_USE_HZ, _torque_lag(log, out, p)))
+        out.update(shared_lag(lowpass, fs, LAG_BAND_HZ, LAG_USE_HZ, _torque_lag(log, out, p), DECONVOLVED))
     return out
 
 
