@@ -32,8 +32,8 @@ from scipy.ndimage import median_filter
 from fricenv.gap.stats import estimate_noise
 
 __all__ = ["FILTERED_AC", "OUTLIER_Z", "ChannelCondition", "advanced", "band_noise", "condition_channel",
-           "correlation_time", "fill_missing", "filter_lag", "frame_times", "lag_against", "looks_filtered",
-           "shared_lag"]
+           "correlation_time", "deconvolved", "fill_missing", "filter_lag", "filter_of_lag", "frame_times",
+           "lag_against", "looks_filtered", "shared_lag"]
 
 OUTLIER_Z = 8.0  # distance from the running median beyond which an isolated sample is an outlier [noise std]
 OUTLIER_SPAN = 7  # running-median span [samples]
@@ -84,7 +84,7 @@ class ChannelCondition:
     filtered: bool = False
     certain: bool = False  # the quiet start shows a filter beyond doubt (QUIET_CERTAIN_Z)
     filter: dict | None = None  # the sensor filter read from the noise roll-off (filter_lag), None: none seen
-    lag_s: float = 0.0  # the lag the channel was advanced by [s] (0: not)
+    lag_s: float = 0.0  # the sensor filter's lag the channel was realigned by [s] (0: not)
 
     def summary(self) -> dict:
         """The report's per-channel line (``where["sensors"]``)."""
@@ -328,15 +328,19 @@ def _rolloff(f: np.ndarray, fc: float, order: int, fs: float, digital: bool = Fa
 
 def _group_delay(fc: float, order: int, fs: float, f_use: float, digital: bool) -> float:
     """Mean group delay of the Butterworth of :func:`_rolloff` over ``(0, f_use]`` [s]."""
+    h = _response(np.linspace(0.0, f_use, 50), fc, order, fs, digital)
+    return float(-(np.unwrap(np.angle(h))[-1] - np.angle(h[0])) / (2 * np.pi * f_use))
+
+
+def _response(f: np.ndarray, fc: float, order: int, fs: float, digital: bool) -> np.ndarray:
+    """Complex frequency response of the Butterworth of :func:`_rolloff` (analog, or digital at ``fs``) at ``f``."""
     from scipy.signal import butter, freqs, freqz
 
     if digital:
         b, a = butter(order, min(fc, 0.499 * fs), fs=fs)
-        _, h = freqz(b, a, worN=np.linspace(0.0, f_use, 50), fs=fs)
-    else:
-        b, a = butter(order, 2 * np.pi * fc, analog=True)
-        _, h = freqs(b, a, worN=2 * np.pi * np.linspace(0.0, f_use, 50))
-    return float(-(np.unwrap(np.angle(h))[-1] - np.angle(h[0])) / (2 * np.pi * f_use))
+        return freqz(b, a, worN=f, fs=fs)[1]
+    b, a = butter(order, 2 * np.pi * fc, analog=True)
+    return freqs(b, a, worN=2 * np.pi * np.asarray(f))[1]
 
 
 def filter_lag(x: np.ndarray, fs: float, f_lo: float, f_use: float, min_cutoff: float = 0.0,
@@ -383,17 +387,6 @@ def filter_lag(x: np.ndarray, fs: float, f_lo: float, f_use: float, min_cutoff: 
         return None
     return {"lag_s": _group_delay(fc, order, fs, f_use, digital), "cutoff_hz": float(fc), "order": int(order),
             "digital": bool(digital)}
-
-
-def _response(f: np.ndarray, fc: float, order: int, fs: float, digital: bool) -> np.ndarray:
-    """Complex frequency response of the Butterworth of :func:`_rolloff` (analog, or digital at ``fs``) at ``f``."""
-    from scipy.signal import butter, freqs, freqz
-
-    if digital:
-        b, a = butter(order, min(fc, 0.499 * fs), fs=fs)
-        return freqz(b, a, worN=f, fs=fs)[1]
-    b, a = butter(order, 2 * np.pi * fc, analog=True)
-    return freqs(b, a, worN=2 * np.pi * f)[1]
 
 
 def deconvolved(x: np.ndarray, fs: float, fc: float, order: int = 2, digital: bool = False) -> np.ndarray:
@@ -475,11 +468,11 @@ def shared_lag(conds: dict[str, ChannelCondition], fs: float, f_lo: float, f_use
         found = [f for f in found if f is not None]
         if found:
             fits[c] = min(found, key=lambda f: f["lag_s"])
-    bounds = list((bounds or {}).values())
-    lag = min([f["lag_s"] for f in fits.values()] + bounds) if fits else 0.0
+    upper = list((bounds or {}).values())
+    lag = min([f["lag_s"] for f in fits.values()] + upper) if fits else 0.0
     certain = any(k.certain for k in conds.values())
     if certain and lag < LAG_MIN_S:  # the quiet start shows a filter: a bound below any filter's lag is wrong
-        lag = min([f["lag_s"] for f in fits.values()] + [b for b in bounds if np.isfinite(b) and b >= LAG_MIN_S],
+        lag = min([f["lag_s"] for f in fits.values()] + [b for b in upper if np.isfinite(b) and b >= LAG_MIN_S],
                   default=0.0)
     if not certain and (lag * fs < LAG_MIN_SAMPLES or lag < LAG_MIN_S):  # no roll-off, or the signal's own
         return {c: replace(k, filtered=False) for c, k in conds.items()}

@@ -25,10 +25,9 @@ from fricenv.logs import QuarterCarLog
 from fricenv.plants import quarter_car as qc
 from fricenv.plants.tire import longitudinal_slip
 
-__all__ = ["MIN_HORIZON", "MIN_WINDOWS", "NOISE_FLOOR", "Data", "LogTooShortError", "applied_torque", "horizon_samples",
-           "model_batch",
-           "prepare", "projected_jacobian_available", "speed_states", "window_jacobian", "window_nuisances",
-           "window_residuals"]
+__all__ = ["MIN_HORIZON", "MIN_WINDOWS", "NOISE_FLOOR", "Data", "LogTooShortError", "applied_torque",
+           "horizon_samples", "model_batch", "prepare", "projected_jacobian_available", "speed_states",
+           "window_jacobian", "window_nuisances", "window_residuals"]
 
 V0_STEP = 0.02  # finite-difference step of the per-window speed nuisance (v logged) [m/s]
 LAMT_STEP = 0.005  # finite-difference step of the transient-slip nuisance [-]

@@ -240,7 +240,7 @@ def test_deconvolution_restores_a_filtered_deceleration_better_than_a_shift(rate
     u = np.clip((t - 1) / 0.15, 0, 1) * -6 + np.clip((t - 3) / 0.15, 0, 1) * 6 + \
         np.where(t > 4, -3 * np.clip(6 * np.abs((t * 6) % 1 - 0.5) - 1, -1, 1), 0.0)
     y = sosfilt(butter(2, CUTOFF, fs=100.0, output="sos"), u)
-    step = int(round(100.0 / rate))
+    step = round(100.0 / rate)
     y, u = y[::step], u[::step]
     lag = float(np.sqrt(2.0) / (2 * np.pi * CUTOFF))  # the analog filter's low-frequency delay [s]
     fc, order, digital = filter_of_lag(None, lag, rate)

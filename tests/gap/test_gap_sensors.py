@@ -292,7 +292,9 @@ def test_a_torque_from_pressure_is_held_at_the_step_mean_of_the_sampled_signal()
 
     dt, n = 0.04, 60
     t = np.arange(n) * dt
-    pressure = lambda s: 800.0 + 400.0 * np.sin(2 * np.pi * 2.5 * s)  # noqa: E731
+    def pressure(s):
+        return 800.0 + 400.0 * np.sin(2 * np.pi * 2.5 * s)
+
     fine = np.linspace(0.0, dt, 201)
     step_mean = np.array([np.mean(pressure(k * dt + fine)) for k in range(n - 1)])
     log = QuarterCarLog(t=t, T_b=pressure(t), omega=np.full(n, 60.0), torque_from_pressure=True)
