@@ -219,8 +219,8 @@ def refine_noise(nominal: CandidateFit, d: Data) -> None:
     own curvature, the second by any model error), so the smaller is the better estimate.
 
     A channel that looks low-pass filtered (:mod:`fricenv.gap.sensors`) has a difference-based estimate far below
-    its real noise: it takes the residual's level (:func:`robust_rms`: a model error at a few brake transitions
-    does not set it), times the square root of the residual's integrated
+    its real noise: it takes the residual's level (:func:`robust_rms` where the filter is certain, so that a model
+    error at a few brake transitions does not set it), times the square root of the residual's integrated
     autocorrelation time (its windows hold that many times fewer independent samples). No channel goes below its
     quantisation floor ``q / sqrt(12)`` or ``NOISE_FLOOR``."""
     train = np.flatnonzero(~d.test)
@@ -236,7 +236,10 @@ def refine_noise(nominal: CandidateFit, d: Data) -> None:
         if info.get("filtered") and np.isfinite(rms):
             tau = correlation_time(r)
             info["correlation_time"] = tau
-            d.sigma[c] = max(robust_rms(r) * d.sigma[c] * dof * np.sqrt(tau), floor)
+            # a filter seen on the quiet start is certain: a model error at a few windows must not set the level;
+            # a filter read from the roll-off alone may be a rough signal's, whose model error the level then holds
+            level = robust_rms(r) * d.sigma[c] * dof if info.get("filter_evidence") == "quiet start" else rms
+            d.sigma[c] = max(level * np.sqrt(tau), floor)
         else:
             d.sigma[c] = max(min(d.sigma[c], rms), floor)
         if c in sensors:

@@ -94,6 +94,8 @@ class ChannelCondition:
             out["filter"] = dict(self.filter)
         if self.lag_s > 0:
             out["lag_s"] = self.lag_s
+        if self.filtered:
+            out["filter_evidence"] = "quiet start" if self.certain else "roll-off"
         return out
 
 
@@ -455,9 +457,11 @@ def shared_lag(conds: dict[str, ChannelCondition], fs: float, f_lo: float, f_use
     :param f_use: the lag is the mean group delay over ``(0, f_use]`` [Hz].
     :param bounds: other upper bounds of the lag, by name [s].
     :param deconvolve: the channels whose filter is undone (:func:`deconvolved`, the filter of
-        :func:`filter_of_lag`) rather than advanced by its lag: those with signal near the cut-off (a deceleration
-        that follows the brake torque), where a shift leaves the smoothing; a channel whose signal lies far below it
-        (a speed) is advanced, which leaves its noise as small as the filter made it.
+        :func:`filter_of_lag`) rather than advanced by its lag, when the filter is certain (a quiet start shows it;
+        an inverse filter on a channel that was never filtered would only raise its noise tenfold): those with signal
+        near the cut-off (a deceleration that follows the brake torque), where a shift leaves the smoothing; a
+        channel whose signal lies far below it (a speed) is advanced, which leaves its noise as small as the filter
+        made it.
     """
     from dataclasses import replace
 
@@ -479,12 +483,13 @@ def shared_lag(conds: dict[str, ChannelCondition], fs: float, f_lo: float, f_use
     out = dict(conds)
     for c, k in conds.items():
         if k.filtered and lag * fs >= LAG_MIN_SAMPLES:
-            if c in deconvolve:
+            if c in deconvolve and certain:
                 fc, order, digital = filter_of_lag(fits.get(c) or next(iter(fits.values()), None), lag, fs)
                 values = deconvolved(k.values, fs, fc, order, digital)
             else:
                 values = advanced(k.values, lag * fs)
-            out[c] = replace(k, values=values, filled=fill_missing(values), filter=fits.get(c), lag_s=lag)
+            out[c] = replace(k, values=values, filled=fill_missing(values), filter=fits.get(c), lag_s=lag,
+                             certain=certain)
     return out
 
 

@@ -119,6 +119,10 @@ def test_shared_lag_takes_the_smallest_upper_bound_and_leaves_unflagged_channels
     assert out["v"].lag_s == pytest.approx(0.02, abs=1e-12)  # the bound is below the roll-off's lag
     assert out["a_x"] is conds["a_x"]
     assert shared_lag(conds, FS, 2.0, 1.0)["v"].lag_s == pytest.approx(_true_lag(), rel=0.2)
+    # a filter read from the roll-off alone (no quiet start) is not certain: the channel is shifted, never inverted
+    shifted = shared_lag(conds, FS, 2.0, 1.0, deconvolve=("v",))["v"]
+    assert not shifted.certain and shifted.summary()["filter_evidence"] == "roll-off"
+    np.testing.assert_array_equal(shifted.values, advanced(conds["v"].values, shifted.lag_s * FS))
 
 
 def test_prepare_realigns_a_filtered_log_and_leaves_an_unfiltered_one_unchanged():
