@@ -480,16 +480,20 @@ def shared_lag(conds: dict[str, ChannelCondition], fs: float, f_lo: float, f_use
                   default=0.0)
     if not certain and (lag * fs < LAG_MIN_SAMPLES or lag < LAG_MIN_S):  # no roll-off, or the signal's own
         return {c: replace(k, filtered=False) for c, k in conds.items()}
+    moved = lag * fs >= LAG_MIN_SAMPLES  # else a certain filter without any lag estimate: flagged, not moved
     out = dict(conds)
     for c, k in conds.items():
-        if k.filtered and lag * fs >= LAG_MIN_SAMPLES:
-            if c in deconvolve and certain:
-                fc, order, digital = filter_of_lag(fits.get(c) or next(iter(fits.values()), None), lag, fs)
-                values = deconvolved(k.values, fs, fc, order, digital)
-            else:
-                values = advanced(k.values, lag * fs)
-            out[c] = replace(k, values=values, filled=fill_missing(values), filter=fits.get(c), lag_s=lag,
-                             certain=certain)
+        if not k.filtered:
+            continue
+        values = k.values
+        if moved and c in deconvolve and certain:
+            fc, order, digital = filter_of_lag(fits.get(c) or next(iter(fits.values()), None), lag, fs)
+            values = deconvolved(k.values, fs, fc, order, digital)
+        elif moved:
+            values = advanced(k.values, lag * fs)
+        # one logger filters its channels alike: the filter's certainty is the log's, not each channel's
+        out[c] = replace(k, values=values, filled=fill_missing(values), filter=fits.get(c),
+                         lag_s=lag if moved else 0.0, certain=certain)
     return out
 
 

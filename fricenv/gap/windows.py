@@ -153,7 +153,7 @@ def applied_torque(log: QuarterCarLog) -> np.ndarray:
     between them, ``(T_k + T_(k+1)) / 2``. Holding the sample instead would delay the torque by half a step (20 ms
     at 25 Hz), as large as the brake delays the diagnosis looks for."""
     T = np.asarray(log.T_b, dtype=float)
-    if not getattr(log, "torque_from_pressure", False) or T.size < 2:
+    if not log.torque_from_pressure or T.size < 2:
         return T
     return np.r_[0.5 * (T[:-1] + T[1:]), T[-1]]
 

@@ -253,3 +253,17 @@ def test_deconvolution_restores_a_filtered_deceleration_better_than_a_shift(rate
     err = np.sqrt(np.mean((deconvolved(y, rate, fc, order, digital)[k] - u[k]) ** 2))
     shifted = np.sqrt(np.nanmean((advanced(y, lag * rate)[k] - u[k]) ** 2))
     assert err < 0.5 * shifted
+
+
+def test_the_filter_certainty_is_the_logs_even_where_no_lag_is_read():
+    """One logger filters ``v`` and ``a_x`` alike: when one channel's quiet start makes the filter certain, every
+    filtered channel carries that certainty (and so the median-square noise level), also when no lag estimate
+    exists and the channels stay where they are."""
+    rng = np.random.default_rng(6)
+    x = _lowpass(np.r_[np.zeros(30), np.sin(np.linspace(0.0, 40.0, 400)) * 5.0] + rng.normal(0.0, 0.05, 430))
+    sure = condition_channel(x, 1e-3, 30)
+    unsure = condition_channel(x, 1e-3, 0)  # no quiet start read: filtered by the whole-channel test only
+    assert sure.certain and unsure.filtered and not unsure.certain
+    out = shared_lag({"v": unsure, "a_x": sure}, FS, 2.0, 1.0, bounds={"a_x": 0.0})
+    for c in ("v", "a_x"):
+        assert out[c].certain and out[c].lag_s == 0.0 and out[c].summary()["filter_evidence"] == "quiet start"

@@ -286,8 +286,8 @@ def test_robust_rms_reads_the_noise_under_errors_in_a_few_windows():
 
 def test_a_torque_from_pressure_is_held_at_the_step_mean_of_the_sampled_signal():
     """A brake pressure logged at 25 Hz samples a continuous signal: over each step the simulator holds the mean of
-    the line between the step's two samples, within 4 % of the amplitude of the true mean over the step (the held sample is
-    off by a third of the amplitude: half a step, 20 ms, of timing). A commanded torque stays held."""
+    the line between the step's two samples, within 4 % of the amplitude of the true mean over the step (the held
+    sample is off by a third of the amplitude: half a step, 20 ms, of timing). A commanded torque stays held."""
     from fricenv.gap.windows import applied_torque
 
     dt, n = 0.04, 60
