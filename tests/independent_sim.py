@@ -319,7 +319,10 @@ def diagnose_case(case: IndependentCase) -> dict:
            "right": dg.verdict == expected, "gap_before": float(dg.gap_before), "gap_after": float(dg.gap_after),
            "params": dict(dg.params), "seconds": time.perf_counter() - t0, "samples": truth["samples"],
            "candidates": [c.effect for c in dg.candidates[:3]], "named": _named_effects(dg),
-           "not_testable": sorted(dg.where.get("not_testable", {}))}
+           "not_testable": sorted(dg.where.get("not_testable", {})),
+           "robust_gap_before": float(dg.where.get("robust_gap_before", float("nan"))),
+           "tests": {e: {"z_paired": float(t["z_paired"]), "robust_gap": float(t["robust_gap"]),
+                         "significant": bool(t["significant"])} for e, t in dg.where.get("tests", {}).items()}}
     out["right_or_untestable"] = right_or_untestable(out)
     _selection_figures(out, case, dg)
     if case.category in LIBRARY_EFFECTS:

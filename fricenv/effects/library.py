@@ -243,7 +243,8 @@ def _radius_starts(ctx: FitContext) -> list[dict]:
 _ACTUATOR = "brake torque that changes (apply and release) while the wheel responds"
 MIN_TRANSIENTS = 2  # brake apply/release events an actuator effect needs [-]
 MIN_SLIP_TRANSIENTS = 3  # windows with a fast slip change a relaxation length needs [-]
-MIN_NEAR_PEAK = 2  # windows near the friction peak before and after a friction change [-]
+MIN_BRAKING_SIDE = 2  # braking windows on either side of a friction change [-]
+MIN_NEAR_PEAK = 2  # windows near the friction peak on either side for a change of the peak alone to show [-]
 MIN_CHANGE_TRAINING = 4  # training windows per fold a change-point search needs (one on either side and more) [-]
 MIN_SPEED_RANGE = 8.0  # braking speed range drag needs [m/s]
 
@@ -267,12 +268,23 @@ def _testable_radius(x: Excitation) -> str | None:
 
 
 def _testable_mu_change(x: Excitation) -> str | None:
+    """A change of theta scales the whole friction curve (the slip stiffness ``B C D`` with the peak ``D``), so braking
+    on either side shows it in the slip the torque needs; the power analysis then decides whether its plausible size
+    stands above the noise. Requiring slip near the peak as well left every log that brakes below it untested, where
+    the true change passed the test (gap validate tuning seeds 9006/9007, 2 of 14 friction-change logs)."""
     if x.training_windows < MIN_CHANGE_TRAINING:
         return f"{x.training_windows} training windows per fold; a change-point search needs {MIN_CHANGE_TRAINING}"
-    if min(x.near_peak_early, x.near_peak_late) < MIN_NEAR_PEAK:
-        return (f"slip near the friction peak in {x.near_peak_early} early and {x.near_peak_late} late window(s); "
-                f"needs {MIN_NEAR_PEAK} on either side of a change")
+    if x.braking_windows < 2 * MIN_BRAKING_SIDE:
+        return f"{x.braking_windows} braking window(s); needs {MIN_BRAKING_SIDE} on either side of a change"
     return None
+
+
+def _caveat_mu_change(x: Excitation) -> str | None:
+    if min(x.near_peak_early, x.near_peak_late) >= MIN_NEAR_PEAK:
+        return None
+    return (f"tested below the friction peak only (slip near the peak in {x.near_peak_early} early and "
+            f"{x.near_peak_late} late window(s)): the change shows through the slip stiffness, which the model "
+            f"scales with the peak; a road whose peak changes and whose stiffness does not would not show here")
 
 
 def _testable_drag(x: Excitation) -> str | None:
@@ -302,9 +314,9 @@ for _entry in (
     QuarterCarEffect(MuChange, (Param("t_change", "s", (-np.inf, np.inf), np.inf, 0.01, 0.1, log_time=True),
                                 Param("theta_after", "-", (0.03, 1.6), lambda road, p: np.array(road)[..., 3].copy(),
                                       0.002, 0.05)),
-                     "braking near the friction peak before and after the change", fit="change_point",
+                     "braking before and after the change, best near the friction peak", fit="change_point",
                      searched=("t_change",), draw=_draw_mu_change, main_error=_mu_change_error,
-                     testable=_testable_mu_change),
+                     testable=_testable_mu_change, caveat=_caveat_mu_change),
     QuarterCarEffect(Drag, (Param("c0", "N", (0.0, 3000.0), 0.0, 2.0, 50.0),
                             Param("c2", "N s^2/m^2", (0.0, 10.0), 0.0, 0.01, 0.1)),
                      "a wide speed range, best with v or a_x logged",

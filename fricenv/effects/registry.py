@@ -135,6 +135,8 @@ class QuarterCarEffect:
     :param builtin: the simulator builds it in (False: a plug-in acting through ``torque``/``theta``).
     :param testable: ``Excitation -> None`` when the log can show the effect, else the reason it cannot (``needs``
         in the log's terms); a diagnosis lists the effects it could not test in ``where["not_testable"]``.
+    :param caveat: ``Excitation -> None``, or what a test of the effect on this log rests on when it is testable
+        only in part (``where["caveats"]``): a verdict of ``none`` says less about it.
     :param torque: plug-in hook on the applied torque (see the module docstring).
     :param theta: plug-in hook on the road's peak factor.
     """
@@ -153,6 +155,7 @@ class QuarterCarEffect:
     torque: Callable | None = None
     theta: Callable | None = None
     testable: Callable[[Excitation], str | None] = always_testable
+    caveat: Callable[[Excitation], str | None] | None = None
 
     @property
     def name(self) -> str:

@@ -275,6 +275,8 @@ def diagnose(log: QuarterCarLog, p: qc.QuarterCarParams = qc.PAPER_PARAMS,
     where = _where(nominal, s, d, cfg)
     where["not_testable"] = not_testable
     where["detectable"] = not_testable.detectable  # issue 15: smallest significant size per effect (excitation.py)
+    if not_testable.caveats:
+        where["caveats"] = not_testable.caveats  # tested in part (the registry's caveat rules)
     where["sensors"] = d.sensors
     where["forward_selection"] = steps
     effects = [] if whole is None else _order(split_params(whole), expected)

@@ -64,16 +64,19 @@ class LogExcitation(Excitation):
 
 class NotTestable(dict):
     """``{effect: reason}`` of the candidates a log cannot show; ``detectable`` holds, per analysed effect,
-    ``{param: smallest detectable |param - off|}`` (the report's ``where["detectable"]``)."""
+    ``{param: smallest detectable |param - off|}`` (the report's ``where["detectable"]``), ``caveats`` per tested
+    effect what its test rests on where the log shows it only in part (``where["caveats"]``)."""
 
     detectable: dict
+    caveats: dict
 
-    def __init__(self, reasons: dict, detectable: dict):
+    def __init__(self, reasons: dict, detectable: dict, caveats: dict | None = None):
         super().__init__(reasons)
         self.detectable = detectable
+        self.caveats = caveats or {}
 
     def __reduce__(self):  # pickled for the worker processes like the plain dict it extends
-        return NotTestable, (dict(self), self.detectable)
+        return NotTestable, (dict(self), self.detectable, self.caveats)
 
 
 def excitation(nominal: CandidateFit, d: Data, sig_z: float = DEFAULT_CONFIG.sig_z) -> LogExcitation:
@@ -105,7 +108,8 @@ def excitation(nominal: CandidateFit, d: Data, sig_z: float = DEFAULT_CONFIG.sig
 
 def untestable(effects, x: Excitation) -> NotTestable:
     """The effects among ``effects`` the log cannot show, each with the reason: the registry's testability rule,
-    then (a :class:`LogExcitation`) the power analysis, "below noise" when no plausible size would be significant."""
+    then (a :class:`LogExcitation`) the power analysis, "below noise" when no plausible size would be significant;
+    and the registry's caveats of the others."""
     power = getattr(x, "detectable", {})
     out = {}
     for e in effects:
@@ -114,4 +118,6 @@ def untestable(effects, x: Excitation) -> NotTestable:
             reason = power[e].reason()
         if reason is not None:
             out[e] = reason
-    return NotTestable(out, {e: power[e].min_detectable for e in effects if e in power})
+    caveats = {e: why for e in effects if e not in out and registry.get(e).caveat is not None
+               and (why := registry.get(e).caveat(x)) is not None}
+    return NotTestable(out, {e: power[e].min_detectable for e in effects if e in power}, caveats)

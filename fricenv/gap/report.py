@@ -139,6 +139,9 @@ def _testability_lines(w: dict) -> list[str]:
     if w.get("not_testable"):
         lines += ["", "Not testable on this log (not fitted; a verdict of `none` says nothing about them):", ""]
         lines += [f"- `{e}`: {why}" for e, why in w["not_testable"].items()]
+    if w.get("caveats"):
+        lines += ["", "Tested in part (a verdict of `none` says less about them):", ""]
+        lines += [f"- `{e}`: {why}" for e, why in w["caveats"].items()]
     confounded = [(st["effect"], st["confounded_with"]) for st in w.get("forward_selection", [])
                   if st.get("confounded_with")]
     if confounded:

@@ -62,3 +62,23 @@ def test_a_2s_abs_log_with_brake_lag_is_testable_and_diagnosed_brake_lag(tmp_pat
     assert dg.verdict == "brake_lag"
     assert dg.params["tau"] == pytest.approx(0.05, rel=0.15)
     assert dg.gap_after < 0.3 * dg.gap_before
+
+
+def test_a_friction_change_below_the_peak_is_found_and_its_caveat_reported():
+    """Open-loop braking on ice that never nears the peak, theta 0.108 -> 0.079 at 1.65 s (gap validate seed 9006,
+    a tuning log): the rule that asked for slip near the peak left the change untested, verdict none. The change
+    shows in the slip the same torque needs, so it is tested, named, and the report says it was below the peak."""
+    from fricenv.effects.quarter_car import make_effect
+    from fricenv.gap.diagnose import diagnose
+    from fricenv.gap.simulate import simulate_log
+    from fricenv.plants.tire import MagicFormula
+
+    road = MagicFormula(B=3.871, C=2.0, E=1.0, theta=0.10755, name="ice~")
+    log, _ = simulate_log([make_effect("mu_change", t_change=1.6475, theta_after=0.07865)], road, "open-loop",
+                          seed=819614529, duration=5.0)
+    dg = diagnose(log, cfg=DiagnoseConfig(jobs=1))
+    assert "mu_change" not in dg.where["not_testable"]
+    assert "below the friction peak" in dg.where["caveats"]["mu_change"]
+    assert dg.verdict == "mu_change"
+    assert dg.params["t_change"] == pytest.approx(1.6475, abs=0.1)
+    assert dg.params["theta_after"] == pytest.approx(0.07865, rel=0.15)

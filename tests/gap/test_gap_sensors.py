@@ -13,6 +13,7 @@ from scipy.signal import butter, lfilter
 from fricenv.effects import registry
 from fricenv.effects.registry import Excitation
 from fricenv.gap.config import DiagnoseConfig
+from fricenv.gap.excitation import untestable
 from fricenv.gap.report import REPORT_KEYS, report_dict
 from fricenv.gap.selection import split_params
 from fricenv.gap.sensors import condition_channel, correlation_time, fill_missing, quantisation_step
@@ -142,7 +143,7 @@ def _excitation(**kw) -> Excitation:
     ("relaxation_length", {"slip_transient_windows": 0}),
     ("brake_lag", {"torque_transients": 1}),
     ("brake_delay", {"torque_transients": 0}),
-    ("mu_change", {"near_peak_late": 0}),
+    ("mu_change", {"braking_windows": 3}),
     ("mu_change", {"training_windows": 2}),
     ("drag", {"speed_range": 3.0, "has_v": False, "has_a_x": False}),
     ("brake_gain", {"braking_windows": 0}),
@@ -152,6 +153,19 @@ def test_testability_rules_name_what_the_log_lacks(effect, lacking):
     assert rule(_excitation()) is None
     reason = rule(_excitation(**lacking))
     assert isinstance(reason, str) and reason
+
+
+def test_a_friction_change_below_the_peak_is_tested_with_a_caveat():
+    """The model's theta scales the slip stiffness with the peak, so braking below the peak tests a friction change;
+    the caveat says that a change of the peak alone would not show there, and it goes where the peak was reached."""
+    entry = registry.get("mu_change")
+    below = _excitation(near_peak_early=5, near_peak_late=0)
+    assert entry.testable(below) is None
+    caveat = entry.caveat(below)
+    assert "below the friction peak" in caveat and "0 late" in caveat
+    assert entry.caveat(_excitation()) is None
+    reasons = untestable(["mu_change", "radius_error"], _excitation(near_peak_late=0, has_v=False, has_a_x=False))
+    assert list(reasons) == ["radius_error"] and list(reasons.caveats) == ["mu_change"]
 
 
 def _fit(effect: str, names, x) -> CandidateFit:
@@ -235,7 +249,7 @@ def test_a_short_25hz_log_gives_a_result_with_what_it_cannot_test():
     report = report_dict(dg)
     assert report["verdict"] in ("none", "unexplained") or report["effects"][0]["effect"] == report["verdict"]
     assert dg.data.horizon == 3
-    assert "mu_change" in report["where"]["not_testable"]  # 11 windows: too few on either side of a change
+    assert "mu_change" in report["where"]["caveats"]  # near the peak in 1 window on either side: tested in part
     assert set(report["where"]["sensors"]) == {"omega", "v", "a_x"}
 
 
