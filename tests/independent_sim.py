@@ -81,6 +81,7 @@ from tests.independent_model import (  # the physics; re-exported: tests and wor
     make_model,
     stopping_distance,
 )
+from tests.power_check import format_power, power_summary, size_ratio
 from tests.real_artifacts import QuarterCarArtifacts, real_like_quarter_car, write_export
 
 __all__ = ["CATEGORIES", "DRIVERS", "EFFECT_PARAMS", "H_STEP", "LIBRARY_EFFECTS", "OUT_OF_LIBRARY_EFFECTS", "ROADS",
@@ -365,6 +366,8 @@ def _effect_figures(out: dict, case: IndependentCase, dg) -> None:
     # the tool's own model class with the true values: the oracle of "could any tool see it in these data"
     out["detectable"] = true_model_detectable(case.category, truth["params"], truth["road"], dg,
                                               DiagnoseConfig(jobs=1))
+    if len(case.effects) < 2:
+        out["size_ratio"] = size_ratio(case.category, truth, dg)
     if out["right"]:
         out["param_error"], out["param_errors"] = main_error(case.category, truth["params"], out["params"])
 
@@ -423,6 +426,7 @@ def measure(n: int, seed: int, jobs: int = 1, real: bool = False, combos: bool =
              real=real, combos=combos, columns=None if columns is None else list(columns))
     s["right_or_untestable"] = float(np.mean([r.get("right_or_untestable", False) for r in results]))
     s["extra_effect_share"] = float(np.mean([bool(r.get("extra_named")) for r in results]))
+    s["power"] = power_summary(results)
     if combos:
         errs = [v for r in results for v in r.get("effect_errors", {}).values()]
         s.update(all_effects_named=float(np.mean([r.get("all_named", False) for r in results])),
@@ -485,6 +489,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     print(format_summary(s))
     print(f"right or untestable (none where the report lists the true effect as not testable): "
           f"{s['right_or_untestable']:.0%} of {args.n} logs")
+    print(format_power(s["power"]))
     print(f"logs where the forward selection added an effect that is not in them: {s['extra_effect_share']:.0%}")
     if args.combos:
         print(f"every effect named: {s['all_effects_named']:.0%} of {args.n} logs; named or reported not testable: "

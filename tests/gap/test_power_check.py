@@ -1,0 +1,39 @@
+"""The power-analysis check of the blind suites (tests/power_check.py) counts what it says it counts."""
+
+from types import SimpleNamespace
+
+import pytest
+
+from fricenv.plants.quarter_car import QuarterCarParams
+from tests.power_check import power_summary, right_or_below_size, size_ratio
+
+ROAD = {"B": 10.0, "C": 1.9, "E": 0.97, "theta": 1.0}
+
+
+def _dg(detectable: dict) -> SimpleNamespace:
+    return SimpleNamespace(where={"detectable": detectable}, data=SimpleNamespace(p=QuarterCarParams()))
+
+
+def test_size_ratio_is_the_true_deviation_over_the_reported_size():
+    dg = _dg({"brake_gain": {"gain": 0.05}, "mu_change": {"theta_after": 0.2}, "radius_error": {"r_eff": 0.004}})
+    assert size_ratio("brake_gain", {"params": {"gain": 1.1}, "road": ROAD}, dg) == pytest.approx(2.0)
+    # a friction change is off at the road's theta before it
+    assert size_ratio("mu_change", {"params": {"t_change": 1.0, "theta_after": 0.9}, "road": ROAD},
+                      dg) == pytest.approx(0.5)
+    r = QuarterCarParams().r
+    assert size_ratio("radius_error", {"params": {"r_eff": r - 0.002}, "road": ROAD}, dg) == pytest.approx(0.5)
+    assert size_ratio("drag", {"params": {"c0": 100.0, "c2": 0.3}, "road": ROAD}, dg) is None
+
+
+def test_power_summary_splits_at_the_reported_size_and_counts_none_below_it_as_right():
+    rows = [{"right": True, "verdict": "brake_gain", "expected": "brake_gain", "size_ratio": 3.0},
+            {"right": False, "verdict": "none", "expected": "brake_gain", "size_ratio": 1.5},
+            {"right": False, "verdict": "none", "expected": "drag", "size_ratio": 0.4},
+            {"right": False, "verdict": "brake_lag", "expected": "brake_delay", "size_ratio": 0.4},
+            {"right": False, "verdict": "none", "expected": "radius_error", "size_ratio": None,
+             "not_testable": ["radius_error"]}]
+    assert [right_or_below_size(r) for r in rows] == [True, False, True, False, True]
+    s = power_summary(rows)
+    assert s["above"] == {"logs": 2, "right": 1}
+    assert s["below"] == {"logs": 2, "right": 0}
+    assert s["right_or_below_size"] == pytest.approx(3 / 5)
