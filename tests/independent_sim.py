@@ -41,6 +41,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from tests import report_check
 from tests.independent_model import (  # the physics; re-exported: tests and worker processes use these names
     AX_NOISE_RANGE,
     CATEGORIES,
@@ -81,7 +82,6 @@ from tests.independent_model import (  # the physics; re-exported: tests and wor
     make_model,
     stopping_distance,
 )
-from tests.power_check import format_power, power_summary, size_ratio
 from tests.real_artifacts import QuarterCarArtifacts, real_like_quarter_car, write_export
 
 __all__ = ["CATEGORIES", "DRIVERS", "EFFECT_PARAMS", "H_STEP", "LIBRARY_EFFECTS", "OUT_OF_LIBRARY_EFFECTS", "ROADS",
@@ -323,7 +323,8 @@ def diagnose_case(case: IndependentCase) -> dict:
            "not_testable": sorted(dg.where.get("not_testable", {})),
            "robust_gap_before": float(dg.where.get("robust_gap_before", float("nan"))),
            "tests": {e: {"z_paired": float(t["z_paired"]), "robust_gap": float(t["robust_gap"]),
-                         "significant": bool(t["significant"])} for e, t in dg.where.get("tests", {}).items()}}
+                         "significant": bool(t["significant"])} for e, t in dg.where.get("tests", {}).items()},
+           "sensors": report_check.sensor_flags(dg)}
     out["right_or_untestable"] = right_or_untestable(out)
     _selection_figures(out, case, dg)
     if case.category in LIBRARY_EFFECTS:
@@ -367,7 +368,7 @@ def _effect_figures(out: dict, case: IndependentCase, dg) -> None:
     out["detectable"] = true_model_detectable(case.category, truth["params"], truth["road"], dg,
                                               DiagnoseConfig(jobs=1))
     if len(case.effects) < 2:
-        out["size_ratio"] = size_ratio(case.category, truth, dg)
+        out["size_ratio"] = report_check.size_ratio(case.category, truth, dg)
     if out["right"]:
         out["param_error"], out["param_errors"] = main_error(case.category, truth["params"], out["params"])
 
@@ -426,7 +427,7 @@ def measure(n: int, seed: int, jobs: int = 1, real: bool = False, combos: bool =
              real=real, combos=combos, columns=None if columns is None else list(columns))
     s["right_or_untestable"] = float(np.mean([r.get("right_or_untestable", False) for r in results]))
     s["extra_effect_share"] = float(np.mean([bool(r.get("extra_named")) for r in results]))
-    s["power"] = power_summary(results)
+    s["power"], s["sensors"] = report_check.power_summary(results), report_check.sensor_summary(results)
     if combos:
         errs = [v for r in results for v in r.get("effect_errors", {}).values()]
         s.update(all_effects_named=float(np.mean([r.get("all_named", False) for r in results])),
@@ -489,7 +490,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     print(format_summary(s))
     print(f"right or untestable (none where the report lists the true effect as not testable): "
           f"{s['right_or_untestable']:.0%} of {args.n} logs")
-    print(format_power(s["power"]))
+    print(report_check.format_power(s["power"]))
+    print(report_check.format_sensors(s["sensors"]))
     print(f"logs where the forward selection added an effect that is not in them: {s['extra_effect_share']:.0%}")
     if args.combos:
         print(f"every effect named: {s['all_effects_named']:.0%} of {args.n} logs; named or reported not testable: "

@@ -1,11 +1,11 @@
-"""The power-analysis check of the blind suites (tests/power_check.py) counts what it says it counts."""
+"""The checks of what a report says on blind logs (tests/report_check.py) count what they say they count."""
 
 from types import SimpleNamespace
 
 import pytest
 
 from fricenv.plants.quarter_car import QuarterCarParams
-from tests.power_check import power_summary, right_or_below_size, size_ratio
+from tests.report_check import power_summary, right_or_below_size, sensor_summary, size_ratio
 
 ROAD = {"B": 10.0, "C": 1.9, "E": 0.97, "theta": 1.0}
 
@@ -37,3 +37,23 @@ def test_power_summary_splits_at_the_reported_size_and_counts_none_below_it_as_r
     assert s["above"] == {"logs": 2, "right": 1}
     assert s["below"] == {"logs": 2, "right": 0}
     assert s["right_or_below_size"] == pytest.approx(3 / 5)
+
+
+def test_sensor_summary_counts_flags_per_kind_of_log():
+    def row(real, v, a_x, outliers):
+        sensors = {"omega": {"filtered": False, "outliers": outliers}}
+        if v is not None:
+            sensors["v"] = {"filtered": v, "outliers": 0}
+        if a_x is not None:
+            sensors["a_x"] = {"filtered": a_x, "outliers": 0}
+        return {"truth": {"real": {"rate_hz": 50.0} if real else None}, "sensors": sensors}
+
+    rows = [row(True, True, True, 3), row(True, False, None, 2), row(True, None, True, 3), row(False, False, False, 0),
+            row(False, None, True, 1), {"verdict": "error", "truth": {"real": None}}]
+    s = sensor_summary(rows)
+    assert s["real"]["v"] == {"logs": 2, "flagged_filtered": 1}
+    assert s["real"]["a_x"] == {"logs": 2, "flagged_filtered": 2}
+    assert s["real"]["omega_outliers"] == {"logs": 3, "set_aside": 8}
+    assert s["clean"]["v"] == {"logs": 1, "flagged_filtered": 0}
+    assert s["clean"]["a_x"] == {"logs": 2, "flagged_filtered": 1}
+    assert s["clean"]["omega_outliers"] == {"logs": 2, "set_aside": 1}

@@ -1,17 +1,23 @@
-"""Is the diagnosis' power analysis honest? A check of issue 15 item 4 on blind logs.
+"""Does a report say true things about a blind log? Its power analysis (issue 15 item 4) and its sensor flags (item 2).
 
 For every analysed effect the report gives the smallest deviation from "off" that its test detects half the time
 (``where["detectable"]``, :mod:`fricenv.gap.detectability`). On a blind log with one library effect the true size is
 known, so the report can be held to it: effects larger than the reported size should mostly be found, smaller ones
 mostly not. :func:`size_ratio` is the true size over the reported one, :func:`power_summary` the share found on
 either side of 1 and the verdicts that are right or ``none`` on an effect the report sized out of reach.
+
+The report also says which channels looked filtered and how many outliers it set aside (``where["sensors"]``). A
+real-like log (:mod:`tests.real_artifacts`) low-passes every ``v`` and ``a_x`` it writes and puts outliers in the wheel
+speed; a clean one does neither. :func:`sensor_flags` keeps a row's flags and :func:`sensor_summary` counts, per kind
+of log, how often a filtered channel was flagged and how often a clean one was.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["format_power", "power_summary", "right_or_below_size", "size_ratio"]
+__all__ = ["format_power", "format_sensors", "power_summary", "right_or_below_size", "sensor_flags", "sensor_summary",
+           "size_ratio"]
 
 
 def size_ratio(effect: str, truth: dict, dg) -> float | None:
@@ -61,3 +67,36 @@ def format_power(pw: dict) -> str:
     return (f"power analysis: effects at or above the reported detectable size named right {pw['above']['right']}/"
             f"{pw['above']['logs']}, below it {pw['below']['right']}/{pw['below']['logs']}; right, or `none` on an "
             f"effect the report sized out of reach: {pw['right_or_below_size']:.0%}")
+
+
+def sensor_flags(dg) -> dict:
+    """Per logged channel what the report saw: ``{"filtered": bool, "outliers": int}``."""
+    return {c: {"filtered": bool(k.get("filtered")), "outliers": int(k.get("outliers", 0))}
+            for c, k in (dg.data.sensors or {}).items()}
+
+
+def sensor_summary(rows: list[dict]) -> dict:
+    """Over the rows with ``sensors``: per kind of log (``real``: written with a logger's artifacts, ``clean``) and
+    channel, the logs that carry it and those where it was flagged filtered; and the outliers set aside in the wheel
+    speed (a real-like log has :class:`tests.real_artifacts.QuarterCarArtifacts` ``outliers`` of them)."""
+    out = {}
+    for kind in ("real", "clean"):
+        group = [r for r in rows if "sensors" in r and bool(r.get("truth", {}).get("real")) == (kind == "real")]
+        if not group:
+            continue
+        seen = {c: {"logs": sum(c in r["sensors"] for r in group),
+                    "flagged_filtered": sum(r["sensors"].get(c, {}).get("filtered", False) for r in group)}
+                for c in ("v", "a_x")}
+        seen["omega_outliers"] = {"logs": len(group), "set_aside": sum(r["sensors"]["omega"]["outliers"] for r in group)}
+        out[kind] = seen
+    return out
+
+
+def format_sensors(s: dict) -> str:
+    """One line of :func:`sensor_summary`."""
+    parts = []
+    for kind, seen in s.items():
+        ch = ", ".join(f"{c} {seen[c]['flagged_filtered']}/{seen[c]['logs']}" for c in ("v", "a_x"))
+        parts.append(f"{kind} logs flagged filtered: {ch}; wheel-speed outliers set aside "
+                     f"{seen['omega_outliers']['set_aside']} in {seen['omega_outliers']['logs']} logs")
+    return "sensors: " + "; ".join(parts)
