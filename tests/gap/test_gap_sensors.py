@@ -49,6 +49,17 @@ def test_isolated_outliers_are_found_and_do_not_move_the_noise_level():
     assert c.noise == pytest.approx(0.2, rel=0.1)
 
 
+@pytest.mark.parametrize("n_spikes, found", [(3, True), (5, True), (12, False)])
+def test_a_short_log_keeps_a_few_outliers_out_but_a_spiky_channel_in(n_spikes, found):
+    # 140 samples (5 s at 28 Hz): 2 % of them is 2.8, yet 3 or 5 glitches are still isolated ones; 12 are a channel
+    # spiky by nature, whose spikes are signal
+    x = _smooth_signal(140) + RNG.normal(0.0, 0.2, 140)
+    spikes = np.linspace(10, 130, n_spikes).astype(int)
+    x[spikes] += 8.0 * np.where(np.arange(n_spikes) % 2, 1.0, -1.0)
+    c = condition_channel(x, 1e-3)
+    assert sorted(c.outliers.tolist()) == (spikes.tolist() if found else [])
+
+
 def test_a_step_is_not_an_outlier():
     x = np.concatenate([np.zeros(500), np.full(500, 5.0)]) + RNG.normal(0.0, 0.05, 1000)
     assert condition_channel(x, 1e-3).outliers.size == 0
