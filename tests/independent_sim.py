@@ -255,13 +255,19 @@ def write_independent_log(path: str | os.PathLike, case: IndependentCase) -> dic
     return truth
 
 
-def write_real_log(stem: str | os.PathLike, case: IndependentCase) -> tuple[str, str, dict]:
-    """Simulate ``case`` and write it as a real-like export with its column map (tests/real_artifacts.py, settings
-    ``case.real``): ``STEM.csv`` and ``STEM.map.json``. Returns the two paths and the truth."""
+def real_export(case: IndependentCase):
+    """Simulate ``case`` and pass it through a logger's artifacts (tests/real_artifacts.py, settings ``case.real``):
+    a :class:`tests.real_artifacts.RealExport`, whose ``truth`` says where the artifacts went."""
     sim = simulate_case(case)
     clean = {"t": sim["t"], "T_b": sim["T_b"], "omega": sim["omega"],
              "v": sim["v"] if "v" in case.columns else None, "a_x": sim["a_x"] if "a_x" in case.columns else None}
-    export = real_like_quarter_car(clean, np.random.default_rng(case.seed + 1), QuarterCarArtifacts(**case.real))
+    return real_like_quarter_car(clean, np.random.default_rng(case.seed + 1), QuarterCarArtifacts(**case.real))
+
+
+def write_real_log(stem: str | os.PathLike, case: IndependentCase) -> tuple[str, str, dict]:
+    """Simulate ``case`` and write it as a real-like export with its column map (tests/real_artifacts.py, settings
+    ``case.real``): ``STEM.csv`` and ``STEM.map.json``. Returns the two paths and the truth."""
+    export = real_export(case)
     csv_path, map_path = write_export(stem, export)
     truth = case.truth()
     truth["samples"] = len(export.columns["timestamp"])
