@@ -29,7 +29,6 @@ Measurement command (imports the diagnosis only there)::
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import math
 import os
@@ -82,6 +81,7 @@ from tests.independent_model import (  # the physics; re-exported: tests and wor
     make_model,
     stopping_distance,
 )
+from tests.measure_cli import measurement_parser, pool_map
 from tests.real_artifacts import QuarterCarArtifacts, real_like_quarter_car, write_export
 
 __all__ = ["CATEGORIES", "DRIVERS", "EFFECT_PARAMS", "H_STEP", "LIBRARY_EFFECTS", "OUT_OF_LIBRARY_EFFECTS", "ROADS",
@@ -453,26 +453,6 @@ def format_rows(s: dict) -> str:
                      f"{r['verdict']:>18} {'OK ' if r['right'] else 'BAD'} | {r['gap_before']:.2f} -> "
                      f"{r['gap_after']:.2f} | {pe}")
     return "\n".join(lines)
-
-
-def measurement_parser(description: str, n: int, seed: int) -> argparse.ArgumentParser:
-    """The options every measurement command shares: ``--n``, ``--seed``, ``--jobs``, ``--json``."""
-    ap = argparse.ArgumentParser(description=description)
-    ap.add_argument("--n", type=int, default=n, help="number of logs")
-    ap.add_argument("--seed", type=int, default=seed, help="seed of the draw")
-    ap.add_argument("--jobs", type=int, default=1, help="processes (one log each)")
-    ap.add_argument("--json", default=None, help="write the summary and per-log results here")
-    return ap
-
-
-def pool_map(fn, tasks: list, jobs: int) -> list:
-    """``[fn(t) for t in tasks]``, in ``jobs`` processes when more than one (``fn`` must be importable)."""
-    from concurrent.futures import ProcessPoolExecutor
-
-    if jobs <= 1:
-        return [fn(t) for t in tasks]
-    with ProcessPoolExecutor(max_workers=jobs) as pool:
-        return list(pool.map(fn, tasks))
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -20,6 +20,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from tests import independent_sim as sim
+from tests.measure_cli import measurement_parser, pool_map
 from tests.real_artifacts import write_export
 
 __all__ = ["check_case", "main", "measure"]
@@ -67,7 +68,7 @@ def measure(n: int, seed: int, jobs: int = 1, real: bool = True) -> dict:
     """``n`` draws of :func:`tests.independent_sim.draw_cases` (real-like or clean), each checked."""
     if n < 1:
         raise ValueError(f"n must be >= 1, got {n}")
-    rows = sim.pool_map(check_case, sim.draw_cases(n, seed, real), jobs)
+    rows = pool_map(check_case, sim.draw_cases(n, seed, real), jobs)
     out = {k: int(sum(r[k] for r in rows)) for k in ("written", "found", "false")}
     out["logs_missing_any"] = int(sum(r["found"] < r["written"] for r in rows))
     return {**out, "n": n, "seed": seed, "real": real, "logs": rows}
@@ -75,7 +76,7 @@ def measure(n: int, seed: int, jobs: int = 1, real: bool = True) -> dict:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Command line: ``python -m tests.outlier_check --n 60 --seed 3010 [--clean]``."""
-    ap = sim.measurement_parser("Match the wheel-speed outliers the diagnosis sets aside to those written.", 60, 7)
+    ap = measurement_parser("Match the wheel-speed outliers the diagnosis sets aside to those written.", 60, 7)
     ap.add_argument("--clean", action="store_true", help="clean logs (no outliers written): false flags only")
     args = ap.parse_args(argv)
     from fricenv.utils import write_json

@@ -19,7 +19,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from tests.independent_sim import measurement_parser, pool_map
+from tests.measure_cli import measurement_parser, pool_map
 from tests.real_artifacts import PayloadArtifacts, real_like_payload, write_export
 
 __all__ = ["LOGGER_RATES", "SIM_DT", "measure_payload", "real_payload_row"]
