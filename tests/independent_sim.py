@@ -340,19 +340,20 @@ def diagnose_case(case: IndependentCase) -> dict:
 
 def _selection_figures(out: dict, case: IndependentCase, dg) -> None:
     """What the forward selection made of the log: the effects it added after the verdict that are not in the log
-    (``extra_named``; a wrong verdict is counted by the confusion matrix, not here), and on a log with several
-    effects whether all are named (``all_named``), all named or listed as not testable (``named_or_untestable``),
-    the pairs it reported as confounded and each named true effect's parameter error."""
+    (``extra_named``; a wrong verdict is counted by the confusion matrix, not here), the effects it reported as
+    confounded (``confounded``: each with those it is confounded with), and on a log with several effects whether
+    all are named (``all_named``), all named or listed as not testable (``named_or_untestable``) and each named true
+    effect's parameter error."""
     from fricenv.gap.validate import main_error
 
     true = {e.name: dict(e.params) for e in case.effects}
     out["extra_named"] = [e for e in out["named"][1:] if e not in true]
+    out["confounded"] = [[s["effect"], *s["confounded_with"]] for s in dg.where.get("forward_selection", [])
+                         if s.get("confounded_with")]
     if len(case.effects) < 2:
         return
     out["all_named"] = set(true) <= set(out["named"])
     out["named_or_untestable"] = set(true) <= set(out["named"]) | set(out["not_testable"])
-    out["confounded"] = [[s["effect"], *s["confounded_with"]] for s in dg.where.get("forward_selection", [])
-                         if s.get("confounded_with")]
     fitted = {e["effect"]: e["params"] for e in dg.effects}
     out["effect_errors"] = {e: main_error(e, true[e], fitted[e])[0] for e in true if e in fitted}
 
@@ -434,6 +435,7 @@ def measure(n: int, seed: int, jobs: int = 1, real: bool = False, combos: bool =
     s["right_or_untestable"] = float(np.mean([r.get("right_or_untestable", False) for r in results]))
     s["extra_effect_share"] = float(np.mean([bool(r.get("extra_named")) for r in results]))
     s["power"], s["sensors"] = report_check.power_summary(results), report_check.sensor_summary(results)
+    s["misses"] = report_check.miss_kinds(results)
     if combos:
         errs = [v for r in results for v in r.get("effect_errors", {}).values()]
         s.update(all_effects_named=float(np.mean([r.get("all_named", False) for r in results])),
@@ -478,6 +480,7 @@ def main(argv: Sequence[str] | None = None) -> int:
           f"{s['right_or_untestable']:.0%} of {args.n} logs")
     print(report_check.format_power(s["power"]))
     print(report_check.format_sensors(s["sensors"]))
+    print("wrong verdicts on library-effect logs, by kind: " + ", ".join(f"{k} {v}" for k, v in s["misses"].items()))
     print(f"logs where the forward selection added an effect that is not in them: {s['extra_effect_share']:.0%}")
     if args.combos:
         print(f"every effect named: {s['all_effects_named']:.0%} of {args.n} logs; named or reported not testable: "

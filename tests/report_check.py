@@ -16,8 +16,11 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["format_power", "format_sensors", "power_summary", "right_or_below_size", "sensor_flags", "sensor_summary",
-           "size_ratio"]
+__all__ = ["MISS_KINDS", "format_power", "format_sensors", "miss_kind", "miss_kinds", "power_summary",
+           "right_or_below_size", "sensor_flags", "sensor_summary", "size_ratio"]
+
+# Why a single library effect's verdict was wrong, in the order tested (the first that applies)
+MISS_KINDS = ("below the oracle", "confounded", "not testable", "other")
 
 
 def size_ratio(effect: str, truth: dict, dg) -> float | None:
@@ -100,3 +103,26 @@ def format_sensors(s: dict) -> str:
         parts.append(f"{kind} logs flagged filtered: {ch}; wheel-speed outliers set aside "
                      f"{seen['omega_outliers']['set_aside']} in {seen['omega_outliers']['logs']} logs")
     return "sensors: " + "; ".join(parts)
+
+
+def miss_kind(row: dict) -> str | None:
+    """Why a single-effect log's verdict is wrong, ``None`` when it is right or the log has no library effect:
+    ``below the oracle`` (even the true model does not pass the test: the data cannot show it), ``confounded``
+    (the report names the true effect and the verdict as confounded on this log), ``not testable`` (the report
+    lists the true effect as such), else ``other`` (the tool's own miss)."""
+    if row.get("right") or "detectable" not in row or row.get("all_named") is not None:
+        return None
+    if row["detectable"] is False:
+        return "below the oracle"
+    pair = {row["expected"], row["verdict"]}
+    if any(pair <= set(group) for group in row.get("confounded", [])):
+        return "confounded"
+    if row["expected"] in row.get("not_testable", ()):
+        return "not testable"
+    return "other"
+
+
+def miss_kinds(rows: list[dict]) -> dict:
+    """The count of each of :data:`MISS_KINDS` over ``rows`` (:func:`miss_kind`)."""
+    kinds = [miss_kind(r) for r in rows]
+    return {k: kinds.count(k) for k in MISS_KINDS}

@@ -5,7 +5,14 @@ from types import SimpleNamespace
 import pytest
 
 from fricenv.plants.quarter_car import QuarterCarParams
-from tests.report_check import power_summary, right_or_below_size, sensor_summary, size_ratio
+from tests.report_check import (
+    miss_kind,
+    miss_kinds,
+    power_summary,
+    right_or_below_size,
+    sensor_summary,
+    size_ratio,
+)
 
 ROAD = {"B": 10.0, "C": 1.9, "E": 0.97, "theta": 1.0}
 
@@ -57,3 +64,19 @@ def test_sensor_summary_counts_flags_per_kind_of_log():
     assert s["clean"]["v"] == {"logs": 1, "flagged_filtered": 0}
     assert s["clean"]["a_x"] == {"logs": 2, "flagged_filtered": 1}
     assert s["clean"]["omega_outliers"] == {"logs": 2, "set_aside": 1}
+
+
+def test_a_wrong_verdict_is_classed_by_the_first_reason_that_applies():
+    base = {"right": False, "expected": "brake_delay", "verdict": "brake_lag", "detectable": True,
+            "confounded": [], "not_testable": []}
+    rows = [dict(base, right=True),
+            dict(base, detectable=False, confounded=[["brake_delay", "brake_lag"]]),
+            dict(base, confounded=[["brake_delay", "brake_lag"]]),
+            dict(base, confounded=[["brake_lag", "brake_delay", "drag"]]),
+            dict(base, verdict="none", not_testable=["brake_delay"]),
+            dict(base, confounded=[["brake_gain", "brake_lag"]]),
+            dict(base, all_named=False),
+            {"right": False, "expected": "unexplained", "verdict": "none"}]
+    assert [miss_kind(r) for r in rows] == [None, "below the oracle", "confounded", "confounded", "not testable",
+                                            "other", None, None]
+    assert miss_kinds(rows) == {"below the oracle": 1, "confounded": 2, "not testable": 1, "other": 1}
