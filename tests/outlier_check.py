@@ -1,10 +1,10 @@
 """Which wheel-speed outliers does the diagnosis set aside? Matched by time on blind logs (issue 15 item 2).
 
 A real-like export (:mod:`tests.real_artifacts`) writes isolated outliers into the wheel speed and records where;
-the diagnosis reads the export through its map, resamples it onto its grid and sets aside what its sensor step
-(:func:`fricenv.gap.sensors.condition_channel`) flags. An outlier counts as found when a flag lies within one grid
+the diagnosis reads the export through its map, resamples it onto its grid and, preparing it, sets aside what its
+sensor step (:func:`fricenv.gap.sensors.condition_channel`) flags. An outlier counts as found when a flag lies within one grid
 sample of its time stamp; a flag with no outlier there is false. Clean logs (no outliers written) give false flags
-only. The check stops at the sensor step: no diagnosis is run.
+only. The check stops at the log's preparation: nothing is fitted.
 
 Measurement command::
 
@@ -29,16 +29,16 @@ MATCH_SAMPLES = 1  # a flag this many grid samples from an outlier's time stamp 
 
 
 def _omega_flags(path: str) -> tuple[np.ndarray, float]:
-    """The grid indices the sensor step sets aside in a contract log's wheel speed, and the grid step [s]."""
+    """The grid indices the diagnosis' log preparation (:func:`fricenv.gap.windows.prepare`) sets aside in a
+    contract log's wheel speed (logged there, missing from its measurements), and the grid step [s]."""
+    from fricenv.gap.config import DEFAULT_CONFIG
     from fricenv.gap.diagnose import read_log
-    from fricenv.gap.windows import FREE_ROLL_TORQUE, _conditioned, applied_torque
+    from fricenv.gap.windows import prepare
     from fricenv.plants.quarter_car import PAPER_PARAMS
 
     log = read_log(path)
-    T = applied_torque(log)
-    braking = np.flatnonzero(np.abs(T) > FREE_ROLL_TORQUE * max(float(np.max(np.abs(T))), 1e-9))
-    cond = _conditioned(log, int(braking[0]) if braking.size else len(T), PAPER_PARAMS)
-    return np.asarray(cond["omega"].outliers, dtype=int), float(log.dt)
+    d = prepare(log, PAPER_PARAMS, DEFAULT_CONFIG)
+    return np.flatnonzero(np.isfinite(log.omega) & ~np.isfinite(d.meas["omega"])), float(log.dt)
 
 
 def check_case(case: sim.IndependentCase) -> dict:

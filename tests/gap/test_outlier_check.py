@@ -2,6 +2,8 @@
 
 import dataclasses
 
+import pytest
+
 from tests import independent_sim as sim
 from tests.outlier_check import check_case, measure
 
@@ -22,7 +24,5 @@ def test_a_clean_log_has_no_outlier_written_and_none_flagged():
 
 
 def test_measure_rejects_an_empty_draw():
-    import pytest
-
     with pytest.raises(ValueError, match="n must be >= 1"):
         measure(0, 1)
