@@ -7,8 +7,8 @@ predictions on this log, with the per-window nuisance states refitted, :func:`fr
 The road is refitted by every candidate, so the part of ``a`` that a change of the road ``(B, C, E, theta)``
 reproduces is no evidence for the effect: ``a`` is projected off the road's Jacobian (finite differences at the
 nominal fit). With the per-window squared norm ``S_w`` of the projected ``a`` (soft-capped like the test's), the
-largest window left out and ``dn`` extra nuisance states per window, the test of :func:`fricenv.gap.stats.paired_z`
-expects ``z(s) = (s^2 S - N dn) / (2 s sqrt(S))`` at ``s`` times the probe (``S = sum S_w``, ``N`` windows kept), so
+windows of largest and smallest gain left out and ``dn`` extra nuisance states per window, the test of
+:func:`fricenv.gap.stats.paired_z` expects ``z(s) = (s^2 S - N dn) / (2 s sqrt(S))`` at ``s`` times the probe (``S = sum S_w``, ``N`` windows kept), so
 without the soft cap the smallest detectable multiple would be
 
     s_min = (z_sig + sqrt(z_sig^2 + N dn)) / sqrt(S);                                         (D1)
@@ -33,7 +33,7 @@ import numpy as np
 
 from fricenv.effects import registry
 from fricenv.gap.params import ROAD_BOUNDS, ROAD_NAMES, fd_steps, param_names
-from fricenv.gap.stats import CandidateFit, soft_cap, window_counts
+from fricenv.gap.stats import CandidateFit, soft_cap, trimmed, window_counts
 from fricenv.gap.verdict import RANGE_EDGE
 from fricenv.gap.windows import FREE_ROLL_TORQUE, Data, window_nuisances, window_residuals
 from fricenv.plants.tire import MagicFormula
@@ -122,10 +122,10 @@ def _at_bound(road: np.ndarray) -> np.ndarray:
 
 def _z(S_w: np.ndarray, m: np.ndarray, s: float, extra_states: int) -> float:
     """The expected :func:`fricenv.gap.stats.paired_z` at ``s`` times a probe whose per-window squared residual
-    change is ``S_w`` (uncapped): soft-capped per window, the window of largest gain left out, less the extra
-    nuisance states' discount."""
+    change is ``S_w`` (uncapped): soft-capped per window, the windows of largest and smallest gain left out
+    (:func:`fricenv.gap.stats.trimmed`), less the extra nuisance states' discount."""
     gain = m * soft_cap(s**2 * S_w / m)
-    keep = np.arange(gain.size) != int(np.argmax(gain))
+    keep = trimmed(gain)
     S = float(np.sum(gain[keep]))
     return (S - extra_states * int(np.sum(keep))) / (2.0 * np.sqrt(S)) if S > 0 else -np.inf
 

@@ -373,6 +373,33 @@ def test_paired_z_is_the_gain_over_its_noise_spread():
     assert paired_z(right, right, d) == 0.0  # identical predictions: no evidence either way
 
 
+def test_paired_z_one_window_decides_neither_way():
+    """A model right on 50 windows (the base off by 0.6 noise std there) that predicts a lock-up the data do not
+    show in one more window (60 noise std off) still passes; a model wrong everywhere but lucky in one window does
+    not. Leaving out only the window of largest gain held the first at z -4.2: the lock-up window's soft-capped
+    loss outweighed the other 50 windows' gain."""
+    from types import SimpleNamespace
+
+    from fricenv.gap.diagnose import CandidateFit, DiagnoseConfig, paired_z
+    from fricenv.gap.stats import soft_cap
+
+    def fit(resid):  # window errors soft-capped as the diagnosis' are (window_mse)
+        wm = soft_cap(np.mean(resid**2, axis=-1))
+        return CandidateFit(effect="x", names=(), x=np.zeros(0), train_mse=0.0, test_mse=float(np.mean(wm)),
+                            window_mse=wm, resid=resid)
+
+    rng = np.random.default_rng(2)
+    d = SimpleNamespace(horizon=10, channels=["omega"])
+    e = rng.standard_normal((51, 10))
+    a = np.full((51, 10), 0.6)
+    a[-1] = 0.0  # the base model has this window right ...
+    lock = np.zeros((51, 10))
+    lock[-1] = 60.0  # ... where the candidate locks the wheel
+    base = fit(e + a)
+    assert paired_z(base, fit(e + lock), d) > DiagnoseConfig().sig_z  # about 0.6 sqrt(490) / 2 = 6.6 less noise
+    assert paired_z(base, fit(e + 2.0 * a - lock), d) < 0.0  # worse everywhere, its one big win left out
+
+
 def test_paired_z_discounts_a_nuisance_state_fitted_on_each_window():
     """A candidate that only fits one more state per window on the window's own samples (the relaxation model's
     transient slip) removes the noise's projection on that state: about one noise variance per window, which
