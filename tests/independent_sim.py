@@ -342,7 +342,7 @@ def _selection_figures(out: dict, case: IndependentCase, dg) -> None:
     """What the forward selection made of the log: the effects it added after the verdict that are not in the log
     (``extra_named``; a wrong verdict is counted by the confusion matrix, not here), the effects it reported as
     confounded (``confounded``: each with those it is confounded with), and on a log with several effects whether
-    all are named (``all_named``), all named or listed as not testable (``named_or_untestable``) and each named true
+    all are named (``all_named``), all named or listed as not testable (``named_or_untestable``), each named true
     effect's parameter error."""
     from fricenv.gap.validate import main_error
 
@@ -365,7 +365,8 @@ def right_or_untestable(row: dict) -> bool:
 
 
 def _effect_figures(out: dict, case: IndependentCase, dg) -> None:
-    """Gap ratio, detectability and (if right) parameter error of an effect log's result row."""
+    """Gap ratio, detectability (on a log with several effects, also which of them the data show: ``shown``) and
+    (if right) parameter error of an effect log's result row."""
     from fricenv.gap.diagnose import DiagnoseConfig
     from fricenv.gap.validate import main_error, true_model_detectable
 
@@ -376,6 +377,10 @@ def _effect_figures(out: dict, case: IndependentCase, dg) -> None:
                                               DiagnoseConfig(jobs=1))
     if len(case.effects) < 2:
         out["size_ratio"] = report_check.size_ratio(case.category, truth, dg)
+    else:
+        shown = report_check.shown_effects({e.name: dict(e.params) for e in case.effects}, truth["road"], dg,
+                                           DiagnoseConfig(jobs=1))
+        out["truth_effects"], out["shown"] = [e.name for e in case.effects], [e for e, yes in shown.items() if yes]
     if out["right"]:
         out["param_error"], out["param_errors"] = main_error(case.category, truth["params"], out["params"])
 
@@ -440,7 +445,8 @@ def measure(n: int, seed: int, jobs: int = 1, real: bool = False, combos: bool =
         errs = [v for r in results for v in r.get("effect_errors", {}).values()]
         s.update(all_effects_named=float(np.mean([r.get("all_named", False) for r in results])),
                  named_or_untestable=float(np.mean([r.get("named_or_untestable", False) for r in results])),
-                 named_effect_params_within_15pct=float(np.mean(np.array(errs) <= 0.15)) if errs else float("nan"))
+                 named_effect_params_within_15pct=float(np.mean(np.array(errs) <= 0.15)) if errs else float("nan"),
+                 combos=report_check.combo_summary(results))
     return s
 
 
@@ -483,9 +489,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     print("wrong verdicts on library-effect logs, by kind: " + ", ".join(f"{k} {v}" for k, v in s["misses"].items()))
     print(f"logs where the forward selection added an effect that is not in them: {s['extra_effect_share']:.0%}")
     if args.combos:
-        print(f"every effect named: {s['all_effects_named']:.0%} of {args.n} logs; named or reported not testable: "
-              f"{s['named_or_untestable']:.0%}; named true effects' main parameter within 15 %: "
-              f"{s['named_effect_params_within_15pct']:.0%}")
+        print(report_check.format_combos(s))
     print(f"wall time: {s['wall_seconds']:.0f} s on {args.jobs} process(es)")
     if args.json:
         write_json(args.json, s)

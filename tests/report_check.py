@@ -10,14 +10,18 @@ The report also says which channels looked filtered and how many outliers it set
 real-like log (:mod:`tests.real_artifacts`) low-passes every ``v`` and ``a_x`` it writes and puts outliers in the wheel
 speed; a clean one does neither. :func:`sensor_flags` keeps a row's flags and :func:`sensor_summary` counts, per kind
 of log, how often a filtered channel was flagged and how often a clean one was.
+
+On a log with several effects the oracle of one effect (the true model against the calibrated nominal one) does not
+say whether the data show each of them: :func:`shown_effects` tests each against the others fitted without it, and
+:func:`combo_summary` counts the logs where the tool named what the data show.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["MISS_KINDS", "format_power", "format_sensors", "miss_kind", "miss_kinds", "power_summary",
-           "right_or_below_size", "sensor_flags", "sensor_summary", "size_ratio"]
+__all__ = ["MISS_KINDS", "combo_summary", "format_combos", "format_power", "format_sensors", "miss_kind", "miss_kinds",
+           "power_summary", "right_or_below_size", "sensor_flags", "sensor_summary", "shown_effects", "size_ratio"]
 
 # Why a single library effect's verdict was wrong, in the order tested (the first that applies)
 MISS_KINDS = ("below the oracle", "confounded", "not testable", "other")
@@ -126,3 +130,54 @@ def miss_kinds(rows: list[dict]) -> dict:
     """The count of each of :data:`MISS_KINDS` over ``rows`` (:func:`miss_kind`)."""
     kinds = [miss_kind(r) for r in rows]
     return {k: kinds.count(k) for k in MISS_KINDS}
+
+
+def shown_effects(effects: dict[str, dict], road: dict, dg, cfg) -> dict[str, bool]:
+    """The oracle of a log with several effects: which of them its data show. For each effect, the true model (every
+    effect at its true parameters, the true road) against the best the others can do without it (the road and the
+    other effects fitted per fold from their true values, cross-fitted as the tool's candidates are), by the
+    diagnosis' own significance test. An effect the others and a refitted road imitate within the noise is not
+    shown, and no tool could name it from these data.
+
+    :param effects: the log's effects, name -> true parameters (DESIGN.md names, SI units).
+    :param road: the true road, keys ``B, C, E, theta``.
+    :param dg: the log's diagnosis (its prepared data).
+    :param cfg: the diagnosis settings (folds, fit settings, ``sig_z``).
+    """
+    from fricenv.effects import registry  # the tool, imported only where a diagnosis is checked
+    from fricenv.gap.candidates import fit_candidate
+    from fricenv.gap.fitting import score
+    from fricenv.gap.params import ROAD_NAMES, param_names
+    from fricenv.gap.stats import cross_fitted, fold_data, paired_z
+
+    d, names = dg.data, list(effects)
+    road_x = np.array([road[k] for k in ROAD_NAMES], dtype=float)
+    x = np.r_[road_x, [effects[e][k] for e in names for k in registry.get(e).param_names]]
+    full = score("+".join(names), names, param_names(names), x, d, 0.0)
+    out = {}
+    for e in names:
+        rest = [o for o in names if o != e]
+        fits = [fit_candidate(rest, road_x, fold_data(d, j), cfg, {o: effects[o] for o in rest})
+                for j in range(int(cfg.folds))]
+        out[e] = bool(paired_z(cross_fitted(fits, d), full, d) > cfg.sig_z)
+    return out
+
+
+def combo_summary(rows: list[dict]) -> dict:
+    """Over the rows with several effects and an oracle (``shown``): how many logs show every effect, how many of
+    those have every effect named, and how many logs have every effect the data show named."""
+    rows = [r for r in rows if "shown" in r]
+    every = [r for r in rows if set(r["shown"]) == set(r["truth_effects"])]
+    return {"logs": len(rows), "every_shown": len(every), "every_shown_all_named": sum(r["all_named"] for r in every),
+            "shown_named": sum(set(r["shown"]) <= set(r["named"]) for r in rows)}
+
+
+def format_combos(s: dict) -> str:
+    """The lines of a ``--combos`` measurement's summary ``s``: its shares of logs with every effect named and the
+    oracle's counts (:func:`combo_summary`, under ``s["combos"]``)."""
+    c = s["combos"]
+    return (f"every effect named: {s['all_effects_named']:.0%} of {s['n']} logs; named or reported not testable: "
+            f"{s['named_or_untestable']:.0%}; named true effects' main parameter within 15 %: "
+            f"{s['named_effect_params_within_15pct']:.0%}\noracle of several effects: every effect shown by the data "
+            f"on {c['every_shown']}/{c['logs']} logs, all named on {c['every_shown_all_named']} of those; every "
+            f"shown effect named on {c['shown_named']}/{c['logs']}")

@@ -6,6 +6,7 @@ import pytest
 
 from fricenv.plants.quarter_car import QuarterCarParams
 from tests.report_check import (
+    combo_summary,
     miss_kind,
     miss_kinds,
     power_summary,
@@ -80,3 +81,36 @@ def test_a_wrong_verdict_is_classed_by_the_first_reason_that_applies():
     assert [miss_kind(r) for r in rows] == [None, "below the oracle", "confounded", "confounded", "not testable",
                                             "other", None, None]
     assert miss_kinds(rows) == {"below the oracle": 1, "confounded": 2, "not testable": 1, "other": 1}
+
+
+def test_the_oracle_of_several_effects_shows_a_large_one_and_not_a_negligible_one():
+    """A brake gain of 0.8 on a log that also holds a drag of 0.1 N (nothing a log could show) is shown; the drag is
+    not: the brake gain alone, fitted with the road, predicts the log as well as the true model."""
+    import warnings
+
+    from fricenv.effects.quarter_car import make_effect
+    from fricenv.gap.config import DiagnoseConfig
+    from fricenv.gap.diagnose import diagnose
+    from fricenv.gap.simulate import simulate_log
+    from fricenv.plants.tire import MagicFormula
+    from tests.report_check import shown_effects
+
+    road = MagicFormula(B=11.0, C=1.9, E=0.8, theta=0.9, name="custom")
+    effects = {"brake_gain": {"gain": 0.8}, "drag": {"c0": 0.1, "c2": 0.0}}
+    log, _ = simulate_log([make_effect(k, **v) for k, v in effects.items()], road, "open-loop", seed=5, duration=4.0)
+    cfg = DiagnoseConfig(jobs=1)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        dg = diagnose(log, cfg=cfg)
+        shown = shown_effects(effects, {"B": 11.0, "C": 1.9, "E": 0.8, "theta": 0.9}, dg, cfg)
+    assert shown == {"brake_gain": True, "drag": False}
+
+
+def test_combo_summary_counts_the_logs_where_what_is_shown_is_named():
+    rows = [{"truth_effects": ["a", "b"], "shown": ["a", "b"], "named": ["a", "b"], "all_named": True},
+            {"truth_effects": ["a", "b"], "shown": ["a", "b"], "named": ["a"], "all_named": False},
+            {"truth_effects": ["a", "b"], "shown": ["a"], "named": ["a", "c"], "all_named": False},
+            {"truth_effects": ["a", "b"], "shown": [], "named": ["none"], "all_named": False},
+            {"verdict": "error"}]
+    s = combo_summary(rows)
+    assert s == {"logs": 4, "every_shown": 2, "every_shown_all_named": 1, "shown_named": 3}
