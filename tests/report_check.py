@@ -164,12 +164,13 @@ def shown_effects(effects: dict[str, dict], road: dict, dg, cfg) -> dict[str, bo
 
 
 def combo_summary(rows: list[dict]) -> dict:
-    """Over the rows with several effects and an oracle (``shown``): how many logs show every effect, how many of
-    those have every effect named, and how many logs have every effect the data show named."""
+    """Over the rows with several effects and an oracle (``shown``): how many logs show every effect and how many of
+    those have every effect named; how many show at least one and how many of those have every shown effect named."""
     rows = [r for r in rows if "shown" in r]
     every = [r for r in rows if set(r["shown"]) == set(r["truth_effects"])]
+    some = [r for r in rows if r["shown"]]
     return {"logs": len(rows), "every_shown": len(every), "every_shown_all_named": sum(r["all_named"] for r in every),
-            "shown_named": sum(set(r["shown"]) <= set(r["named"]) for r in rows)}
+            "some_shown": len(some), "shown_named": sum(set(r["shown"]) <= set(r["named"]) for r in some)}
 
 
 def format_combos(s: dict) -> str:
@@ -179,5 +180,5 @@ def format_combos(s: dict) -> str:
     return (f"every effect named: {s['all_effects_named']:.0%} of {s['n']} logs; named or reported not testable: "
             f"{s['named_or_untestable']:.0%}; named true effects' main parameter within 15 %: "
             f"{s['named_effect_params_within_15pct']:.0%}\noracle of several effects: every effect shown by the data "
-            f"on {c['every_shown']}/{c['logs']} logs, all named on {c['every_shown_all_named']} of those; every "
-            f"shown effect named on {c['shown_named']}/{c['logs']}")
+            f"on {c['every_shown']}/{c['logs']} logs, all named on {c['every_shown_all_named']} of those; at least "
+            f"one shown on {c['some_shown']}/{c['logs']}, every shown effect named on {c['shown_named']} of those")
