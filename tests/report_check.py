@@ -137,7 +137,8 @@ def shown_effects(effects: dict[str, dict], road: dict, dg, cfg) -> dict[str, bo
     effect at its true parameters, the true road) against the best the others can do without it (the road and the
     other effects fitted per fold from their true values, cross-fitted as the tool's candidates are), by the
     diagnosis' own significance test. An effect the others and a refitted road imitate within the noise is not
-    shown, and no tool could name it from these data.
+    shown, and no tool could name it from these data; the true set is not fitted, so "shown" is an upper bound of
+    what a fit can find (as for the single-effect oracle).
 
     :param effects: the log's effects, name -> true parameters (DESIGN.md names, SI units).
     :param road: the true road, keys ``B, C, E, theta``.

@@ -8,8 +8,8 @@ The road is refitted by every candidate, so the part of ``a`` that a change of t
 reproduces is no evidence for the effect: ``a`` is projected off the road's Jacobian (finite differences at the
 nominal fit). With the per-window squared norm ``S_w`` of the projected ``a`` (soft-capped like the test's), the
 windows of largest and smallest gain left out and ``dn`` extra nuisance states per window, the test of
-:func:`fricenv.gap.stats.paired_z` expects ``z(s) = (s^2 S - N dn) / (2 s sqrt(S))`` at ``s`` times the probe (``S = sum S_w``, ``N`` windows kept), so
-without the soft cap the smallest detectable multiple would be
+:func:`fricenv.gap.stats.paired_z` expects ``z(s) = (s^2 S - N dn) / (2 s sqrt(S))`` at ``s`` times the probe
+(``S = sum S_w``, ``N`` windows kept), so without the soft cap the smallest detectable multiple would be
 
     s_min = (z_sig + sqrt(z_sig^2 + N dn)) / sqrt(S);                                         (D1)
 
