@@ -145,16 +145,14 @@ def shown_effects(effects: dict[str, dict], road: dict, dg, cfg) -> dict[str, bo
     :param dg: the log's diagnosis (its prepared data).
     :param cfg: the diagnosis settings (folds, fit settings, ``sig_z``).
     """
-    from fricenv.effects import registry  # the tool, imported only where a diagnosis is checked
-    from fricenv.gap.candidates import fit_candidate
-    from fricenv.gap.fitting import score
-    from fricenv.gap.params import ROAD_NAMES, param_names
+    from fricenv.gap.candidates import fit_candidate  # the tool, imported only where a diagnosis is checked
+    from fricenv.gap.params import ROAD_NAMES
     from fricenv.gap.stats import cross_fitted, fold_data, paired_z
+    from fricenv.gap.validate import true_model_fit
 
     d, names = dg.data, list(effects)
     road_x = np.array([road[k] for k in ROAD_NAMES], dtype=float)
-    x = np.r_[road_x, [effects[e][k] for e in names for k in registry.get(e).param_names]]
-    full = score("+".join(names), names, param_names(names), x, d, 0.0)
+    full = true_model_fit(effects, road, d)
     out = {}
     for e in names:
         rest = [o for o in names if o != e]

@@ -32,7 +32,7 @@ from fricenv.plants.tire import ROADS, MagicFormula
 from fricenv.utils import as_generator
 
 __all__ = ["CATEGORIES", "PARAM_TOLERANCE", "Case", "draw_case", "main_error", "run_case", "summarize",
-           "true_model_detectable", "validate"]
+           "true_model_detectable", "true_model_fit", "validate"]
 
 NONE, OUT = "none", "out_of_library"
 CATEGORIES = tuple(EFFECTS) + (NONE, OUT)  # the library at import; categories() includes effects registered later
@@ -135,6 +135,23 @@ def run_case(case: Case, cfg: DiagnoseConfig | None = None, via_file: bool = Tru
     return out
 
 
+def true_model_fit(effects: dict[str, dict], road: dict, d):
+    """The true model scored on the prepared log ``d`` (no fit): the true road and every effect at its true
+    parameters, held out on every window as the candidates are (for the oracles of the summaries).
+
+    :param effects: effect name -> its true parameters (DESIGN.md names, SI units), in the model's order.
+    :param road: the true road, keys ``B, C, E, theta``.
+    """
+    from fricenv.gap.diagnose import ROAD_NAMES, param_names, score
+
+    names = list(effects)
+    x = np.array([road[k] for k in ROAD_NAMES] + [effects[e][k] for e in names for k in registry.get(e).param_names],
+                 dtype=float)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return score("+".join(names), names, param_names(names), x, d, 0.0)
+
+
 def true_model_detectable(effect: str, params: dict, road: dict, dg, cfg: DiagnoseConfig) -> bool:
     """Oracle check (for the summaries only): does the TRUE model (true road and effect) improve the held-out error
     over the calibrated nominal model by the diagnosis' own significance rule? If not, the effect is below the
@@ -143,14 +160,9 @@ def true_model_detectable(effect: str, params: dict, road: dict, dg, cfg: Diagno
     :param effect: library effect name; :param params: its true parameters (DESIGN.md names, SI units).
     :param road: the true road, keys ``B, C, E, theta``; :param dg: the log's :class:`Diagnosis`.
     """
-    from fricenv.gap.diagnose import ROAD_NAMES, paired_z, param_names, score
+    from fricenv.gap.diagnose import paired_z
 
-    names = param_names([effect])
-    x = np.array([road[k] for k in ROAD_NAMES] + [params[k] for k in registry.get(effect).param_names], dtype=float)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        true_fit = score(effect, [effect], names, x, dg.data, 0.0)
-    return bool(paired_z(dg.nominal, true_fit, dg.data) > cfg.sig_z)
+    return bool(paired_z(dg.nominal, true_model_fit({effect: params}, road, dg.data), dg.data) > cfg.sig_z)
 
 
 def _run_one(case: Case, cfg: DiagnoseConfig) -> dict:
