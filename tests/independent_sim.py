@@ -318,8 +318,7 @@ def diagnose_case(case: IndependentCase) -> dict:
                 dg = diagnose_file(path, cfg=DiagnoseConfig(jobs=1))
         except Exception as exc:  # noqa: BLE001 -- a log the reader or the tool rejects (or crashes on) counts as wrong
             return {"category": case.category, "truth": case.truth(), "verdict": "error",
-                    "error": f"{type(exc).__name__}: {exc}",
-                    "expected": expected, "right": False, "gap_before": float("nan"), "gap_after": float("nan"),
+                    "error": f"{type(exc).__name__}: {exc}", "expected": expected, "right": False, "gap_before": float("nan"), "gap_after": float("nan"),
                     "params": {}, "seconds": time.perf_counter() - t0}
     out = {"category": case.category, "truth": truth, "true_params": truth["params"], "driver": case.driver,
            "road": truth["road"], "columns": list(case.columns), "verdict": dg.verdict, "expected": expected,
@@ -328,8 +327,9 @@ def diagnose_case(case: IndependentCase) -> dict:
            "candidates": [c.effect for c in dg.candidates[:3]], "named": _named_effects(dg),
            "not_testable": sorted(dg.where.get("not_testable", {})),
            "robust_gap_before": float(dg.where.get("robust_gap_before", float("nan"))),
-           "tests": {e: {"z_paired": float(t["z_paired"]), "robust_gap": float(t["robust_gap"]),
-                         "significant": bool(t["significant"])} for e, t in dg.where.get("tests", {}).items()},
+           "tests": {e: {"z_paired": float(t["z_paired"]), "z_without_effect": t.get("z_without_effect"),
+                         "robust_gap": float(t["robust_gap"]), "significant": bool(t["significant"])}
+                     for e, t in dg.where.get("tests", {}).items()},
            "sensors": report_check.sensor_flags(dg)}
     out["right_or_untestable"] = right_or_untestable(out)
     _selection_figures(out, case, dg)

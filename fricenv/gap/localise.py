@@ -108,6 +108,7 @@ def localise(nominal: CandidateFit, chosen: CandidateFit | None, d: Data, folds:
 
 def tests_table(fits: list, significant: list, edges: dict) -> dict:
     """Per candidate: its held-out tests, robust gap, significance and the parameters at a range edge."""
-    return {f.effect: {"t_stat": f.t_stat, "z": f.z, "z_paired": f.z_paired, "robust_gap": robust_gap(f),
+    return {f.effect: {"t_stat": f.t_stat, "z": f.z, "z_paired": f.z_paired,
+                       "z_without_effect": f.z_without, "robust_gap": robust_gap(f),
                        "significant": any(f is s for s in significant),
                        "at_range_edge": edges.get(f.effect, [])} for f in fits}

@@ -50,6 +50,11 @@ def report_dict(dg: Diagnosis, plant: str = "quarter-car") -> dict:
                         "effects": _effects(dg)})
 
 
+def _z(z: float | None) -> str:
+    """A z value for a table; "-" for a test not made (the payload, or a model without an effect)."""
+    return "-" if z is None else f"{z:.1f}"
+
+
 def summary_line(dg: Diagnosis) -> str:
     """One-line summary for the command line."""
     params = ", ".join(f"{k}={v:.4g}" for k, v in dg.params.items())
@@ -99,14 +104,15 @@ def report_markdown(dg: Diagnosis, report: dict, images: Sequence[str] = (PLOT_T
         after = c.get("gap_after")
         lines.append(f"| {name} | {c['noise_std']:.4g} | {c['gap']:.2f} | {'-' if after is None else f'{after:.2f}'} |")
     lines += ["", "## Candidates (each window predicted by a fit that did not see it)", "",
-              "| effect | params | gap after | robust gap after | score | t | z | z paired | significant |",
-              "| --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
+              "| effect | params | gap after | robust gap after | score | t | z | z paired | z own road | significant |",
+              "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
     for c in report["candidates"]:
         t = w["tests"].get(c["effect"], {})
         params = ", ".join(f"{k}={v:.4g}" for k, v in c["params"].items())
         lines.append(f"| {c['effect']} | {params} | {c['gap_after']:.3f} | {t.get('robust_gap', float('nan')):.3f} "
                      f"| {c['score']:.3f} | {t.get('t_stat', float('nan')):.2f} | {t.get('z', float('nan')):.1f} | "
-                     f"{t.get('z_paired', float('nan')):.1f} | {t.get('significant', False)} |")
+                     f"{t.get('z_paired', float('nan')):.1f} | {_z(t.get('z_without_effect'))} | "
+                     f"{t.get('significant', False)} |")
     lines += _testability_lines(w)
     if "joint_fit" in w:
         j = w["joint_fit"]

@@ -57,6 +57,7 @@ class CandidateFit:
     t_stat: float = 0.0  # paired test against the nominal model on held-out windows
     z: float = 0.0  # robust held-out improvement in noise standard deviations
     z_paired: float = 0.0  # the same improvement over its noise spread given the two models' prediction difference
+    z_without: float | None = None  # paired z against itself with its effects switched off (candidates.test_against)
     seconds: float = 0.0
     resid: np.ndarray | None = None  # (windows, samples) normalised residuals of all windows
     x_folds: tuple = ()  # the per-fold fits of a cross-fitted candidate (x is their mean)

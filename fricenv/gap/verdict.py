@@ -20,9 +20,12 @@ RANGE_EDGE = 1e-3
 
 
 def significant(f: CandidateFit, nominal: CandidateFit, cfg: DiagnoseConfig) -> bool:
-    """A held-out improvement well beyond what the measurement noise could make (:func:`paired_z`); the robust
-    :func:`improvement_z` and the paired t statistic are reported, not required."""
-    return f.z_paired > cfg.sig_z and f.adjusted_mse < nominal.adjusted_mse
+    """A held-out improvement well beyond what the measurement noise could make (:func:`paired_z`), over the
+    nominal model and over the candidate's own road with its effects switched off (``z_without``, the nested
+    test of :func:`fricenv.gap.candidates.test_against`); the robust :func:`improvement_z` and the paired t
+    statistic are reported, not required."""
+    nested = f.z_without is None or f.z_without > cfg.sig_z
+    return f.z_paired > cfg.sig_z and nested and f.adjusted_mse < nominal.adjusted_mse
 
 
 

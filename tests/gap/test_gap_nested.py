@@ -1,0 +1,64 @@
+"""The nested test: a candidate counts only for what its effect adds to its own road (candidates.test_against)."""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pytest
+
+from fricenv.effects.quarter_car import make_effect
+from fricenv.gap import candidates
+from fricenv.gap.config import DiagnoseConfig
+from fricenv.gap.fitting import fit_nominal, refine_noise, score
+from fricenv.gap.params import param_names
+from fricenv.gap.simulate import simulate_log
+from fricenv.gap.verdict import significant
+from fricenv.gap.windows import prepare
+from fricenv.plants import quarter_car as qc
+from fricenv.plants.tire import ROADS
+
+CFG = DiagnoseConfig(jobs=1)
+DRY = ROADS["dry"].as_array()
+# a road that brakes like the dry one below the peak and differs beyond it: what an over-fitted nominal road is
+OFF_PEAK = DRY * np.array([1.25, 0.9, 1.0, 0.97])
+
+
+def _data(effects: list):
+    log, _ = simulate_log(effects, ROADS["dry"], driver="open-loop", seed=11)
+    d = prepare(log, qc.PAPER_PARAMS, CFG)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        refine_noise(fit_nominal(d, CFG), d)
+    return d
+
+
+def _gain_fit(road: np.ndarray, gain: float, d):
+    return score("brake_gain", ["brake_gain"], param_names(["brake_gain"]), np.r_[road, gain], d, 0.0)
+
+
+def test_a_better_road_with_its_effect_switched_off_is_not_an_effect():
+    """A nominal log: the calibrated nominal road is off the peak, and a brake-gain candidate at the true road
+    with a gain of exactly 1 beats it by far. The effect adds nothing to its own road, so it is not significant
+    (without the nested test it would be)."""
+    d = _data([])
+    nominal = score("nominal", [], param_names([]), OFF_PEAK, d, 0.0)
+    cand = _gain_fit(DRY, 1.0, d)
+    candidates.test_against(nominal, cand, d)
+    assert cand.z_paired > CFG.sig_z  # the road alone beats the nominal model ...
+    assert cand.z_without == pytest.approx(0.0, abs=1e-9)  # ... and the gain adds nothing to it
+    assert not significant(cand, nominal, CFG)
+    at_own_road = score("nominal", [], param_names([]), DRY, d, 0.0)
+    assert np.array_equal(candidates.without_effects(cand, d).window_mse, at_own_road.window_mse)
+
+
+def test_an_effect_that_closes_the_gap_passes_both_tests():
+    """A brake gain of 0.8 in the log: the fitted gain beats the nominal model and its own road without it."""
+    d = _data([make_effect("brake_gain", gain=0.8)])
+    nominal = score("nominal", [], param_names([]), OFF_PEAK, d, 0.0)
+    cand = _gain_fit(DRY, 0.8, d)
+    candidates.test_against(nominal, cand, d)
+    assert cand.z_without > CFG.sig_z
+    assert significant(cand, nominal, CFG)
+    candidates.test_against(nominal, nominal, d)
+    assert nominal.z_without is None  # the nominal model has no effect to switch off
