@@ -24,7 +24,7 @@ __all__ = ["MISS_KINDS", "combo_summary", "format_combos", "format_power", "form
            "power_summary", "right_or_below_size", "sensor_flags", "sensor_summary", "shown_effects", "size_ratio"]
 
 # Why a single library effect's verdict was wrong, in the order tested (the first that applies)
-MISS_KINDS = ("below the oracle", "confounded", "not testable", "other")
+MISS_KINDS = ("below the oracle", "true model leaves the gap", "confounded", "not testable", "other")
 
 
 def size_ratio(effect: str, truth: dict, dg) -> float | None:
@@ -111,13 +111,17 @@ def format_sensors(s: dict) -> str:
 
 def miss_kind(row: dict) -> str | None:
     """Why a single-effect log's verdict is wrong, ``None`` when it is right or the log has no library effect:
-    ``below the oracle`` (even the true model does not pass the test: the data cannot show it), ``confounded``
-    (the report names the true effect and the verdict as confounded on this log), ``not testable`` (the report
-    lists the true effect as such), else ``other`` (the tool's own miss)."""
+    ``below the oracle`` (even the true model does not pass the test: the data cannot show it), ``true model leaves
+    the gap`` (an ``unexplained`` verdict where the true model passes the test but closes less of the gap than the
+    verdict rule asks of an effect, ``true_explains``), ``confounded`` (the report names the true effect and the
+    verdict as confounded on this log), ``not testable`` (the report lists the true effect as such), else ``other``
+    (the tool's own miss)."""
     if row.get("right") or "detectable" not in row or row.get("all_named") is not None:
         return None
     if row["detectable"] is False:
         return "below the oracle"
+    if row.get("true_explains") is False and row["verdict"] == "unexplained":
+        return "true model leaves the gap"
     pair = {row["expected"], row["verdict"]}
     if any(pair <= set(group) for group in row.get("confounded", [])):
         return "confounded"

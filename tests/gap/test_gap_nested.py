@@ -62,3 +62,20 @@ def test_an_effect_that_closes_the_gap_passes_both_tests():
     assert significant(cand, nominal, CFG)
     candidates.test_against(nominal, nominal, d)
     assert nominal.z_without is None  # the nominal model has no effect to switch off
+
+
+def test_the_oracle_applies_the_same_rule():
+    """The oracle is the diagnosis' significance rule (nested test included) and its explains rule applied to the
+    true model: on a log with a brake gain of 0.8 the true model passes both; the true road with the gain at its off
+    value adds nothing over itself, so it is not detectable."""
+    from fricenv.gap.diagnose import diagnose
+    from fricenv.gap.validate import true_model_detectable, true_model_explains
+
+    log, _ = simulate_log([make_effect("brake_gain", gain=0.8)], ROADS["dry"], driver="open-loop", seed=11)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        dg = diagnose(log, cfg=CFG)
+    road = dict(zip("BCE", DRY[:3]), theta=DRY[3])
+    assert true_model_detectable("brake_gain", {"gain": 0.8}, road, dg, CFG)
+    assert true_model_explains("brake_gain", {"gain": 0.8}, road, dg, CFG)
+    assert not true_model_detectable("brake_gain", {"gain": 1.0}, road, dg, CFG)

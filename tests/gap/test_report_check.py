@@ -77,10 +77,13 @@ def test_a_wrong_verdict_is_classed_by_the_first_reason_that_applies():
             dict(base, verdict="none", not_testable=["brake_delay"]),
             dict(base, confounded=[["brake_gain", "brake_lag"]]),
             dict(base, all_named=False),
-            {"right": False, "expected": "unexplained", "verdict": "none"}]
+            {"right": False, "expected": "unexplained", "verdict": "none"},
+            dict(base, verdict="unexplained", true_explains=False),
+            dict(base, verdict="none", true_explains=False)]  # the true model's share decides only `unexplained`
     assert [miss_kind(r) for r in rows] == [None, "below the oracle", "confounded", "confounded", "not testable",
-                                            "other", None, None]
-    assert miss_kinds(rows) == {"below the oracle": 1, "confounded": 2, "not testable": 1, "other": 1}
+                                            "other", None, None, "true model leaves the gap", "other"]
+    assert miss_kinds(rows) == {"below the oracle": 1, "true model leaves the gap": 1, "confounded": 2,
+                                "not testable": 1, "other": 2}
 
 
 def test_the_oracle_of_several_effects_shows_a_large_one_and_not_a_negligible_one():
