@@ -24,7 +24,7 @@ _lag_decay = _compile(speed.slip_lag_decay)
 
 
 @numba.njit(cache=True, error_model="numpy")
-def _recursion(omega, r, c0, c2, B, C, E, theta, relax, dt_over_sigma, Fz, m, dt, out):
+def _recursion(omega, r, c0, c2, B, C, E, theta, relax, dt_over_sigma, Fz, m, dt, implicit, out):
     """``out[:, k + 1] = Phi_k(out[:, k])`` (:meth:`fricenv.gap.speed._SpeedModel.step`) from ``out[:, 0]``, the
     transient slip starting from rest; per-element arrays (K,), ``theta`` (K, n)."""
     K, n = out.shape
@@ -43,7 +43,7 @@ def _recursion(omega, r, c0, c2, B, C, E, theta, relax, dt_over_sigma, Fz, m, dt
                 dmu_dv = dmu * dlam_dv
             f = -(Fz * mu + c0[i] + c2[i] * v * v) / m
             dfdv = -(Fz * dmu_dv + 2.0 * c2[i] * v) / m
-            v = max(v + dt * f / (1.0 - dt * min(dfdv, 0.0)), 0.0)
+            v = max(v + dt * f / (1.0 - implicit * dt * min(dfdv, 0.0)), 0.0)
             out[i, k + 1] = v
     return out
 
@@ -62,7 +62,8 @@ def sequential_speed(model, v0: np.ndarray) -> np.ndarray:
     theta = np.ascontiguousarray(np.broadcast_to(model.theta, (K, n)), dtype=float)
     return _recursion(np.ascontiguousarray(model.omega, dtype=float), col(model.r), col(model.c0), col(model.c2),
                       B, C, E, theta, np.ascontiguousarray(np.broadcast_to(model.relax, (K, 1))[:, 0]),
-                      col(model.dt_over_sigma), float(model.p.Fz), float(model.p.m), float(model.dt), out)
+                      col(model.dt_over_sigma), float(model.p.Fz), float(model.p.m), float(model.dt),
+                      speed.IMPLICIT, out)
 
 
 _guard_cache(globals(), ("fricenv.gap.speed",))  # the cache compiled in the slip, Magic Formula and lag formulas
