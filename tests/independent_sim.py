@@ -189,7 +189,7 @@ def draw_independent_case(category: str, rng: np.random.Generator, driver: str |
 
 
 def simulate_case(case: IndependentCase, veh: Vehicle = VEHICLE) -> dict:
-    """Run a case: returns arrays t, T_b, omega, v, a_x (measured), v_true, omega_true, T_applied."""
+    """Run a case: returns arrays t, T_b, omega, v, a_x (measured), v_true, omega_true, a_x_true, T_applied."""
     rng = np.random.default_rng(case.seed)
     n = round(MAX_DURATION / DT)
     free = round(case.free_roll / DT)
@@ -213,14 +213,15 @@ def simulate_case(case: IndependentCase, veh: Vehicle = VEHICLE) -> dict:
     model = make_model(case.road, case.effects, cmd, veh)
     x = initial_state(model, case.v0)
     w_std = math.sqrt(OMEGA_NOISE_VAR)
-    rec = {k: [] for k in ("t", "T_b", "omega", "v", "a_x", "v_true", "omega_true", "T_applied")}
+    rec = {k: [] for k in ("t", "T_b", "omega", "v", "a_x", "v_true", "omega_true", "a_x_true", "T_applied")}
     for k in range(n):
         t = k * DT
         if x[0] < V_STOP:
             break
         om = x[1] + w_std * rng.standard_normal()
         v_m = x[0] + case.v_std * rng.standard_normal()
-        ax = model.accel(t, x) + case.a_x_std * rng.standard_normal()
+        ax_true = model.accel(t, x)
+        ax = ax_true + case.a_x_std * rng.standard_normal()
         cmd_hist[k] = ctrl(k, om) if ctrl is not None else plan[k]
         current[0] = k
         rec["t"].append(t)
@@ -230,6 +231,7 @@ def simulate_case(case: IndependentCase, veh: Vehicle = VEHICLE) -> dict:
         rec["a_x"].append(ax)
         rec["v_true"].append(x[0])
         rec["omega_true"].append(x[1])
+        rec["a_x_true"].append(ax_true)
         rec["T_applied"].append(model.applied(t, x))
         x = integrate(model, x, t, t + DT)
     return {k: np.asarray(v, dtype=float) for k, v in rec.items()}
@@ -335,6 +337,8 @@ def diagnose_case(case: IndependentCase) -> dict:
     _selection_figures(out, case, dg)
     if case.category in LIBRARY_EFFECTS:
         _effect_figures(out, case, dg)
+    elif case.category == OUT and case.real is None:  # the noise-free truth, on the log's own samples
+        out["truth_shown"] = report_check.truth_shown(simulate_case(case), dg, DiagnoseConfig(jobs=1))
     return out
 
 
@@ -440,7 +444,7 @@ def measure(n: int, seed: int, jobs: int = 1, real: bool = False, combos: bool =
     s["right_or_untestable"] = float(np.mean([r.get("right_or_untestable", False) for r in results]))
     s["extra_effect_share"] = float(np.mean([bool(r.get("extra_named")) for r in results]))
     s["power"], s["sensors"] = report_check.power_summary(results), report_check.sensor_summary(results)
-    s["misses"] = report_check.miss_kinds(results)
+    s["misses"], s["out_of_library"] = report_check.miss_kinds(results), report_check.truth_summary(results)
     if combos:
         errs = [v for r in results for v in r.get("effect_errors", {}).values()]
         s.update(all_effects_named=float(np.mean([r.get("all_named", False) for r in results])),
@@ -448,19 +452,6 @@ def measure(n: int, seed: int, jobs: int = 1, real: bool = False, combos: bool =
                  named_effect_params_within_15pct=float(np.mean(np.array(errs) <= 0.15)) if errs else float("nan"),
                  combos=report_check.combo_summary(results))
     return s
-
-
-def format_rows(s: dict) -> str:
-    """One line per log: truth, driver, road, columns, verdict, gaps."""
-    lines = ["per log: category | driver | road | columns | verdict | gap_before -> gap_after | param error"]
-    for r in s["logs"]:
-        road = r.get("truth", {}).get("road", {}).get("preset", "?")
-        cols = ",".join(r.get("truth", {}).get("columns", [])) or "required"
-        pe = f"{r['param_error']:.3f}" if "param_error" in r else "-"
-        lines.append(f"  {r['category']:>18} | {r.get('truth', {}).get('driver', '?'):>9} | {road:>4} | {cols:>6} | "
-                     f"{r['verdict']:>18} {'OK ' if r['right'] else 'BAD'} | {r['gap_before']:.2f} -> "
-                     f"{r['gap_after']:.2f} | {pe}")
-    return "\n".join(lines)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -480,13 +471,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     from tests import independent_sim as mod  # noqa: PLW0406 -- by its import name, so that the worker processes can unpickle
 
     s = mod.measure(args.n, args.seed, args.jobs, args.real, args.combos, () if args.omega_only else None)
-    print(format_rows(s))
+    print(report_check.format_rows(s["logs"]))
     print(format_summary(s))
     print(f"right or untestable (none where the report lists the true effect as not testable): "
           f"{s['right_or_untestable']:.0%} of {args.n} logs")
     print(report_check.format_power(s["power"]))
     print(report_check.format_sensors(s["sensors"]))
     print("wrong verdicts on library-effect logs, by kind: " + ", ".join(f"{k} {v}" for k, v in s["misses"].items()))
+    if s["out_of_library"]["logs"]:
+        print(report_check.format_truth(s["out_of_library"]))
     print(f"logs where the forward selection added an effect that is not in them: {s['extra_effect_share']:.0%}")
     if args.combos:
         print(report_check.format_combos(s))

@@ -13,15 +13,18 @@ of log, how often a filtered channel was flagged and how often a clean one was.
 
 On a log with several effects the oracle of one effect (the true model against the calibrated nominal one) does not
 say whether the data show each of them: :func:`shown_effects` tests each against the others fitted without it, and
-:func:`combo_summary` counts the logs where the tool named what the data show.
+:func:`combo_summary` counts the logs where the tool named what the data show. An out-of-library effect is outside the
+tool's model class, so no true model of that class exists: :func:`truth_shown` scores the simulator's noise-free
+truth itself against the nominal model (clean logs), and :func:`truth_summary` counts the logs whose data show it.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["MISS_KINDS", "combo_summary", "format_combos", "format_power", "format_sensors", "miss_kind", "miss_kinds",
-           "power_summary", "right_or_below_size", "sensor_flags", "sensor_summary", "shown_effects", "size_ratio"]
+__all__ = ["MISS_KINDS", "combo_summary", "format_combos", "format_power", "format_rows", "format_sensors",
+           "format_truth", "miss_kind", "miss_kinds", "power_summary", "right_or_below_size", "sensor_flags",
+           "sensor_summary", "shown_effects", "size_ratio", "truth_shown", "truth_summary"]
 
 # Why a single library effect's verdict was wrong, in the order tested (the first that applies)
 MISS_KINDS = ("below the oracle", "true model leaves the gap", "confounded", "not testable", "other")
@@ -185,3 +188,61 @@ def format_combos(s: dict) -> str:
             f"{s['named_effect_params_within_15pct']:.0%}\noracle of several effects: every effect shown by the data "
             f"on {c['every_shown']}/{c['logs']} logs, all named on {c['every_shown_all_named']} of those; at least "
             f"one shown on {c['some_shown']}/{c['logs']}, every shown effect named on {c['shown_named']} of those")
+
+
+def truth_shown(sim: dict, dg, cfg) -> bool:
+    """The oracle of an out-of-library log, which the tool's model class cannot hold: does the noise-free truth (the
+    simulator's own states and deceleration, ``omega_true``, ``v_true``, ``a_x_true``, on the log's samples) beat the
+    calibrated nominal model by the diagnosis' paired test? Its residual is the measurement noise alone, and it fits
+    no state per window, so the nominal model's per-window fits are counted against that model
+    (:func:`fricenv.gap.stats.paired_z`). If the truth itself does not pass, the data cannot show the effect, and
+    `none` is all that a tool can say. A clean log only: its rows are the simulator's samples.
+
+    :param sim: :func:`tests.independent_sim.simulate_case` of the log's case.
+    :param dg: the log's diagnosis (its prepared data and nominal model).
+    :param cfg: the diagnosis settings (``sig_z``).
+    """
+    from fricenv.gap.stats import CandidateFit, paired_z, window_counts, window_mse
+
+    d = dg.data
+    if d.n != len(sim["t"]):
+        raise ValueError(f"the log has {d.n} samples, its simulation {len(sim['t'])}: not a clean log")
+    rows = d.starts[:, None] + np.arange(d.horizon)[None, :]
+    true = {"omega": sim["omega_true"], "v": sim["v_true"], "a_x": sim["a_x_true"]}
+    meas = d.meas if d.meas is not None else {"omega": d.omega, "v": d.v, "a_x": d.a_x}
+    r = np.concatenate([np.where(np.isfinite(meas[c][rows]), (true[c][rows] - meas[c][rows]) / d.sigma[c], 0.0)
+                        for c in d.channels], axis=-1)
+    wm = window_mse(r, window_counts(d))
+    truth = CandidateFit(effect="truth", names=(), x=np.zeros(0), train_mse=float(np.mean(wm[~d.test])),
+                         test_mse=float(np.mean(wm)), window_mse=wm, resid=r, nuisances=0)
+    return bool(paired_z(dg.nominal, truth, d) > cfg.sig_z)
+
+
+def truth_summary(rows: list[dict]) -> dict:
+    """Over the out-of-library rows with the oracle (``truth_shown``): how many logs show their effect, and how many
+    of those and of the others got the right verdict (``unexplained``)."""
+    rows = [r for r in rows if "truth_shown" in r]
+    shown = [r for r in rows if r["truth_shown"]]
+    hidden = [r for r in rows if not r["truth_shown"]]
+    return {"logs": len(rows), "shown": len(shown), "right_shown": sum(r["right"] for r in shown),
+            "hidden_none": sum(r["verdict"] == "none" for r in hidden)}
+
+
+def format_truth(s: dict) -> str:
+    """The line of :func:`truth_summary` that a measurement run prints."""
+    return (f"out-of-library logs: the noise-free truth beats the nominal model on {s['shown']}/{s['logs']}, named "
+            f"unexplained on {s['right_shown']} of those; of the {s['logs'] - s['shown']} whose data do not show the "
+            f"effect, {s['hidden_none']} read none")
+
+
+def format_rows(rows: list[dict]) -> str:
+    """One line per log: truth, driver, road, columns, verdict, gaps."""
+    lines = ["per log: category | driver | road | columns | verdict | gap_before -> gap_after | param error"]
+    for r in rows:
+        road = r.get("truth", {}).get("road", {}).get("preset", "?")
+        cols = ",".join(r.get("truth", {}).get("columns", [])) or "required"
+        pe = f"{r['param_error']:.3f}" if "param_error" in r else "-"
+        lines.append(f"  {r['category']:>18} | {r.get('truth', {}).get('driver', '?'):>9} | {road:>4} | {cols:>6} | "
+                     f"{r['verdict']:>18} {'OK ' if r['right'] else 'BAD'} | {r['gap_before']:.2f} -> "
+                     f"{r['gap_after']:.2f} | {pe}")
+    return "\n".join(lines)

@@ -2,6 +2,7 @@
 
 from types import SimpleNamespace
 
+import numpy as np
 import pytest
 
 from fricenv.plants.quarter_car import QuarterCarParams
@@ -117,3 +118,31 @@ def test_combo_summary_counts_the_logs_where_what_is_shown_is_named():
             {"verdict": "error"}]
     s = combo_summary(rows)
     assert s == {"logs": 4, "every_shown": 2, "every_shown_all_named": 1, "some_shown": 3, "shown_named": 2}
+
+
+def test_the_noise_free_truth_shows_a_strong_brake_fade_and_not_a_nominal_log(tmp_path):
+    """The oracle of an out-of-library log: on a pedal log whose brake fades by 40 % over the stop the noise-free
+    truth beats the calibrated nominal model by far; on the same log without the fade (the nominal model's own
+    class) it does not, since the nominal model then predicts within the noise."""
+    import dataclasses
+    import warnings
+
+    from fricenv.gap.diagnose import DiagnoseConfig, diagnose_file
+    from tests import independent_sim as ind
+    from tests.report_check import truth_shown
+
+    cfg = DiagnoseConfig(jobs=1)
+    base = ind.draw_independent_case("none", np.random.default_rng(4), driver="pedal")
+    base = dataclasses.replace(base, columns=("v", "a_x"))
+    temp_rise = 0.5 * ind.VEHICLE.m * base.v0**2 / ind.FADE_HEAT_CAPACITY  # all kinetic energy into the brake
+    fade = ind.Effect("brake_fade", {"fade_per_kelvin": 0.4 / temp_rise, "heat_capacity": ind.FADE_HEAT_CAPACITY,
+                                     "cooling": ind.FADE_HEAT_CAPACITY / ind.FADE_COOLING_TIME})
+    shown = {}
+    for name, case in (("fade", dataclasses.replace(base, category="out_of_library", effects=(fade,))), ("none", base)):
+        path = tmp_path / f"{name}.csv"
+        ind.write_independent_log(path, case)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            dg = diagnose_file(path, cfg=cfg)
+        shown[name] = truth_shown(ind.simulate_case(case), dg, cfg)
+    assert shown == {"fade": True, "none": False}
