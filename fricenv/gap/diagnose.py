@@ -53,7 +53,8 @@ Method (every error measure is computed on data not used for fitting):
    constant one significantly (paired z above ``drift_z``) and halves the robust gap it leaves (when that gap is
    above the noise), the effect only imitates the cause (brake fade looks like a brake gain that drifts down) and
    the verdict is ``unexplained``. The constant model is refitted from the split fits first, so that a better
-   optimum is not mistaken for a drift (``where["drift_test"]``).
+   optimum is not mistaken for a drift (``where["drift_test"]``). A set that the forward selection makes the verdict
+   where no single effect closed the gap is tested the same way.
 9. **Testability and several effects.** Candidates the log cannot show (each effect's registry rule, e.g. a
    relaxation length without slip transients, or one too small for this log's noise at its largest plausible size,
    :mod:`fricenv.gap.detectability`) are not fitted and are listed in ``where["not_testable"]``. After the verdict, a
@@ -272,6 +273,8 @@ def diagnose(log: QuarterCarLog, p: qc.QuarterCarParams = qc.PAPER_PARAMS,
         if s.chosen is not None and cfg.drift_check and len(d.starts) >= 2 * int(cfg.folds):
             _check_drift(s, nominal, d, cfg, jobs)
         whole, steps = _forward(s, nominal, folds, d, p, cfg, jobs, tuple(expected))
+        if whole is not None and s.chosen is None and cfg.drift_check and len(d.starts) >= 2 * int(cfg.folds):
+            whole = _set_drifts(s, whole, d, cfg, jobs)
     where = _where(nominal, s, d, cfg)
     where["not_testable"] = not_testable
     where["detectable"] = not_testable.detectable  # issue 15: smallest significant size per effect (excitation.py)
@@ -306,6 +309,15 @@ def _forward(s: _Selection, nominal: CandidateFit, folds: list[Data], d: Data, p
     if s.chosen is None and (whole is first or not explains(whole, nominal, cfg)):
         return None, steps
     return whole, steps
+
+
+def _set_drifts(s: _Selection, whole: CandidateFit, d: Data, cfg: DiagnoseConfig, jobs: int) -> CandidateFit | None:
+    """The drift test of a set that the forward selection made the verdict where no single effect closed the gap
+    (the verdict was ``unexplained``, so no single model was tested for drift): its effects' parameters must be
+    constant too. A brake fade is otherwise read as a brake gain plus a drag whose speed dependence imitates the
+    fade's heating (clean seed 3804, logs 25 and 32). Returns the set, or None when its parameters drift."""
+    s.drift, _ = drift_test(whole, d, cfg, jobs)
+    return None if s.drift["drifts"] else whole
 
 
 def _order(effects: list[dict], expected: dict) -> list[dict]:
