@@ -372,14 +372,13 @@ def _effect_figures(out: dict, case: IndependentCase, dg) -> None:
     """Gap ratio, detectability (on a log with several effects, also which of them the data show: ``shown``) and
     (if right) parameter error of an effect log's result row."""
     from fricenv.gap.diagnose import DiagnoseConfig
-    from fricenv.gap.validate import main_error, true_model_detectable, true_model_explains
+    from fricenv.gap.validate import main_error, true_model_oracle
 
     truth = out["truth"]
     out["ratio"] = out["gap_after"] / out["gap_before"] if out["gap_before"] > 0 else float("nan")
     # the tool's own model class with the true values: the oracle of "could any tool see it in these data"
     cfg = DiagnoseConfig(jobs=1)
-    out["detectable"] = true_model_detectable(case.category, truth["params"], truth["road"], dg, cfg)
-    out["true_explains"] = true_model_explains(case.category, truth["params"], truth["road"], dg, cfg)
+    out["detectable"], out["true_explains"] = true_model_oracle(case.category, truth["params"], truth["road"], dg, cfg)
     if len(case.effects) < 2:
         out["size_ratio"] = report_check.size_ratio(case.category, truth, dg)
     else:

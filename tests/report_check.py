@@ -203,15 +203,12 @@ def truth_shown(sim: dict, dg, cfg) -> bool:
     :param cfg: the diagnosis settings (``sig_z``).
     """
     from fricenv.gap.stats import CandidateFit, paired_z, window_counts, window_mse
+    from fricenv.gap.windows import trajectory_residuals
 
     d = dg.data
     if d.n != len(sim["t"]):
         raise ValueError(f"the log has {d.n} samples, its simulation {len(sim['t'])}: not a clean log")
-    rows = d.starts[:, None] + np.arange(d.horizon)[None, :]
-    true = {"omega": sim["omega_true"], "v": sim["v_true"], "a_x": sim["a_x_true"]}
-    meas = d.meas if d.meas is not None else {"omega": d.omega, "v": d.v, "a_x": d.a_x}
-    r = np.concatenate([np.where(np.isfinite(meas[c][rows]), (true[c][rows] - meas[c][rows]) / d.sigma[c], 0.0)
-                        for c in d.channels], axis=-1)
+    r = trajectory_residuals({"omega": sim["omega_true"], "v": sim["v_true"], "a_x": sim["a_x_true"]}, d)
     wm = window_mse(r, window_counts(d))
     truth = CandidateFit(effect="truth", names=(), x=np.zeros(0), train_mse=float(np.mean(wm[~d.test])),
                          test_mse=float(np.mean(wm)), window_mse=wm, resid=r, nuisances=0)

@@ -17,7 +17,8 @@ from fricenv.gap.pool import start_tasks
 from fricenv.gap.stats import CandidateFit, cross_fitted, fold_data, improvement_z, paired_t, paired_z
 from fricenv.gap.windows import Data, window_nuisances
 
-__all__ = ["FIT_STRATEGIES", "fit_candidate", "nested_nominal", "run_fits", "start_fits", "test_against", "without_effects"]
+__all__ = ["FIT_STRATEGIES", "fit_candidate", "nested_nominal", "run_fits", "start_fits", "test_against",
+           "without_effects"]
 
 
 def _least_squares(effects: Sequence[str], road: np.ndarray, d: Data, cfg: DiagnoseConfig,

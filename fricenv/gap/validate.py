@@ -32,8 +32,7 @@ from fricenv.plants.tire import ROADS, MagicFormula
 from fricenv.utils import as_generator
 
 __all__ = ["CATEGORIES", "PARAM_TOLERANCE", "Case", "draw_case", "main_error", "run_case", "summarize",
-           "true_model_detectable", "true_model_explains", "true_model_fit",
-           "validate"]
+           "true_model_fit", "true_model_oracle", "validate"]
 
 NONE, OUT = "none", "out_of_library"
 CATEGORIES = tuple(EFFECTS) + (NONE, OUT)  # the library at import; categories() includes effects registered later
@@ -130,8 +129,8 @@ def run_case(case: Case, cfg: DiagnoseConfig | None = None, via_file: bool = Tru
            "candidates": [c.effect for c in dg.candidates[:3]]}
     if case.category in EFFECTS:
         out["ratio"] = dg.gap_after / dg.gap_before if dg.gap_before > 0 else np.nan
-        out["detectable"] = true_model_detectable(case.category, out["true_params"], out["road"], dg, cfg)
-        out["true_explains"] = true_model_explains(case.category, out["true_params"], out["road"], dg, cfg)
+        out["detectable"], out["true_explains"] = true_model_oracle(case.category, out["true_params"], out["road"],
+                                                                    dg, cfg)
         if out["right"]:
             out["param_error"], out["param_errors"] = main_error(case.category, out["true_params"], dg.params)
     return out
@@ -154,31 +153,26 @@ def true_model_fit(effects: dict[str, dict], road: dict, d):
         return score("+".join(names), names, param_names(names), x, d, 0.0)
 
 
-def true_model_detectable(effect: str, params: dict, road: dict, dg, cfg: DiagnoseConfig) -> bool:
-    """Oracle check (for the summaries only): does the TRUE model (true road and effect) pass the diagnosis' own
-    significance rule (:func:`fricenv.gap.verdict.significant`: over the calibrated nominal model, and over its own
-    road with the effect switched off)? If not, the effect is below the noise in this log and no tool could name it
-    from these data.
+def true_model_oracle(effect: str, params: dict, road: dict, dg, cfg: DiagnoseConfig) -> tuple[bool, bool]:
+    """Oracle checks (for the summaries only) of the TRUE model (true road and effect), scored once:
+
+    - detectable: does it pass the diagnosis' own significance rule (:func:`fricenv.gap.verdict.significant`:
+      over the calibrated nominal model, and over its own road with the effect switched off)? If not, the effect
+      is below the noise in this log and no tool could name it from these data;
+    - explains: does it close the share of the gap the verdict rule asks of an effect
+      (:func:`fricenv.gap.verdict.explains`)? If not, a fit of the right effect leaves the log ``unexplained`` too
+      (lock-ups that no model times, a noise level read too low).
 
     :param effect: library effect name; :param params: its true parameters (DESIGN.md names, SI units).
     :param road: the true road, keys ``B, C, E, theta``; :param dg: the log's :class:`Diagnosis`.
+    :return: (detectable, explains).
     """
     from fricenv.gap.candidates import test_against
-    from fricenv.gap.verdict import significant
+    from fricenv.gap.verdict import explains, significant
 
     true = true_model_fit({effect: params}, road, dg.data)
     test_against(dg.nominal, true, dg.data)
-    return bool(significant(true, dg.nominal, cfg))
-
-
-def true_model_explains(effect: str, params: dict, road: dict, dg, cfg: DiagnoseConfig) -> bool:
-    """Oracle check (for the summaries only): does the TRUE model close the share of the gap the verdict rule asks
-    of an effect (:func:`fricenv.gap.verdict.explains`)? If not, a fit of the right effect leaves the log
-    ``unexplained`` too (lock-ups that no model times, a noise level read too low). Same parameters as
-    :func:`true_model_detectable`."""
-    from fricenv.gap.verdict import explains
-
-    return bool(explains(true_model_fit({effect: params}, road, dg.data), dg.nominal, cfg))
+    return bool(significant(true, dg.nominal, cfg)), bool(explains(true, dg.nominal, cfg))
 
 
 

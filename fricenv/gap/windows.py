@@ -27,7 +27,7 @@ from fricenv.plants.tire import longitudinal_slip
 
 __all__ = ["MIN_HORIZON", "MIN_WINDOWS", "NOISE_FLOOR", "Data", "LogTooShortError", "applied_torque",
            "horizon_samples", "model_batch", "prepare", "projected_jacobian_available", "speed_states",
-           "window_jacobian", "window_nuisances", "window_residuals"]
+           "trajectory_residuals", "window_jacobian", "window_nuisances", "window_residuals"]
 
 V0_STEP = 0.02  # finite-difference step of the per-window speed nuisance (v logged) [m/s]
 LAMT_STEP = 0.005  # finite-difference step of the transient-slip nuisance [-]
@@ -280,6 +280,15 @@ def _normalised(pred: dict, meas: dict, d: Data) -> np.ndarray:
     exists (a missing, held or outlier sample is left out)."""
     parts = [np.where(np.isfinite(meas[c]), (pred[c] - meas[c]) / d.sigma[c], 0.0) for c in d.channels]
     return np.concatenate(parts, axis=-1)
+
+
+def trajectory_residuals(traj: dict, d: Data) -> np.ndarray:
+    """Normalised residuals (W, M) of given whole-log channel trajectories (channel -> (n,) array) on every window,
+    laid out as :func:`window_residuals` lays out a model's, with no start state fitted: the residuals of a
+    prediction made without the windows' own samples (an oracle's noise-free truth)."""
+    widx = np.arange(len(d.starts))
+    rows = d.starts[widx][:, None] + np.arange(d.horizon)[None, :]
+    return _normalised({c: np.asarray(traj[c], dtype=float)[rows] for c in d.channels}, _measured(d, widx), d)
 
 
 def window_nuisances(effects: Sequence[str], d: Data) -> int:

@@ -66,16 +66,24 @@ def test_an_effect_that_closes_the_gap_passes_both_tests():
 
 def test_the_oracle_applies_the_same_rule():
     """The oracle is the diagnosis' significance rule (nested test included) and its explains rule applied to the
-    true model: on a log with a brake gain of 0.8 the true model passes both; the true road with the gain at its off
-    value adds nothing over itself, so it is not detectable."""
-    from fricenv.gap.diagnose import diagnose
-    from fricenv.gap.validate import true_model_detectable, true_model_explains
+    true model. On a log with a brake gain of 0.8 the true model passes both. On a nominal log whose calibrated
+    nominal road is off the peak, the true road with the gain at its off value beats that road by far, yet adds
+    nothing over itself, so it is not detectable (it would be by the paired test against the nominal model alone)."""
+    from types import SimpleNamespace
 
+    from fricenv.gap.diagnose import diagnose
+    from fricenv.gap.validate import true_model_oracle
+
+    road = dict(zip("BCE", DRY[:3]), theta=DRY[3])
     log, _ = simulate_log([make_effect("brake_gain", gain=0.8)], ROADS["dry"], driver="open-loop", seed=11)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
         dg = diagnose(log, cfg=CFG)
-    road = dict(zip("BCE", DRY[:3]), theta=DRY[3])
-    assert true_model_detectable("brake_gain", {"gain": 0.8}, road, dg, CFG)
-    assert true_model_explains("brake_gain", {"gain": 0.8}, road, dg, CFG)
-    assert not true_model_detectable("brake_gain", {"gain": 1.0}, road, dg, CFG)
+    assert true_model_oracle("brake_gain", {"gain": 0.8}, road, dg, CFG) == (True, True)
+
+    d = _data([])
+    off_peak = SimpleNamespace(data=d, nominal=score("nominal", [], param_names([]), OFF_PEAK, d, 0.0))
+    at_road = _gain_fit(DRY, 1.0, d)
+    candidates.test_against(off_peak.nominal, at_road, d)
+    assert at_road.z_paired > CFG.sig_z  # what the paired test against the nominal model alone would accept
+    assert true_model_oracle("brake_gain", {"gain": 1.0}, road, off_peak, CFG)[0] is False
