@@ -57,8 +57,10 @@ Method (every error measure is computed on data not used for fitting):
    optimum is not mistaken for a drift (``where["drift_test"]``). A set that the forward selection makes the verdict
    where no single effect closed the gap is tested the same way.
 9. **Testability and several effects.** Candidates the log cannot show (each effect's registry rule, e.g. a
-   relaxation length without slip transients, or one too small for this log's noise at its largest plausible size,
-   :mod:`fricenv.gap.detectability`) are not fitted and are listed in ``where["not_testable"]``. After the verdict, a
+   relaxation length without slip transients) are not fitted and are listed in ``where["not_testable"]``, as are
+   those too small for this log's noise at their largest plausible size (:mod:`fricenv.gap.detectability`); these
+   are fitted all the same, since that power analysis is linearised, and one that turns out significant (or
+   selected) leaves the list for a caveat (``where["caveats"]``). After the verdict, a
    forward selection (:mod:`fricenv.gap.selection`) adds the next candidate (any fitted one) while the joint model
    beats the set so far on held-out data, up to three (``effects``; ``gap_after`` is the whole set's).
 """
@@ -185,7 +187,8 @@ def _calibrate_and_fit(folds: list[Data], d: Data, cfg: DiagnoseConfig, jobs: in
         refine_noise(first, folds[0])  # the folds share the noise levels (one dict)
         nominal_folds = [score("nominal", [], first.names, first.x, folds[0], first.seconds)]
         not_testable = untestable(cfg.candidates, excitation(nominal_folds[0], d, cfg.sig_z))
-        candidates = [c for c in cfg.candidates if c not in not_testable]
+        # an effect rated below noise is fitted all the same: the power analysis is linearised (NotTestable.shown)
+        candidates = [c for c in cfg.candidates if c not in not_testable or c in not_testable.below_noise]
         run_cfg = replace(cfg, candidates=tuple(candidates))
         pending = [start_fits([([c], nominal_folds[0].road_x(), folds[0], run_cfg, None) for c in candidates], jobs)]
         advance()
@@ -276,6 +279,8 @@ def diagnose(log: QuarterCarLog, p: qc.QuarterCarParams = qc.PAPER_PARAMS,
         whole, steps = _forward(s, nominal, folds, d, p, cfg, jobs, tuple(expected))
         if whole is not None and s.chosen is None and cfg.drift_check and len(d.starts) >= 2 * int(cfg.folds):
             whole = _set_drifts(s, whole, d, cfg, jobs)
+    effects = [] if whole is None else _order(split_params(whole), expected)
+    not_testable = not_testable.shown({f.effect for f in s.significant} | {e["effect"] for e in effects})
     where = _where(nominal, s, d, cfg)
     where["not_testable"] = not_testable
     where["detectable"] = not_testable.detectable  # issue 15: smallest significant size per effect (excitation.py)
@@ -283,7 +288,6 @@ def diagnose(log: QuarterCarLog, p: qc.QuarterCarParams = qc.PAPER_PARAMS,
         where["caveats"] = not_testable.caveats  # tested in part (the registry's caveat rules)
     where["sensors"] = d.sensors
     where["forward_selection"] = steps
-    effects = [] if whole is None else _order(split_params(whole), expected)
     if expected:
         where["expected_effects"] = expected
     verdict = effects[0]["effect"] if effects else s.verdict  # a discovery before an expected calibration

@@ -69,14 +69,26 @@ class NotTestable(dict):
 
     detectable: dict
     caveats: dict
+    below_noise: tuple
 
-    def __init__(self, reasons: dict, detectable: dict, caveats: dict | None = None):
+    def __init__(self, reasons: dict, detectable: dict, caveats: dict | None = None, below_noise=()):
         super().__init__(reasons)
         self.detectable = detectable
         self.caveats = caveats or {}
+        self.below_noise = tuple(below_noise)  # the effects only the power analysis rules out (still fitted)
 
     def __reduce__(self):  # pickled for the worker processes like the plain dict it extends
-        return NotTestable, (dict(self), self.detectable, self.caveats)
+        return NotTestable, (dict(self), self.detectable, self.caveats, self.below_noise)
+
+    def shown(self, effects) -> NotTestable:
+        """These reasons less the effects among ``effects`` that the power analysis rated below noise and the fits
+        showed after all (significant, or selected): the analysis is linearised at the nominal road, and an effect
+        that moves a wheel lock-up acts on the data nonlinearly. Each gets a caveat saying so."""
+        found = [e for e in self.below_noise if e in effects]
+        caveats = {**self.caveats, **{e: f"rated below noise by the power analysis ({self[e]}), yet significant "
+                                         "on held-out data" for e in found}}
+        return NotTestable({e: r for e, r in self.items() if e not in found}, self.detectable, caveats,
+                           [e for e in self.below_noise if e not in found])
 
 
 def excitation(nominal: CandidateFit, d: Data, sig_z: float = DEFAULT_CONFIG.sig_z) -> LogExcitation:
@@ -111,13 +123,13 @@ def untestable(effects, x: Excitation) -> NotTestable:
     then (a :class:`LogExcitation`) the power analysis, "below noise" when no plausible size would be significant;
     and the registry's caveats of the others."""
     power = getattr(x, "detectable", {})
-    out = {}
+    out, below = {}, []
     for e in effects:
         reason = registry.get(e).testable(x)
-        if reason is None and e in power:
-            reason = power[e].reason()
+        if reason is None and e in power and (reason := power[e].reason()) is not None:
+            below.append(e)
         if reason is not None:
             out[e] = reason
     caveats = {e: why for e in effects if e not in out and registry.get(e).caveat is not None
                and (why := registry.get(e).caveat(x)) is not None}
-    return NotTestable(out, {e: power[e].min_detectable for e in effects if e in power}, caveats)
+    return NotTestable(out, {e: power[e].min_detectable for e in effects if e in power}, caveats, below)

@@ -107,6 +107,16 @@ def test_not_testable_pickles_with_its_detectable_sizes():
     assert back == {"brake_lag": "below noise"} and back.detectable == {"brake_lag": {"tau": 0.2}}
 
 
+def test_an_effect_rated_below_noise_that_the_fits_show_is_testable_after_all():
+    nt = NotTestable({"brake_gain": "below noise: needs |gain - 1| >= 0.77", "radius_error": "needs v or a_x"},
+                     {"brake_gain": {"gain": 0.77}}, {}, below_noise=["brake_gain"])
+    assert pickle.loads(pickle.dumps(nt)).below_noise == ("brake_gain",)
+    out = nt.shown({"brake_gain", "radius_error", "drag"})
+    assert out == {"radius_error": "needs v or a_x"}  # a registry rule stands; only the power analysis is overruled
+    assert "0.77" in out.caveats["brake_gain"] and out.below_noise == ()
+    assert nt.shown({"drag"}) == nt
+
+
 @pytest.mark.parametrize(("rate", "cutoff", "order"), [(100.0, 20.0, 2), (200.0, 20.0, 2), (100.0, 10.0, 4)])
 def test_filter_lag_is_the_sensor_filters_group_delay(rate, cutoff, order):
     """Noise through a causal Butterworth at 1 kHz, logged at ``rate``: the lag read from the noise roll-off is the
@@ -145,3 +155,22 @@ def test_report_markdown_names_confounded_effects():
                                {"effect": "brake_lag", "z_over_set": 0.3, "added": False}]}
     text = "\n".join(_testability_lines(w))
     assert "- `drag` with `brake_gain`" in text and "brake_lag" not in text
+
+
+def test_a_brake_gain_the_power_analysis_under_rates_is_still_fitted_and_named(tmp_path):
+    """A real-like wheel-speed-only log (tuning seed 3000 of ``tests.independent_sim --real``, log 20: pedal, snow,
+    gain 0.77): the power analysis, linearised at the nominal road, rates a brake gain below noise (it acts through
+    the wheel's lock-ups). It was not fitted, and the verdict was `none`; fitted all the same, it is significant and
+    the verdict, with a caveat instead of a not-testable entry."""
+    from fricenv.gap.diagnose import diagnose_file
+    from tests import independent_sim as ind
+
+    case = ind.draw_cases(60, 3000, real=True)[20]
+    assert case.effects[0].name == "brake_gain" and not case.columns
+    path, _ = ind._diagnosable_log(str(tmp_path), case)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        dg = diagnose_file(path, cfg=DiagnoseConfig(jobs=1))
+    assert dg.verdict == "brake_gain"
+    assert "brake_gain" not in dg.where["not_testable"]
+    assert dg.where["caveats"]["brake_gain"].startswith("rated below noise")
