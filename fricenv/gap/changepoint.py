@@ -47,7 +47,7 @@ def change_point_starts(effect: str, road: np.ndarray, d: Data, k: int) -> list[
     best shape's minimum costs least are kept, and the switching time is refined at single-sample resolution over
     each split's stretch. Only the global minimum per shape is not enough: a shape fitted over the change can place
     it a few windows off, and the least squares from there stays there (real-like seed 3901 log 35, fold 0: best
-    splits at 4.3 s and 1.7 s, the true change at 1.19 s; the splits at 1.08 s and 1.27 s, fitted, cost 3 % less).
+    splits at 4.3 s and 1.7 s, the true change at 1.19 s; the splits at 1.08 s and 1.27 s, fitted, cost 3-4 % less).
     """
     train = np.flatnonzero(~d.test)
     lo_t, hi_t = ROAD_BOUNDS["theta"]
