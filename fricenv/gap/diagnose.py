@@ -274,10 +274,11 @@ def diagnose(log: QuarterCarLog, p: qc.QuarterCarParams = qc.PAPER_PARAMS,
         nominal, fits = _candidates(nominal_folds, per_fold, folds, d, run_cfg, jobs)
         s = _select(nominal, fits, folds, d, p, run_cfg, jobs)
         # each half needs training windows in every fold: at least ``folds`` windows per half
-        if s.chosen is not None and cfg.drift_check and len(d.starts) >= 2 * int(cfg.folds):
+        drift_check = cfg.drift_check and len(d.starts) >= 2 * int(cfg.folds)
+        if s.chosen is not None and drift_check:
             _check_drift(s, nominal, d, cfg, jobs)
         whole, steps = _forward(s, nominal, folds, d, p, cfg, jobs, tuple(expected))
-        if whole is not None and s.chosen is None and cfg.drift_check and len(d.starts) >= 2 * int(cfg.folds):
+        if whole is not None and s.chosen is None and drift_check:
             whole = _set_drifts(s, whole, d, cfg, jobs)
     effects = [] if whole is None else _order(split_params(whole), expected)
     not_testable = not_testable.shown({f.effect for f in s.significant} | {e["effect"] for e in effects})
