@@ -12,7 +12,9 @@ significantly on held-out data, up to ``MAX_EFFECTS``:
   the set; of those that pass the test, the one with the lowest joint held-out error is added: the selection ranks
   by held-out gain over the set, not by single-fit rank.
 - **Joint fit.** Started from the set's own parameters and the candidate's single fit (a single fit stretched to the
-  far bound of its range is no start: the registry's start list is used instead), on top of the road starts.
+  far bound of its range is no start: the registry's start list is used instead), on top of the road starts. A
+  joint fit that ends worse than the set on the training windows (it nests the set, so its start misled it) is
+  fitted again from the registry's start list.
 - **Screen.** Each joint model is fitted from its best start first; only one past half the addition threshold, or
   that would call its candidate confounded, is fitted again from every start, which gives exactly the unscreened fit.
 - **Test.** The joint model against the set: the paired held-out z of :func:`fricenv.gap.stats.paired_z` above
@@ -61,23 +63,24 @@ def split_params(f: CandidateFit) -> list[dict]:
             for e in effects_of(f)]
 
 
-def _seeds(current: CandidateFit, c: CandidateFit, d: Data) -> dict:
+def _seeds(current: CandidateFit, c: CandidateFit, d: Data, restart: bool = False) -> dict:
     """Start values of the joint fit of ``current`` plus ``c``: the set's fitted parameters and ``c``'s single fit,
     unless that is pressed against the far bound of its range and the registry has a start list for ``c`` (an
-    effect fitted by its own search, such as a change point, has none: its single fit is its only start)."""
+    effect fitted by its own search, such as a change point, has none: its single fit is its only start). With
+    ``restart``, ``c`` starts from the registry's list (:func:`_restart`)."""
     seeds = {e["effect"]: e["params"] for e in split_params(current)}
-    if not at_range_edge(c, d.p) or not registry.get(c.effect).starts(fit_context(d)):
+    if not restart and (not at_range_edge(c, d.p) or not registry.get(c.effect).starts(fit_context(d))):
         seeds[c.effect] = c.effect_params()
     return seeds
 
 
 def _fit_joints(current: CandidateFit, extra: Sequence[CandidateFit], folds: list[Data], d: Data,
-                cfg: DiagnoseConfig, jobs: int, nominal: CandidateFit) -> list[CandidateFit]:
+                cfg: DiagnoseConfig, jobs: int, nominal: CandidateFit, restart: bool = False) -> list[CandidateFit]:
     """The current set plus each of ``extra``, fitted per fold (seeded by :func:`_seeds`), cross-fitted and tested
     against the nominal model."""
     base = effects_of(current)
     roads = current.x_folds or (current.x,) * len(folds)
-    tasks = [(base + [c.effect], road_of(x), f, cfg, _seeds(current, c, d))
+    tasks = [(base + [c.effect], road_of(x), f, cfg, _seeds(current, c, d, restart))
              for c in extra for f, x in zip(folds, roads)]
     fits = run_fits(tasks, jobs, "forward selection") if tasks else []
     k = len(folds)
@@ -106,9 +109,31 @@ def _extend(current: CandidateFit, extra: Sequence[CandidateFit], folds: list[Da
                                       or confounded(current, c, j, d, cfg))]
     for i, joint in zip(again, _fit_joints(current, [todo[i] for i in again], folds, d, cfg, jobs, nominal)):
         joints[i] = joint
+    for i, joint in _restart(current, todo, joints, folds, d, cfg, jobs, nominal):
+        joints[i] = joint
     for c, joint in zip(todo, joints):
         known[frozenset(base + [c.effect])] = joint
     return [known[frozenset(base + [c.effect])] for c in extra]
+
+
+def _restart(current: CandidateFit, todo: Sequence[CandidateFit], joints: list[CandidateFit], folds: list[Data],
+             d: Data, cfg: DiagnoseConfig, jobs: int, nominal: CandidateFit) -> list[tuple[int, CandidateFit]]:
+    """Joint fits that ended in a local minimum, fitted again from the registry's start list: (index, refit) where
+    the refit fits the training windows better.
+
+    A joint model nests the set (its added effect switched off), so a least squares that fits the training windows
+    worse than the set alone was led astray by its start: the candidate's single fit, which the set's effects may
+    have pulled far off (combos tuning seed 3011, log 36: a relaxation length of 1.18 m fitted alone, 0.27 m true;
+    the joint fit from it stayed near 1.2 m, from the start list it finds 0.29 m).
+    """
+    stuck = [i for i, j in enumerate(joints) if j.train_mse > current.train_mse]
+    # only a candidate its single fit started can start elsewhere: one with a start list in the registry
+    stuck = [i for i in stuck if todo[i].effect in _seeds(current, todo[i], d)
+             and registry.get(todo[i].effect).starts(fit_context(d))]
+    if not stuck:
+        return []
+    refits = _fit_joints(current, [todo[i] for i in stuck], folds, d, cfg, jobs, nominal, restart=True)
+    return [(i, r) for i, r in zip(stuck, refits) if r.train_mse < joints[i].train_mse]
 
 
 def confounded(current: CandidateFit, single: CandidateFit, joint: CandidateFit, d: Data,
