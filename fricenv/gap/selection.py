@@ -95,22 +95,26 @@ def _extend(current: CandidateFit, extra: Sequence[CandidateFit], folds: list[Da
     """The current set plus each of ``extra``, fitted per fold and cross-fitted; a set in ``known`` (frozenset of
     effect names -> cross-fitted model) is not refitted.
 
-    Screened (issue 18): each joint model is first fitted from its best start alone. Only one past ``SCREEN_SHARE``
-    of the addition threshold over the set, or that would make its candidate :func:`confounded` with the set, is
-    fitted again from all ``cfg.fit_starts`` starts, which gives exactly the unscreened fit (the best start's run
+    Screened (issue 18): each joint model is first fitted from its best start alone (and from the registry's start
+    list where that fit ends worse than the set, :func:`_restart`). Only one past ``SCREEN_SHARE`` of the addition
+    threshold over the set, or that would make its candidate :func:`confounded` with the set, is fitted again from
+    all ``cfg.fit_starts`` starts of the list that won, which gives exactly the unscreened fit (the best start's run
     is the first of them).
     """
     base = effects_of(current)
     todo = [c for c in extra if frozenset(base + [c.effect]) not in known]
     quick = replace(cfg, fit_starts=1) if cfg.fit_starts > 1 else cfg
     joints = _fit_joints(current, todo, folds, d, quick, jobs, nominal)
+    restarted = dict(_restart(current, todo, joints, folds, d, quick, jobs, nominal))
+    joints = [restarted.get(i, j) for i, j in enumerate(joints)]
     again = [i for i, (c, j) in enumerate(zip(todo, joints))
              if quick is not cfg and (paired_z(current, j, d) > SCREEN_SHARE * cfg.sig_z
                                       or confounded(current, c, j, d, cfg))]
-    for i, joint in zip(again, _fit_joints(current, [todo[i] for i in again], folds, d, cfg, jobs, nominal)):
-        joints[i] = joint
-    for i, joint in _restart(current, todo, joints, folds, d, cfg, jobs, nominal):
-        joints[i] = joint
+    for restart in (False, True):  # fitted again from all starts of the list that won the screen
+        redo = [i for i in again if (i in restarted) == restart]
+        for i, joint in zip(redo, _fit_joints(current, [todo[i] for i in redo], folds, d, cfg, jobs, nominal,
+                                              restart) if redo else []):
+            joints[i] = joint
     for c, joint in zip(todo, joints):
         known[frozenset(base + [c.effect])] = joint
     return [known[frozenset(base + [c.effect])] for c in extra]

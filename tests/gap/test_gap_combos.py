@@ -136,7 +136,7 @@ def test_joint_fits_are_screened_from_their_best_start_and_refitted_only_near_th
     z_set = {"drag+a": 3.0, "drag+b": 1.0, "drag+c": 1.0}  # paired z of each joint model over the set
     calls = []
 
-    def fake_fit_joints(current, extra, folds, d, cfg, jobs, nominal):
+    def fake_fit_joints(current, extra, folds, d, cfg, jobs, nominal, restart=False):
         calls.append(([c.effect for c in extra], cfg.fit_starts))
         return [CandidateFit(effect=f"drag+{c.effect}", names=ROAD_NAMES, x=np.full(4, cfg.fit_starts),
                              train_mse=1.0, test_mse=1.0, window_mse=np.ones(4)) for c in extra]
