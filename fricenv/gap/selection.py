@@ -28,7 +28,7 @@ significantly on held-out data, up to ``MAX_EFFECTS``:
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Collection, Sequence
 from dataclasses import replace
 
 from fricenv.effects import registry
@@ -75,12 +75,13 @@ def _seeds(current: CandidateFit, c: CandidateFit, d: Data, restart: bool = Fals
 
 
 def _fit_joints(current: CandidateFit, extra: Sequence[CandidateFit], folds: list[Data], d: Data,
-                cfg: DiagnoseConfig, jobs: int, nominal: CandidateFit, restart: bool = False) -> list[CandidateFit]:
-    """The current set plus each of ``extra``, fitted per fold (seeded by :func:`_seeds`), cross-fitted and tested
-    against the nominal model."""
+                cfg: DiagnoseConfig, jobs: int, nominal: CandidateFit,
+                restart: Collection[str] = ()) -> list[CandidateFit]:
+    """The current set plus each of ``extra``, fitted per fold (seeded by :func:`_seeds`; the effects in ``restart``
+    from the registry's start list), cross-fitted and tested against the nominal model."""
     base = effects_of(current)
     roads = current.x_folds or (current.x,) * len(folds)
-    tasks = [(base + [c.effect], road_of(x), f, cfg, _seeds(current, c, d, restart))
+    tasks = [(base + [c.effect], road_of(x), f, cfg, _seeds(current, c, d, c.effect in restart))
              for c in extra for f, x in zip(folds, roads)]
     fits = run_fits(tasks, jobs, "forward selection") if tasks else []
     k = len(folds)
@@ -110,11 +111,9 @@ def _extend(current: CandidateFit, extra: Sequence[CandidateFit], folds: list[Da
     again = [i for i, (c, j) in enumerate(zip(todo, joints))
              if quick is not cfg and (paired_z(current, j, d) > SCREEN_SHARE * cfg.sig_z
                                       or confounded(current, c, j, d, cfg))]
-    for restart in (False, True):  # fitted again from all starts of the list that won the screen
-        redo = [i for i in again if (i in restarted) == restart]
-        for i, joint in zip(redo, _fit_joints(current, [todo[i] for i in redo], folds, d, cfg, jobs, nominal,
-                                              restart) if redo else []):
-            joints[i] = joint
+    restart = {todo[i].effect for i in restarted}  # refitted from all starts of the list that won the screen
+    for i, joint in zip(again, _fit_joints(current, [todo[i] for i in again], folds, d, cfg, jobs, nominal, restart)):
+        joints[i] = joint
     for c, joint in zip(todo, joints):
         known[frozenset(base + [c.effect])] = joint
     return [known[frozenset(base + [c.effect])] for c in extra]
@@ -136,7 +135,8 @@ def _restart(current: CandidateFit, todo: Sequence[CandidateFit], joints: list[C
              and registry.get(todo[i].effect).starts(fit_context(d))]
     if not stuck:
         return []
-    refits = _fit_joints(current, [todo[i] for i in stuck], folds, d, cfg, jobs, nominal, restart=True)
+    refits = _fit_joints(current, [todo[i] for i in stuck], folds, d, cfg, jobs, nominal,
+                         {todo[i].effect for i in stuck})
     return [(i, r) for i, r in zip(stuck, refits) if r.train_mse < joints[i].train_mse]
 
 

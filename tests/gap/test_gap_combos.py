@@ -136,7 +136,7 @@ def test_joint_fits_are_screened_from_their_best_start_and_refitted_only_near_th
     z_set = {"drag+a": 3.0, "drag+b": 1.0, "drag+c": 1.0}  # paired z of each joint model over the set
     calls = []
 
-    def fake_fit_joints(current, extra, folds, d, cfg, jobs, nominal, restart=False):
+    def fake_fit_joints(current, extra, folds, d, cfg, jobs, nominal, restart=()):
         calls.append(([c.effect for c in extra], cfg.fit_starts))
         return [CandidateFit(effect=f"drag+{c.effect}", names=ROAD_NAMES, x=np.full(4, cfg.fit_starts),
                              train_mse=1.0, test_mse=1.0, window_mse=np.ones(4)) for c in extra]
@@ -166,8 +166,8 @@ def test_a_joint_fit_that_fits_worse_than_its_set_is_fitted_again_from_the_start
     refit_train = {"drag+brake_gain": 0.8}
     calls = []
 
-    def fake_fit_joints(current, extra, folds, d, cfg, jobs, nominal, restart=False):
-        calls.append(([c.effect for c in extra], restart))
+    def fake_fit_joints(current, extra, folds, d, cfg, jobs, nominal, restart=()):
+        calls.append(([c.effect for c in extra], set(restart)))
         table = refit_train if restart else train
         return [CandidateFit(effect=f"drag+{c.effect}", names=ROAD_NAMES, x=np.ones(4),
                              train_mse=table[f"drag+{c.effect}"], test_mse=1.0, window_mse=np.ones(4)) for c in extra]
@@ -182,7 +182,7 @@ def test_a_joint_fit_that_fits_worse_than_its_set_is_fitted_again_from_the_start
     calls.clear()
     redone = selection._restart(current, todo, joints, [None, None], d, DiagnoseConfig(), 1, current)
     # brake_lag fits better than the set: kept; a change point has no start list: its single fit is its only start
-    assert calls == [(["brake_gain"], True)]
+    assert calls == [(["brake_gain"], {"brake_gain"})]
     assert [(i, r.train_mse) for i, r in redone] == [(0, 0.8)]
 
 
