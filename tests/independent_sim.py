@@ -261,9 +261,15 @@ def real_export(case: IndependentCase):
     """Simulate ``case`` and pass it through a logger's artifacts (tests/real_artifacts.py, settings ``case.real``):
     a :class:`tests.real_artifacts.RealExport`, whose ``truth`` says where the artifacts went."""
     sim = simulate_case(case)
-    clean = {"t": sim["t"], "T_b": sim["T_b"], "omega": sim["omega"],
+    spec = QuarterCarArtifacts(**case.real)
+    # by default the logger interpolates the simulated 100 Hz measurement, noise and all (an export resampled from
+    # the bus); with ``wheel_noise_std`` the wheel speed is sampled noise-free and gets the sensor's own noise at each
+    # logged sample. v and a_x keep theirs either way, smoothed by the IMU filter at the clean rate.
+    omega = sim["omega"] if spec.wheel_noise_std is None else sim["omega_true"]
+    clean = {"t": sim["t"], "T_b": sim["T_b"], "omega": omega,
              "v": sim["v"] if "v" in case.columns else None, "a_x": sim["a_x"] if "a_x" in case.columns else None}
-    return real_like_quarter_car(clean, np.random.default_rng(case.seed + 1), QuarterCarArtifacts(**case.real))
+    return real_like_quarter_car(clean, np.random.default_rng(case.seed + 1), spec,
+                                 noise_rng=np.random.default_rng(case.seed + 2))
 
 
 def write_real_log(stem: str | os.PathLike, case: IndependentCase) -> tuple[str, str, dict]:
@@ -389,7 +395,7 @@ def _effect_figures(out: dict, case: IndependentCase, dg) -> None:
 
 
 def draw_cases(n: int, seed: int, real: bool = False, combos: bool = False,
-               columns: tuple | None = None) -> list[IndependentCase]:
+               columns: tuple | None = None, white_wheel_noise: bool = False) -> list[IndependentCase]:
     """``n`` cases, categories in turn, shuffled.
 
     :param columns: force the optional columns of every log (``()``: ``t, T_b, omega`` only); the cases are
@@ -397,6 +403,8 @@ def draw_cases(n: int, seed: int, real: bool = False, combos: bool = False,
     :param real: write each log as a real-like export (settings drawn from a second generator, so the cases
         themselves are those of the plain draw).
     :param combos: every case carries one of :data:`COMBOS` (several effects at once) instead of one category.
+    :param white_wheel_noise: with ``real``, the export's wheel speed carries the sensor's white noise drawn at each
+        logged sample (``QuarterCarArtifacts.wheel_noise_std``) instead of the 100 Hz measurement interpolated.
     """
     rng = np.random.default_rng(seed)
     if combos:
@@ -416,7 +424,8 @@ def draw_cases(n: int, seed: int, real: bool = False, combos: bool = False,
     if not real:
         return cases
     rng_real = np.random.default_rng([seed, 15])
-    return [dataclasses.replace(c, real=_real_settings(rng_real)) for c in cases]
+    noise = {"wheel_noise_std": math.sqrt(OMEGA_NOISE_VAR)} if white_wheel_noise else {}
+    return [dataclasses.replace(c, real={**_real_settings(rng_real), **noise}) for c in cases]
 
 
 def _real_settings(rng: np.random.Generator) -> dict:
@@ -425,7 +434,7 @@ def _real_settings(rng: np.random.Generator) -> dict:
 
 
 def measure(n: int, seed: int, jobs: int = 1, real: bool = False, combos: bool = False,
-            columns: tuple | None = None) -> dict:
+            columns: tuple | None = None, white_wheel_noise: bool = False) -> dict:
     """Draw ``n`` independent logs, diagnose each blind, and summarise (fricenv.gap.validate's summary format;
     with ``combos`` also the share of logs whose every effect is named)."""
     from fricenv.gap.validate import summarize
@@ -434,12 +443,15 @@ def measure(n: int, seed: int, jobs: int = 1, real: bool = False, combos: bool =
         raise ValueError(f"n must be >= 1, got {n}")
     if jobs < 1:
         raise ValueError(f"jobs must be >= 1, got {jobs}")
-    cases = draw_cases(n, seed, real, combos, columns)
+    if white_wheel_noise and not real:
+        raise ValueError("white_wheel_noise applies to real-like exports only: pass real=True (--real)")
+    cases = draw_cases(n, seed, real, combos, columns, white_wheel_noise)
     t0 = time.perf_counter()
     results = pool_map(diagnose_case, cases, jobs)
     s = summarize(results)
     s.update(n=n, seed=seed, jobs=jobs, wall_seconds=time.perf_counter() - t0, source="tests.independent_sim",
-             real=real, combos=combos, columns=None if columns is None else list(columns))
+             real=real, combos=combos, columns=None if columns is None else list(columns),
+             white_wheel_noise=white_wheel_noise)
     s["right_or_untestable"] = float(np.mean([r.get("right_or_untestable", False) for r in results]))
     s["extra_effect_share"] = float(np.mean([bool(r.get("extra_named")) for r in results]))
     s["power"], s["sensors"] = report_check.power_summary(results), report_check.sensor_summary(results)
@@ -464,12 +476,18 @@ def main(argv: Sequence[str] | None = None) -> int:
                     help="write t, T_b and omega only (no v, no a_x) in every log")
     ap.add_argument("--combos", action="store_true",
                     help="several effects per log (COMBOS); reports the share with every effect named")
+    ap.add_argument("--white-wheel-noise", action="store_true",
+                    help="with --real: the wheel speed carries the sensor's white noise drawn at each logged sample "
+                         "instead of the simulated 100 Hz measurement interpolated at the logger's instants")
     args = ap.parse_args(argv)
+    if args.white_wheel_noise and not args.real:
+        ap.error("--white-wheel-noise needs --real")
     from fricenv.gap.validate import format_summary
     from fricenv.utils import write_json
     from tests import independent_sim as mod  # noqa: PLW0406 -- by its import name, so that the worker processes can unpickle
 
-    s = mod.measure(args.n, args.seed, args.jobs, args.real, args.combos, () if args.omega_only else None)
+    s = mod.measure(args.n, args.seed, args.jobs, args.real, args.combos, () if args.omega_only else None,
+                    args.white_wheel_noise)
     print(report_check.format_rows(s["logs"]))
     print(format_summary(s))
     print(f"right or untestable (none where the report lists the true effect as not testable): "

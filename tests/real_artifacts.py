@@ -69,6 +69,9 @@ class QuarterCarArtifacts:
     imu_cutoff_hz: float | None = 5.0  # Butterworth cut-off on a_x and v [Hz]; None: no filter
     imu_order: int = 2
     wheel_quantum_kmh: float | None = 0.1  # quantum of the wheel-speed column [km/h]; None: none
+    # white noise of the wheel-speed sensor, drawn at each logged sample [rad/s]; None: the clean channel is taken as
+    # measured (its own noise then reaches the log interpolated between the clean samples)
+    wheel_noise_std: float | None = None
     outliers: int = 3  # isolated wheel-speed outliers [-]
     outlier_kmh: tuple[float, float] = (5.0, 15.0)  # their size range, either sign [km/h]
     radius: float = 0.345  # wheel radius the map gives for the km/h rim speed [m]
@@ -194,20 +197,28 @@ def _filtered(clean: dict, names: tuple[str, ...], cutoff: float | None, order: 
 
 
 def real_like_quarter_car(clean: dict, rng: np.random.Generator,
-                          spec: QuarterCarArtifacts = QuarterCarArtifacts()) -> RealExport:
+                          spec: QuarterCarArtifacts = QuarterCarArtifacts(),
+                          noise_rng: np.random.Generator | None = None) -> RealExport:
     """A real-like CAN export of a clean quarter-car log.
 
     :param clean: arrays ``t`` (uniform, from 0) [s], ``T_b`` [N m], ``omega`` [rad/s], optional ``v`` [m/s] and
         ``a_x`` [m/s^2] (None or absent: not logged).
     :param rng: random generator (jitter, drops, outliers, epoch, decoy noise).
     :param spec: the artifacts.
+    :param noise_rng: random generator of the wheel-speed noise (``spec.wheel_noise_std``; default ``rng``). A sensor
+        sampled at an instant carries its own noise there: interpolating a noisy clean series instead would make the
+        noise's variance swing between half and all of the sensor's, with a beat at the difference of the two rates,
+        and correlate neighbouring samples (up to 0.5 near the clean rate).
     :return: a :class:`RealExport`; its map picks the rear-left wheel (non-driven, non-steered) among four.
     """
     t = np.asarray(clean["t"], dtype=float)
     filt = _filtered(clean, ("v", "a_x"), spec.imu_cutoff_hz, spec.imu_order)
     s, dropped = sample_instants(float(t[-1]), spec.rate_hz, spec.jitter, spec.drop_prob, rng)
     stamps, epoch0 = _epoch(s, rng)
-    rim_kmh = sample_at(t, np.asarray(clean["omega"], dtype=float), s) * spec.radius * KMH_PER_MS
+    omega = sample_at(t, np.asarray(clean["omega"], dtype=float), s)
+    if spec.wheel_noise_std is not None:
+        omega = omega + (rng if noise_rng is None else noise_rng).normal(0.0, spec.wheel_noise_std, omega.size)
+    rim_kmh = omega * spec.radius * KMH_PER_MS
     rim_kmh, outlier_rows = add_outliers(rim_kmh, spec.outliers, spec.outlier_kmh, rng)
     if spec.wheel_quantum_kmh is not None:
         rim_kmh = quantise(rim_kmh, spec.wheel_quantum_kmh)

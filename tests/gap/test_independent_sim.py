@@ -275,6 +275,39 @@ def test_real_like_export_reads_back_to_the_simulated_log(tmp_path):
     assert nearest.max() <= 1e-9 * sim["T_b"].max()
 
 
+def test_white_wheel_noise_is_the_sensor_noise_at_each_logged_sample():
+    """``--white-wheel-noise``: the real-like wheel speed is the true one at each logged instant plus the sensor's
+    noise drawn there, white and of the simulator's std at any logger rate. The default export interpolates the
+    simulated (noisy, 100 Hz) measurement instead, as a logger that resamples a bus signal does: where an instant falls
+    between two clean samples that halves the noise's variance, and near 100 Hz neighbouring samples correlate."""
+    from tests.real_artifacts import QuarterCarArtifacts, real_like_quarter_car
+
+    case = dataclasses.replace(ind.draw_cases(4, seed=3, real=True)[0], real={"rate_hz": 97.0})
+    sim = simulate_case(case)
+    std = float(np.sqrt(ind.OMEGA_NOISE_VAR))
+    figures = {}
+    for noise in (std, None):
+        spec = QuarterCarArtifacts(rate_hz=97.0, outliers=0, wheel_quantum_kmh=None, wheel_noise_std=noise)
+        clean = {"t": sim["t"], "T_b": sim["T_b"], "omega": sim["omega_true" if noise else "omega"], "v": None,
+                 "a_x": None}
+        export = real_like_quarter_car(clean, np.random.default_rng(1), spec, noise_rng=np.random.default_rng(2))
+        s = export.truth["instants"]
+        e = export.columns["wheel_rl(kmph)"] / (spec.radius * 3.6) - np.interp(s, sim["t"], sim["omega_true"])
+        figures[noise] = (float(np.std(e)), float(np.corrcoef(e[:-1], e[1:])[0, 1]))
+    (sd, ac), (sd_old, ac_old) = figures[std], figures[None]
+    assert abs(sd / std - 1.0) < 0.1 and abs(ac) < 0.12  # white, of the sensor's std (n ~ 480 samples)
+    assert sd_old < 0.9 * std and ac_old > 0.15  # interpolated: smaller and correlated
+
+
+def test_white_wheel_noise_draws_the_same_cases_and_needs_real():
+    plain = ind.draw_cases(6, seed=3, real=True)
+    white = ind.draw_cases(6, seed=3, real=True, white_wheel_noise=True)
+    assert [dataclasses.replace(c, real=None) for c in white] == [dataclasses.replace(c, real=None) for c in plain]
+    assert all(w.real == {**p.real, "wheel_noise_std": math.sqrt(ind.OMEGA_NOISE_VAR)} for w, p in zip(white, plain))
+    with pytest.raises(ValueError, match="real"):
+        ind.measure(1, 3, white_wheel_noise=True)
+
+
 def test_combos_carry_several_effects():
     cases = ind.draw_cases(len(ind.COMBOS), seed=4, combos=True)
     assert sorted(tuple(e.name for e in c.effects) for c in cases) == sorted(ind.COMBOS)
