@@ -338,7 +338,7 @@ def diagnose_case(case: IndependentCase) -> dict:
            "tests": {e: {"z_paired": float(t["z_paired"]), "z_without_effect": t.get("z_without_effect"),
                          "robust_gap": float(t["robust_gap"]), "significant": bool(t["significant"])}
                      for e, t in dg.where.get("tests", {}).items()},
-           "sensors": report_check.sensor_flags(dg)}
+           "sensors": report_check.sensor_flags(dg), "periodic": dg.where.get("periodic")}
     out["right_or_untestable"] = right_or_untestable(out)
     _selection_figures(out, case, dg)
     if case.category in LIBRARY_EFFECTS:

@@ -80,6 +80,7 @@ from fricenv.gap.excitation import excitation, untestable
 from fricenv.gap.fitting import distinct_starts, fit_nominal, refine_noise, score
 from fricenv.gap.localise import localise, tests_table
 from fricenv.gap.params import ROAD_NAMES, param_names, road_of
+from fricenv.gap.periodic import periodic_line
 from fricenv.gap.pool import default_jobs, map_tasks, shared_pool
 from fricenv.gap.selection import forward_select, split_params
 from fricenv.gap.stats import (
@@ -292,6 +293,9 @@ def diagnose(log: QuarterCarLog, p: qc.QuarterCarParams = qc.PAPER_PARAMS,
     if expected:
         where["expected_effects"] = expected
     verdict = effects[0]["effect"] if effects else s.verdict  # a discovery before an expected calibration
+    where["periodic"] = periodic_line(nominal, d)
+    if verdict == "none" and where["periodic"] is not None:  # a line in the residual that no library effect makes
+        verdict, where["periodic"]["decided"] = "unexplained", True
     return Diagnosis(verdict=verdict, gap_before=nominal.gap,
                      gap_after=nominal.gap if whole is None else whole.gap,
                      params=next((e["params"] for e in effects if e["effect"] == verdict), {}), where=where,

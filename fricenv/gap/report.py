@@ -126,6 +126,12 @@ def report_markdown(dg: Diagnosis, report: dict, images: Sequence[str] = (PLOT_T
                        f"{dt['robust_gap_split']:.3f}; early -> late: {moved}. "
                        + ("Its parameters drift: the gap is caused by something this constant library effect only "
                           "imitates, hence `unexplained`." if dt["drifts"] else "No significant drift."))]
+    if w.get("periodic"):
+        pl = w["periodic"]
+        lines += ["", (f"The nominal model's wheel-speed residual holds a line at {pl['freq_hz']:.1f} Hz, "
+                       f"{pl['ratio']:.0f} times its spectrum's median level: a periodic gap (a wheel hop, a brake "
+                       "judder) that no library effect makes"
+                       + (", hence `unexplained`." if pl.get("decided") else "."))]
     lines += ["", ("Score: share of the nominal model's held-out excess squared error the candidate closes. "
                    "z paired: held-out improvement of the squared normalised error (without its largest window) "
                    "over its spread under the measurement noise given the two models' prediction difference; a "

@@ -126,7 +126,7 @@ def run_case(case: Case, cfg: DiagnoseConfig | None = None, via_file: bool = Tru
            "columns": "required only" if case.drop_optional else "all", "verdict": dg.verdict,
            "expected": expected, "right": dg.verdict == expected, "gap_before": dg.gap_before,
            "gap_after": dg.gap_after, "params": dg.params, "seconds": seconds, "samples": len(log),
-           "candidates": [c.effect for c in dg.candidates[:3]]}
+           "candidates": [c.effect for c in dg.candidates[:3]], "periodic": dg.where.get("periodic")}
     if case.category in EFFECTS:
         out["ratio"] = dg.gap_after / dg.gap_before if dg.gap_before > 0 else np.nan
         out["detectable"], out["true_explains"] = true_model_oracle(case.category, out["true_params"], out["road"],
