@@ -280,19 +280,16 @@ def test_white_wheel_noise_is_the_sensor_noise_at_each_logged_sample():
     noise drawn there, white and of the simulator's std at any logger rate. The default export interpolates the
     simulated (noisy, 100 Hz) measurement instead, as a logger that resamples a bus signal does: where an instant falls
     between two clean samples that halves the noise's variance, and near 100 Hz neighbouring samples correlate."""
-    from tests.real_artifacts import QuarterCarArtifacts, real_like_quarter_car
-
-    case = dataclasses.replace(ind.draw_cases(4, seed=3, real=True)[0], real={"rate_hz": 97.0})
+    case = ind.draw_cases(4, seed=3, real=True)[0]
     sim = simulate_case(case)
     std = float(np.sqrt(ind.OMEGA_NOISE_VAR))
     figures = {}
     for noise in (std, None):
-        spec = QuarterCarArtifacts(rate_hz=97.0, outliers=0, wheel_quantum_kmh=None, wheel_noise_std=noise)
-        clean = {"t": sim["t"], "T_b": sim["T_b"], "omega": sim["omega_true" if noise else "omega"], "v": None,
-                 "a_x": None}
-        export = real_like_quarter_car(clean, np.random.default_rng(1), spec, noise_rng=np.random.default_rng(2))
+        real = {"rate_hz": 97.0, "outliers": 0, "wheel_quantum_kmh": None, "wheel_noise_std": noise}
+        export = ind.real_export(dataclasses.replace(case, real=real))
         s = export.truth["instants"]
-        e = export.columns["wheel_rl(kmph)"] / (spec.radius * 3.6) - np.interp(s, sim["t"], sim["omega_true"])
+        radius = export.truth["spec"]["radius"]
+        e = export.columns["wheel_rl(kmph)"] / (radius * 3.6) - np.interp(s, sim["t"], sim["omega_true"])
         figures[noise] = (float(np.std(e)), float(np.corrcoef(e[:-1], e[1:])[0, 1]))
     (sd, ac), (sd_old, ac_old) = figures[std], figures[None]
     assert abs(sd / std - 1.0) < 0.1 and abs(ac) < 0.12  # white, of the sensor's std (n ~ 480 samples)
