@@ -173,6 +173,7 @@ class _Selection:
     chosen: CandidateFit | None = None
     drift: dict | None = None
     residuals: dict = field(default_factory=dict)
+    periodic: dict | None = None  # the line in the nominal wheel-speed residual (fricenv.gap.periodic), if any
 
 
 def _calibrate_and_fit(folds: list[Data], d: Data, cfg: DiagnoseConfig, jobs: int):
@@ -233,8 +234,12 @@ def _select(nominal: CandidateFit, fits: list, folds: list[Data], d: Data, p: qc
         test_against(nominal, s.joint, d)
         s.joint_wins = significant(s.joint, nominal, cfg) and explains(s.joint, nominal, cfg) and \
             not at_range_edge(s.joint, p) and s.joint.adjusted_mse < eligible[0].adjusted_mse
+    line = periodic_line(nominal, d)
     s.verdict, s.chosen, s.fits = decide_verdict(eligible, fits, lambda f: explains(f, nominal, cfg), s.joint_wins,
-                                                 gap_is_real(nominal, sig, cfg))
+                                                 gap_is_real(nominal, sig, cfg, periodic=line is not None))
+    if line is not None:  # the line decided the verdict when the gap is real only through it
+        line["decided"] = s.verdict == "unexplained" and not gap_is_real(nominal, sig, cfg)
+    s.periodic = line
     return s
 
 
@@ -292,10 +297,8 @@ def diagnose(log: QuarterCarLog, p: qc.QuarterCarParams = qc.PAPER_PARAMS,
     where["forward_selection"] = steps
     if expected:
         where["expected_effects"] = expected
+    where["periodic"] = s.periodic
     verdict = effects[0]["effect"] if effects else s.verdict  # a discovery before an expected calibration
-    where["periodic"] = periodic_line(nominal, d)
-    if verdict == "none" and where["periodic"] is not None:  # a line in the residual that no library effect makes
-        verdict, where["periodic"]["decided"] = "unexplained", True
     return Diagnosis(verdict=verdict, gap_before=nominal.gap,
                      gap_after=nominal.gap if whole is None else whole.gap,
                      params=next((e["params"] for e in effects if e["effect"] == verdict), {}), where=where,

@@ -41,7 +41,8 @@ def periodic_line(nominal: CandidateFit, d: Data) -> dict | None:
     :param nominal: the cross-fitted nominal model (its ``resid`` held out on every window, ``omega`` first).
     :param d: the prepared log.
     :return: ``{"freq_hz", "ratio", "decided"}`` of the largest ordinate when it passes (``decided``: whether the
-        line turned a ``none`` into ``unexplained``; the diagnosis sets it), else None.
+        line alone made the gap real, turning a ``none`` into ``unexplained``; the verdict rule sets it), else
+        None.
     """
     if nominal.resid is None:
         return None

@@ -52,15 +52,17 @@ def at_range_edge(f: CandidateFit, p: qc.QuarterCarParams) -> list[str]:
     return out
 
 
-def gap_is_real(nominal: CandidateFit, significant: Sequence[CandidateFit], cfg: DiagnoseConfig) -> bool:
+def gap_is_real(nominal: CandidateFit, significant: Sequence[CandidateFit], cfg: DiagnoseConfig,
+                periodic: bool = False) -> bool:
     """Whether the nominal model misses by more than the noise.
 
     True when its held-out gap is above ``gap_none`` beyond the few lock-up windows that no model times (the trim
-    of :func:`robust_gap`, the same that judges the candidates), or when a candidate beats it significantly on data
-    it was not fitted to (then the nominal model cannot be within the noise either).
+    of :func:`robust_gap`, the same that judges the candidates), when a candidate beats it significantly on data
+    it was not fitted to (then the nominal model cannot be within the noise either), or when its residual holds a
+    ``periodic`` line that noise cannot make (:func:`fricenv.gap.periodic.periodic_line`).
     """
     misses = nominal.gap > cfg.gap_none and robust_gap(nominal) > cfg.gap_within_noise
-    return misses or bool(significant)
+    return misses or bool(significant) or periodic
 
 
 

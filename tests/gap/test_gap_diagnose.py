@@ -451,6 +451,7 @@ def test_a_gap_only_in_the_lock_up_windows_is_not_real():
     assert not gap_is_real(cases[0], [], CFG)
     assert gap_is_real(cases[1], [], CFG)
     assert gap_is_real(cases[0], [cases[1]], CFG)
+    assert gap_is_real(cases[0], [], CFG, periodic=True)  # a line in the residual that noise cannot make
 
 
 def test_least_squares_starts_come_from_distinct_roads():
