@@ -44,7 +44,8 @@ Method (every error measure is computed on data not used for fitting):
    ``TRIM_SHARE`` of windows left out, at most ``ratio_explained`` of the nominal one, or below
    ``gap_within_noise``; the best-ranked of those, ahead of a better-ranked one that does not close it alone);
    ``unexplained`` when the gap is real (nominal gap above ``gap_none`` and not only in the
-   trimmed windows, or a significant candidate) and no candidate closes it; ``none`` otherwise. The two best
+   trimmed windows, a significant candidate, or a periodic line in the wheel-speed residual that no library effect
+   makes, :mod:`fricenv.gap.periodic`) and no candidate closes it; ``none`` otherwise. The two best
    significant candidates are also fitted jointly; if only the joint model closes the gap, the larger single effect
    is the verdict and the other follows in ``candidates`` (the joint fit is reported under ``where["joint_fit"]``).
    A candidate whose effect parameter is pressed against the far bound of its physical range (:func:`at_range_edge`)
