@@ -27,6 +27,7 @@ from fricenv.logs.logmap import HEADER_UNIT as _HEADER_UNIT
 from fricenv.logs.logmap import SI_UNITS as _SI_UNITS
 from fricenv.logs.logmap import UNITS, ColumnMap, ColumnMapError, apply_map, load_map
 from fricenv.logs.logmap import unit_key as _unit_key
+from fricenv.logs.sensor_filter import SensorFilter, parse_comment
 from fricenv.plants.sui_johansen import RADIUS
 from fricenv.utils import atomic_write
 
@@ -84,6 +85,8 @@ class QuarterCarLog:
     torque_from_pressure: bool = field(default=False, compare=False)  # T_b = pressure x nominal factor: expect a gain
     resampled: dict | None = field(default=None, compare=False)  # resample.Grid.summary(); None: not needed
     missing: dict[str, float] = field(default_factory=dict, compare=False)  # channel -> share of NaN samples
+    # channel -> its low-pass as the user stated it (a "sensor_filter:" comment line, fricenv.logs.sensor_filter)
+    sensor_filters: dict[str, SensorFilter] = field(default_factory=dict, compare=False)
 
     REQUIRED = ("t", "T_b", "omega")
     OPTIONAL = ("v", "a_x")
@@ -300,6 +303,7 @@ def _columns(path: Path, plant: str, header: list[str], table: np.ndarray,
             factor = cmap.channels["T_b"].factor
             added += [TORQUE_FROM_PRESSURE,
                       f"T_b = {sources['T_b'][0]} x {factor:g} N m per Pa (a nominal factor: expect a brake_gain)"]
+        added += [e.filter.comment(name) for name, e in cmap.channels.items() if e.filter is not None]
         return cols, added
     missing = [name for name in cls.REQUIRED if name not in header]
     if missing:
@@ -377,12 +381,27 @@ def read_log(path: str | os.PathLike, plant: str = "quarter-car",
              "missing": {name: float(np.mean(np.isnan(x))) for name, x in cols.items() if name != "t"}}
     if plant == "quarter-car":
         notes["torque_from_pressure"] = TORQUE_FROM_PRESSURE in notes["comments"]
+        notes["sensor_filters"] = _stated_filters(path, notes["comments"], cols)
     return cls(**cols, **notes)
+
+
+def _stated_filters(path: Path, comments: tuple[str, ...], cols: dict) -> dict[str, SensorFilter]:
+    """The sensor filters the ``sensor_filter:`` comment lines state, for the channels the log has."""
+    out = {}
+    for line in comments:
+        try:
+            found = parse_comment(line)
+        except ValueError as exc:
+            raise LogFormatError(f"{path}: comment line: {exc}") from None
+        if found is not None and found[0] in cols:
+            out[found[0]] = found[1]
+    return out
 
 
 def write_log(path: str | os.PathLike, log: QuarterCarLog | PayloadLog, comments: tuple[str, ...] = ()) -> None:
     """Write a log atomically in the DESIGN.md format; optional columns that are ``None`` are left out, a missing
-    sample is written ``nan``, and a torque from pressure is marked by the :data:`TORQUE_FROM_PRESSURE` line.
+    sample is written ``nan``, a torque from pressure is marked by the :data:`TORQUE_FROM_PRESSURE` line and a
+    stated sensor filter by its ``sensor_filter:`` line.
 
     :param path: destination CSV.
     :param log: the log to write.
@@ -393,6 +412,7 @@ def write_log(path: str | os.PathLike, log: QuarterCarLog | PayloadLog, comments
     lines = list(comments or log.comments)
     if getattr(log, "torque_from_pressure", False) and TORQUE_FROM_PRESSURE not in lines:
         lines.append(TORQUE_FROM_PRESSURE)
+    lines += [f.comment(c) for c, f in getattr(log, "sensor_filters", {}).items() if f.comment(c) not in lines]
     with atomic_write(path) as fh:
         for line in lines:
             fh.write(f"# {line}\n")

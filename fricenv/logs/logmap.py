@@ -11,8 +11,9 @@ A map is a JSON object::
                   "a_x":   {"column": "ax", "unit": "g"}}}
 
 ``factor`` is the brake torque per line pressure [N m per Pa] (whatever unit the pressure column is in); ``radius``
-[m] turns a wheel's rim speed into ``omega``. A ``unit`` left out is taken from the header cell (``wheel_rl(kmph)``),
-else the channel's SI unit. Every error is a :class:`ColumnMapError` naming the map file and key.
+[m] turns a wheel's rim speed into ``omega``; ``filter`` (``v``, ``a_x``) states the sensor's low-pass,
+``{"order": 2, "cutoff_hz": 5.0}`` (:mod:`fricenv.logs.sensor_filter`). A ``unit`` left out is taken from the header
+cell (``wheel_rl(kmph)``), else the channel's SI unit. Every error is a :class:`ColumnMapError` naming the map file and key.
 """
 
 from __future__ import annotations
@@ -26,6 +27,8 @@ from pathlib import Path
 import numpy as np
 
 from fricenv.errors import InvalidInputError
+from fricenv.logs import sensor_filter
+from fricenv.logs.sensor_filter import SensorFilter
 from fricenv.utils import read_json_object
 
 __all__ = [
@@ -78,7 +81,7 @@ SI_UNITS = {"t": "s", "T_b": "N m", "omega": "rad/s", "v": "m/s", "a_x": "m/s^2"
 CHANNEL_KINDS = {"t": ("time", "epoch"), "T_b": ("torque", "pressure"), "omega": ("angular_speed", "speed"),
                  "v": ("speed",), "a_x": ("acceleration",), "M": ("torque",), "f_x": ("force",), "f_y": ("force",),
                  "theta": ("angle",), "X": ("length",), "Y": ("length",)}
-ENTRY_KEYS = ("column", "unit", "factor", "radius")
+ENTRY_KEYS = ("column", "unit", "factor", "radius", "filter")
 # A header cell "name [unit]" or "name (unit)".
 HEADER_UNIT = re.compile(r"^(?P<name>[^\[\]()]+?)\s*(\[(?P<u1>[^\]]*)\]|\((?P<u2>[^)]*)\))$")
 
@@ -118,6 +121,7 @@ class ChannelSource:
     unit: str | None = None
     factor: float | None = None  # brake torque per pressure [N m per Pa]
     radius: float | None = None  # wheel radius for a rim speed [m]
+    filter: SensorFilter | None = None  # the sensor's low-pass, as its data sheet states it (sensor_filter)
 
 
 @dataclass(frozen=True)
@@ -163,7 +167,13 @@ def _entry(source: str, channel: str, raw) -> ChannelSource:
     unit = None if raw.get("unit") is None else _unit_for(source, f"{key}.unit", channel, raw["unit"])
     factor = None if raw.get("factor") is None else _positive(source, f"{key}.factor", raw["factor"])
     radius = None if raw.get("radius") is None else _positive(source, f"{key}.radius", raw["radius"])
-    return ChannelSource(channel, column.strip(), unit, factor, radius)
+    filt = None
+    if raw.get("filter") is not None:
+        try:
+            filt = sensor_filter.parse_entry(channel, raw["filter"])
+        except (TypeError, ValueError) as exc:
+            raise _fail(source, f"{key}.filter", str(exc)) from None
+    return ChannelSource(channel, column.strip(), unit, factor, radius, filt)
 
 
 def parse_map(raw, plant: str, channels: tuple[str, ...], required: tuple[str, ...],

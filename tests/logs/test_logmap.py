@@ -7,8 +7,9 @@ import math
 import numpy as np
 import pytest
 
-from fricenv.logs import TORQUE_FROM_PRESSURE, read_log, write_log
+from fricenv.logs import TORQUE_FROM_PRESSURE, LogFormatError, read_log, write_log
 from fricenv.logs.logmap import ColumnMapError, find_unit, split_header_cell
+from fricenv.logs.sensor_filter import SensorFilter
 
 N = 12
 R = 0.3  # wheel radius given in the maps [m]
@@ -120,6 +121,28 @@ def test_torque_from_pressure_survives_the_contract_file(tmp_path):
     assert not plain.torque_from_pressure
 
 
+def test_a_stated_sensor_filter_survives_the_contract_file(tmp_path):
+    """The map's ``filter`` (a data sheet's IMU filter) becomes a ``sensor_filter:`` comment of the contract CSV,
+    which the reader turns back into ``sensor_filters``; a log without one has none."""
+    entry = {"column": "acc", "unit": "m/s^2", "filter": {"order": 2, "cutoff_hz": 5}}
+    csv, mp = _si_export(tmp_path, ("a_x", "acc", entry, TRUTH["a_x"]))
+    log = read_log(csv, column_map=mp)
+    assert log.sensor_filters == {"a_x": SensorFilter(2, 5.0)}
+    assert "sensor_filter: a_x butterworth order=2 cutoff_hz=5" in log.comments
+    write_log(tmp_path / "contract.csv", log)
+    assert read_log(tmp_path / "contract.csv").sensor_filters == {"a_x": SensorFilter(2, 5.0)}
+    assert read_log(_si_export(tmp_path, name="plain")[0], column_map=_si_export(tmp_path, name="plain")[1]) \
+        .sensor_filters == {}
+
+
+def test_a_malformed_sensor_filter_line_is_a_clear_error(tmp_path):
+    path = tmp_path / "log.csv"
+    rows = "\n".join(f"{t},{T},{w}" for t, T, w in zip(TRUTH["t"], TRUTH["T_b"], TRUTH["omega"]))
+    path.write_text(f"# sensor_filter: a_x butterworth order=two cutoff_hz=5\nt,T_b,omega\n{rows}\n")
+    with pytest.raises(LogFormatError, match=r"log\.csv: comment line: .*order must be an integer"):
+        read_log(path)
+
+
 def _map_error(tmp_path, channels: dict, cols=None, plant="quarter-car", read_plant="quarter-car") -> str:
     base = {"time": TRUTH["t"], "torque": TRUTH["T_b"], "w": TRUTH["omega"], "wheel_rl(kmph)": TRUTH["omega"]}
     csv, mp = _export(tmp_path, cols or base, channels, plant=plant)
@@ -143,6 +166,16 @@ WRONG_MAPS = [
     ({**OK, "omega": "wheel_fr"}, "channels.omega.column: 'wheel_fr': no such column in "),
     ({**OK, "omega": {"column": "wheel_rl", "unit": "rpm"}}, "channels.omega.unit: 'rpm', but the column header says"),
     ({**OK, "omega": {"column": "w", "unit": 3}}, "channels.omega.unit: 3 is not a unit of 'omega'"),
+    ({**OK, "omega": {"column": "w", "filter": {"order": 2, "cutoff_hz": 5}}},
+     "channels.omega.filter: a stated sensor filter is used for v, a_x only, not 'omega'"),
+    ({**OK, "a_x": {"column": "w", "filter": {"order": 2}}}, "channels.a_x.filter: 'cutoff_hz' is required"),
+    ({**OK, "a_x": {"column": "w", "filter": {"order": 2, "cutoff": 5}}},
+     "channels.a_x.filter: unknown key 'cutoff'; valid keys: order, cutoff_hz"),
+    ({**OK, "a_x": {"column": "w", "filter": {"order": 2.5, "cutoff_hz": 5}}},
+     "channels.a_x.filter: order must be an integer from 1 to 8, got 2.5"),
+    ({**OK, "v": {"column": "w", "filter": {"order": 2, "cutoff_hz": 0}}},
+     "channels.v.filter: cutoff_hz must be a positive number of Hz, got 0"),
+    ({**OK, "v": {"column": "w", "filter": "5 Hz"}}, "channels.v.filter: must be an object like"),
 ]
 
 
