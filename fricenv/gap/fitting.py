@@ -236,9 +236,10 @@ def refine_noise(nominal: CandidateFit, d: Data) -> None:
         if info.get("filtered") and np.isfinite(rms):
             tau = correlation_time(r)
             info["correlation_time"] = tau
-            # a filter seen on the quiet start is certain: a model error at a few windows must not set the level;
+            # a filter seen on the quiet start (or stated) is certain: a model error at a few windows must not set it;
             # a filter read from the roll-off alone may be a rough signal's, whose model error the level then holds
-            level = robust_rms(r) * d.sigma[c] * dof if info.get("filter_evidence") == "quiet start" else rms
+            certain = info.get("filter_evidence") in ("quiet start", "column map")
+            level = robust_rms(r) * d.sigma[c] * dof if certain else rms
             d.sigma[c] = max(level * np.sqrt(tau), floor)
         else:
             d.sigma[c] = max(min(d.sigma[c], rms), floor)

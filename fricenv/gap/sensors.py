@@ -33,7 +33,7 @@ from fricenv.gap.stats import estimate_noise
 
 __all__ = ["FILTERED_AC", "OUTLIER_Z", "ChannelCondition", "advanced", "band_noise", "condition_channel",
            "correlation_time", "deconvolved", "fill_missing", "filter_lag", "filter_of_lag", "frame_times",
-           "lag_against", "looks_filtered", "shared_lag"]
+           "group_delay", "lag_against", "looks_filtered", "shared_lag"]
 
 OUTLIER_Z = 8.0  # distance from the running median beyond which an isolated sample is an outlier [noise std]
 OUTLIER_SPAN = 7  # running-median span [samples]
@@ -88,6 +88,7 @@ class ChannelCondition:
     certain: bool = False  # the quiet start shows a filter beyond doubt (QUIET_CERTAIN_Z)
     filter: dict | None = None  # the sensor filter read from the noise roll-off (filter_lag), None: none seen
     lag_s: float = 0.0  # the sensor filter's lag the channel was realigned by [s] (0: not)
+    stated: bool = False  # the filter is the one the column map states (fricenv.logs.sensor_filter), not read
 
     def summary(self) -> dict:
         """The report's per-channel line (``where["sensors"]``)."""
@@ -98,7 +99,7 @@ class ChannelCondition:
         if self.lag_s > 0:
             out["lag_s"] = self.lag_s
         if self.filtered:
-            out["filter_evidence"] = "quiet start" if self.certain else "roll-off"
+            out["filter_evidence"] = "column map" if self.stated else "quiet start" if self.certain else "roll-off"
         return out
 
 
@@ -331,7 +332,7 @@ def _rolloff(f: np.ndarray, fc: float, order: int, fs: float, digital: bool = Fa
     return out
 
 
-def _group_delay(fc: float, order: int, fs: float, f_use: float, digital: bool) -> float:
+def group_delay(fc: float, order: int, fs: float, f_use: float, digital: bool) -> float:
     """Mean group delay of the Butterworth of :func:`_rolloff` over ``(0, f_use]`` [s]."""
     h = _response(np.linspace(0.0, f_use, 50), fc, order, fs, digital)
     return float(-(np.unwrap(np.angle(h))[-1] - np.angle(h[0])) / (2 * np.pi * f_use))
@@ -390,7 +391,7 @@ def filter_lag(x: np.ndarray, fs: float, f_lo: float, f_use: float, min_cutoff: 
     explained = 1.0 - cost / max(float(np.sum((lp - lp.mean()) ** 2)), 1e-300)
     if explained < LAG_MIN_FIT or fc > LAG_TOP * fs or fc < min_cutoff:
         return None
-    return {"lag_s": _group_delay(fc, order, fs, f_use, digital), "cutoff_hz": float(fc), "order": int(order),
+    return {"lag_s": group_delay(fc, order, fs, f_use, digital), "cutoff_hz": float(fc), "order": int(order),
             "digital": bool(digital)}
 
 

@@ -21,6 +21,7 @@ from fricenv.gap.params import ROAD_NAMES
 from fricenv.gap.pool import default_jobs
 from fricenv.gap.sensors import LAG_TOP, condition_channel, lag_against, shared_lag
 from fricenv.gap.speed import filtered_transient_slip, reconstruct_speed
+from fricenv.gap.stated_filter import apply_stated
 from fricenv.logs import QuarterCarLog
 from fricenv.plants import quarter_car as qc
 from fricenv.plants.tire import longitudinal_slip
@@ -114,16 +115,19 @@ def horizon_samples(cfg: DiagnoseConfig, dt: float) -> int:
 def _conditioned(log: QuarterCarLog, free_end: int, p: qc.QuarterCarParams) -> dict:
     """Every logged channel's :class:`fricenv.gap.sensors.ChannelCondition` (``free_end``: the quiet start); the
     channels a logger may low-pass are realigned by their filter's lag when their noise shows its roll-off
-    (:func:`fricenv.gap.sensors.shared_lag`, band from ``LAG_BAND_HZ``, lag over ``(0, LAG_USE_HZ]``)."""
+    (:func:`fricenv.gap.sensors.shared_lag`, band from ``LAG_BAND_HZ``, lag over ``(0, LAG_USE_HZ]``), or by the
+    filter the column map states (:func:`fricenv.gap.stated_filter.apply_stated`)."""
     out = {}
     for c in ("omega", "v", "a_x"):
         x = getattr(log, c)
         if x is not None:
             out[c] = condition_channel(np.asarray(x, dtype=float), NOISE_FLOOR[c], free_end, c in FILTERED_CHANNELS)
     fs = 1.0 / log.dt
-    lowpass = {c: k for c, k in out.items() if c in FILTERED_CHANNELS}
+    stated = {c: f for c, f in log.sensor_filters.items() if c in FILTERED_CHANNELS}
+    lowpass = {c: k for c, k in out.items() if c in FILTERED_CHANNELS and c not in stated}
     if lowpass and LAG_BAND_HZ < LAG_TOP * fs:
         out.update(shared_lag(lowpass, fs, LAG_BAND_HZ, LAG_USE_HZ, _torque_lag(log, out, p), DECONVOLVED))
+    out.update(apply_stated(out, stated, fs, LAG_USE_HZ, DECONVOLVED))
     return out
 
 
