@@ -288,6 +288,15 @@ EXPECTED = {NONE: "none", OUT: "unexplained"}
 COMBOS = (("drag", "relaxation_length"), ("brake_gain", "radius_error", "drag"), ("brake_gain", "drag"),
           ("radius_error", "relaxation_length"), ("brake_gain", "relaxation_length"))
 REAL_RATES = (25.0, 100.0)  # range of the real-like logger rate [Hz]
+# Command-line switches of the real-like export: flag -> (QuarterCarArtifacts settings, help)
+ARTIFACT_OPTIONS = {
+    "white-wheel-noise": ({"wheel_noise_std": math.sqrt(OMEGA_NOISE_VAR)},
+                          ("the wheel speed carries the sensor's white noise drawn at each logged sample instead of "
+                          "the simulated 100 Hz measurement interpolated at the logger's instants")),
+    "stated-filter": ({"state_filter": True},
+                      ("the column map states the IMU filter on v and a_x (order and cut-off, as a data sheet gives "
+                      "them) instead of leaving the diagnosis to read it from the noise")),
+}
 
 
 def _diagnosable_log(tmp: str, case: IndependentCase) -> tuple[str, dict]:
@@ -395,7 +404,7 @@ def _effect_figures(out: dict, case: IndependentCase, dg) -> None:
 
 
 def draw_cases(n: int, seed: int, real: bool = False, combos: bool = False,
-               columns: tuple | None = None, white_wheel_noise: bool = False) -> list[IndependentCase]:
+               columns: tuple | None = None, artifacts: dict | None = None) -> list[IndependentCase]:
     """``n`` cases, categories in turn, shuffled.
 
     :param columns: force the optional columns of every log (``()``: ``t, T_b, omega`` only); the cases are
@@ -403,8 +412,8 @@ def draw_cases(n: int, seed: int, real: bool = False, combos: bool = False,
     :param real: write each log as a real-like export (settings drawn from a second generator, so the cases
         themselves are those of the plain draw).
     :param combos: every case carries one of :data:`COMBOS` (several effects at once) instead of one category.
-    :param white_wheel_noise: with ``real``, the export's wheel speed carries the sensor's white noise drawn at each
-        logged sample (``QuarterCarArtifacts.wheel_noise_std``) instead of the 100 Hz measurement interpolated.
+    :param artifacts: with ``real``, settings of :class:`tests.real_artifacts.QuarterCarArtifacts` for every export
+        (:data:`ARTIFACT_OPTIONS`: the sensor's white wheel-speed noise, the IMU filter stated in the map).
     """
     rng = np.random.default_rng(seed)
     if combos:
@@ -424,8 +433,7 @@ def draw_cases(n: int, seed: int, real: bool = False, combos: bool = False,
     if not real:
         return cases
     rng_real = np.random.default_rng([seed, 15])
-    noise = {"wheel_noise_std": math.sqrt(OMEGA_NOISE_VAR)} if white_wheel_noise else {}
-    return [dataclasses.replace(c, real={**_real_settings(rng_real), **noise}) for c in cases]
+    return [dataclasses.replace(c, real={**_real_settings(rng_real), **(artifacts or {})}) for c in cases]
 
 
 def _real_settings(rng: np.random.Generator) -> dict:
@@ -434,7 +442,7 @@ def _real_settings(rng: np.random.Generator) -> dict:
 
 
 def measure(n: int, seed: int, jobs: int = 1, real: bool = False, combos: bool = False,
-            columns: tuple | None = None, white_wheel_noise: bool = False) -> dict:
+            columns: tuple | None = None, artifacts: dict | None = None) -> dict:
     """Draw ``n`` independent logs, diagnose each blind, and summarise (fricenv.gap.validate's summary format;
     with ``combos`` also the share of logs whose every effect is named)."""
     from fricenv.gap.validate import summarize
@@ -443,15 +451,15 @@ def measure(n: int, seed: int, jobs: int = 1, real: bool = False, combos: bool =
         raise ValueError(f"n must be >= 1, got {n}")
     if jobs < 1:
         raise ValueError(f"jobs must be >= 1, got {jobs}")
-    if white_wheel_noise and not real:
-        raise ValueError("white_wheel_noise applies to real-like exports only: pass real=True (--real)")
-    cases = draw_cases(n, seed, real, combos, columns, white_wheel_noise)
+    if artifacts and not real:
+        raise ValueError("artifacts apply to real-like exports only: pass real=True (--real)")
+    cases = draw_cases(n, seed, real, combos, columns, artifacts)
     t0 = time.perf_counter()
     results = pool_map(diagnose_case, cases, jobs)
     s = summarize(results)
     s.update(n=n, seed=seed, jobs=jobs, wall_seconds=time.perf_counter() - t0, source="tests.independent_sim",
              real=real, combos=combos, columns=None if columns is None else list(columns),
-             white_wheel_noise=white_wheel_noise)
+             artifacts=artifacts or {})
     s["right_or_untestable"] = float(np.mean([r.get("right_or_untestable", False) for r in results]))
     s["extra_effect_share"] = float(np.mean([bool(r.get("extra_named")) for r in results]))
     s["power"], s["sensors"] = report_check.power_summary(results), report_check.sensor_summary(results)
@@ -476,18 +484,19 @@ def main(argv: Sequence[str] | None = None) -> int:
                     help="write t, T_b and omega only (no v, no a_x) in every log")
     ap.add_argument("--combos", action="store_true",
                     help="several effects per log (COMBOS); reports the share with every effect named")
-    ap.add_argument("--white-wheel-noise", action="store_true",
-                    help="with --real: the wheel speed carries the sensor's white noise drawn at each logged sample "
-                         "instead of the simulated 100 Hz measurement interpolated at the logger's instants")
+    for flag, (_, text) in ARTIFACT_OPTIONS.items():
+        ap.add_argument(f"--{flag}", action="store_true", help=f"with --real: {text}")
     args = ap.parse_args(argv)
-    if args.white_wheel_noise and not args.real:
-        ap.error("--white-wheel-noise needs --real")
+    artifacts = {k: v for flag, (setting, _) in ARTIFACT_OPTIONS.items() if getattr(args, flag.replace("-", "_"))
+                 for k, v in setting.items()}
+    if artifacts and not args.real:
+        ap.error(f"--{', --'.join(ARTIFACT_OPTIONS)} need --real")
     from fricenv.gap.validate import format_summary
     from fricenv.utils import write_json
     from tests import independent_sim as mod  # noqa: PLW0406 -- by its import name, so that the worker processes can unpickle
 
     s = mod.measure(args.n, args.seed, args.jobs, args.real, args.combos, () if args.omega_only else None,
-                    args.white_wheel_noise)
+                    artifacts)
     print(report_check.format_rows(s["logs"]))
     print(format_summary(s))
     print(f"right or untestable (none where the report lists the true effect as not testable): "

@@ -77,6 +77,7 @@ class QuarterCarArtifacts:
     radius: float = 0.345  # wheel radius the map gives for the km/h rim speed [m]
     pressure_factor: float = 1.5e-4  # nominal brake torque per line pressure [N m per Pa]
     v_rate_hz: float | None = None  # a slower reference speed, held between its updates [Hz]; None: logger rate
+    state_filter: bool = False  # the map states the IMU filter on v and a_x (its "filter" entry, from a data sheet)
 
 
 @dataclass(frozen=True)
@@ -240,13 +241,22 @@ def real_like_quarter_car(clean: dict, rng: np.random.Generator,
         v_s = s if spec.v_rate_hz is None else _slow_instants(s, spec.v_rate_hz)
         cols["speed (km/h)"] = sample_at(t, filt["v"], v_s) * KMH_PER_MS
         channels["v"] = {"column": "speed", "unit": "km/h"}
+        channels["v"].update(_stated(spec))
     if filt.get("a_x") is not None:
         cols["ax[g]"] = sample_at(t, filt["a_x"], s) / STANDARD_GRAVITY
         channels["a_x"] = {"column": "ax", "unit": "g"}
+        channels["a_x"].update(_stated(spec))
     truth = {"spec": asdict(spec), "dropped_rows": dropped.tolist(), "outlier_rows": outlier_rows.tolist(),
              "epoch0": epoch0, "instants": s}
     return RealExport(cols, {"plant": "quarter-car", "channels": channels}, truth,
                       comments=("CAN export, logger v2.1", f"vehicle start {epoch0:.3f}"))
+
+
+def _stated(spec: QuarterCarArtifacts) -> dict:
+    """The map entry's ``filter`` when the export states its IMU filter (the order and cut-off it applied)."""
+    if not spec.state_filter or spec.imu_cutoff_hz is None:
+        return {}
+    return {"filter": {"order": spec.imu_order, "cutoff_hz": spec.imu_cutoff_hz}}
 
 
 def _slow_instants(s: np.ndarray, rate_hz: float) -> np.ndarray:

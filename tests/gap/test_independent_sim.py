@@ -296,13 +296,15 @@ def test_white_wheel_noise_is_the_sensor_noise_at_each_logged_sample():
     assert sd_old < 0.9 * std and ac_old > 0.15  # interpolated: smaller and correlated
 
 
-def test_white_wheel_noise_draws_the_same_cases_and_needs_real():
+@pytest.mark.parametrize("flag", list(ind.ARTIFACT_OPTIONS))
+def test_artifact_options_draw_the_same_cases_and_need_real(flag):
+    setting = ind.ARTIFACT_OPTIONS[flag][0]
     plain = ind.draw_cases(6, seed=3, real=True)
-    white = ind.draw_cases(6, seed=3, real=True, white_wheel_noise=True)
-    assert [dataclasses.replace(c, real=None) for c in white] == [dataclasses.replace(c, real=None) for c in plain]
-    assert all(w.real == {**p.real, "wheel_noise_std": math.sqrt(ind.OMEGA_NOISE_VAR)} for w, p in zip(white, plain))
+    other = ind.draw_cases(6, seed=3, real=True, artifacts=setting)
+    assert [dataclasses.replace(c, real=None) for c in other] == [dataclasses.replace(c, real=None) for c in plain]
+    assert all(w.real == {**p.real, **setting} for w, p in zip(other, plain))
     with pytest.raises(ValueError, match="real"):
-        ind.measure(1, 3, white_wheel_noise=True)
+        ind.measure(1, 3, artifacts=setting)
 
 
 def test_combos_carry_several_effects():
