@@ -19,8 +19,9 @@ __all__ = ["MU_CHANGE_FACTORS", "change_point_starts", "fit_change_point", "midd
 MU_CHANGE_FACTORS = np.geomspace(0.35, 2.0, 16)  # theta grid of the change-point search, times the nominal theta
 THETA = 3  # index of theta in the road (B, C, E, theta)
 STARTS_PER_RUN = 2  # change-point starts per ``cfg.fit_starts``: the best local minima of the search [-]
-# Relative difference of two training costs below which switching times count as tied (round-off) [-]
-TIE_TOLERANCE = 1e-12
+# Rise of the training cost (sum of squared normalised residuals) over its minimum that bounds the switching times the
+# data cannot tell apart: the one-sigma profile-likelihood interval of one parameter [-]
+TIME_INTERVAL_RISE = 1.0
 
 
 def _named(effect: str) -> tuple[tuple[str, ...], int, int]:
@@ -104,28 +105,28 @@ def _refine_change_time(effect: str, shape: np.ndarray, thetas: np.ndarray, cum:
     return fine[middle_of_minimum(_capped_cost(r, len(fine)))]
 
 
-def middle_of_minimum(cost: np.ndarray) -> int:
-    """Index of the middle of the run of switching times (on a uniform grid) tied at the cost's minimum.
+def middle_of_minimum(cost: np.ndarray, rise: float = TIME_INTERVAL_RISE) -> int:
+    """Index of the middle of the run of switching times around the cost's minimum whose cost is within ``rise`` of
+    it (``cost`` over times on a uniform grid).
 
     The training windows tell the switching time only where it falls in one of them. A change inside a window the
-    fit did not see costs the same anywhere across that window, and the first of those times (the window's start,
-    what ``argmin`` returns) is the worst guess for the window the fold is then asked to predict: on gap validate
-    seed 9018 log 19 the change at 1.346 s fell in a held-out window, the fold placed it at 1.29 s, and that window's
-    prediction was worse than the nominal model's (gain -12.6 against +74 for the true time). The middle of the
-    times the data leave open is the guess whose worst error is smallest. A one-sigma interval (cost within 1 of the
-    minimum) in place of the tie was tried: it also moves a time the fold's own windows place, off its least
-    squares value (omega-only tuning 3000 log 24: paired z 4.2 -> 3.4, the verdict lost).
+    fit did not see leaves every time across that window at the same training cost, and the first minimum (the
+    window's start) is the worst guess for the window it is then asked to predict: on gap validate seed 9018 log 19
+    the change at 1.346 s fell in a held-out window, the fold placed it at 1.29 s, and that window's prediction was
+    worse than the nominal model's (gain -12.6 against +74 for the true time). The middle of the interval the data
+    leave open is the guess whose worst error is smallest; where one window pins the time, the interval is a sample
+    or two wide and its middle is the minimum.
     """
     cost = np.where(np.isfinite(cost), cost, np.inf)
     i = int(np.argmin(cost))
     if not np.isfinite(cost[i]):
         return i
-    tied = cost <= cost[i] + TIE_TOLERANCE * max(1.0, abs(float(cost[i])))
+    near = cost <= cost[i] + rise
     lo = i
-    while lo > 0 and tied[lo - 1]:
+    while lo > 0 and near[lo - 1]:
         lo -= 1
     hi = i
-    while hi < len(cost) - 1 and tied[hi + 1]:
+    while hi < len(cost) - 1 and near[hi + 1]:
         hi += 1
     return (lo + hi) // 2
 
