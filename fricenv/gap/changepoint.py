@@ -14,14 +14,11 @@ from fricenv.gap.fitting import FIT_LOSS_SCALE, bounds, fit, fit_loss, road_star
 from fricenv.gap.params import ROAD_BOUNDS, param_names
 from fricenv.gap.windows import Data, window_residuals
 
-__all__ = ["MU_CHANGE_FACTORS", "change_point_starts", "fit_change_point", "middle_of_minimum"]
+__all__ = ["MU_CHANGE_FACTORS", "change_point_starts", "fit_change_point"]
 
 MU_CHANGE_FACTORS = np.geomspace(0.35, 2.0, 16)  # theta grid of the change-point search, times the nominal theta
 THETA = 3  # index of theta in the road (B, C, E, theta)
 STARTS_PER_RUN = 2  # change-point starts per ``cfg.fit_starts``: the best local minima of the search [-]
-# Rise of the training cost (sum of squared normalised residuals) over its minimum that bounds the switching times the
-# data cannot tell apart: the one-sigma profile-likelihood interval of one parameter [-]
-TIME_INTERVAL_RISE = 1.0
 
 
 def _named(effect: str) -> tuple[tuple[str, ...], int, int]:
@@ -102,33 +99,7 @@ def _refine_change_time(effect: str, shape: np.ndarray, thetas: np.ndarray, cum:
     fine = np.repeat(base[None], len(fine_t), axis=0)
     fine[:, i_time] = fine_t
     r = window_residuals([effect], names, fine, d, train)
-    return fine[middle_of_minimum(_capped_cost(r, len(fine)))]
-
-
-def middle_of_minimum(cost: np.ndarray, rise: float = TIME_INTERVAL_RISE) -> int:
-    """Index of the middle of the run of switching times around the cost's minimum whose cost is within ``rise`` of
-    it (``cost`` over times on a uniform grid).
-
-    The training windows tell the switching time only where it falls in one of them. A change inside a window the
-    fit did not see leaves every time across that window at the same training cost, and the first minimum (the
-    window's start) is the worst guess for the window it is then asked to predict: on gap validate seed 9018 log 19
-    the change at 1.346 s fell in a held-out window, the fold placed it at 1.29 s, and that window's prediction was
-    worse than the nominal model's (gain -12.6 against +74 for the true time). The middle of the interval the data
-    leave open is the guess whose worst error is smallest; where one window pins the time, the interval is a sample
-    or two wide and its middle is the minimum.
-    """
-    cost = np.where(np.isfinite(cost), cost, np.inf)
-    i = int(np.argmin(cost))
-    if not np.isfinite(cost[i]):
-        return i
-    near = cost <= cost[i] + rise
-    lo = i
-    while lo > 0 and near[lo - 1]:
-        lo -= 1
-    hi = i
-    while hi < len(cost) - 1 and near[hi + 1]:
-        hi += 1
-    return (lo + hi) // 2
+    return fine[int(np.argmin(_capped_cost(r, len(fine))))]
 
 
 def _fit_from(effect: str, start: np.ndarray, d: Data, cfg: DiagnoseConfig) -> np.ndarray:
@@ -144,7 +115,8 @@ def _fit_from(effect: str, start: np.ndarray, d: Data, cfg: DiagnoseConfig) -> n
     fine = np.repeat(x[None], len(fine_t), axis=0)
     fine[:, i_time] = fine_t
     r = window_residuals(effects, names, fine, d, np.flatnonzero(~d.test))
-    best = fine[middle_of_minimum(np.sum(r.reshape(len(fine), -1) ** 2, axis=1))]
+    cost = np.sum(r.reshape(len(fine), -1) ** 2, axis=1)
+    best = fine[int(np.argmin(np.where(np.isfinite(cost), cost, np.inf)))]
     if best[i_time] != x[i_time]:
         x = fit(effects, names, best[None], d, cfg, fixed={time_name: float(best[i_time])})
     return x
