@@ -1,6 +1,6 @@
 """Which wheel-speed outliers does the diagnosis set aside? Matched by time on blind logs (issue 15 item 2).
 
-A real-like export (:mod:`tests.real_artifacts`) writes isolated outliers into the wheel speed and records where;
+A real-like export (:mod:`validation.real_artifacts`) writes isolated outliers into the wheel speed and records where;
 the diagnosis reads the export through its map, resamples it onto its grid and, preparing it, sets aside what its
 sensor step (:func:`fricenv.gap.signals.sensors.condition_channel`) flags. An outlier counts as found when a flag lies within one grid
 sample of its time stamp; a flag with no outlier there is false. Clean logs (no outliers written) give false flags
@@ -19,9 +19,9 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from tests import independent_sim as sim
-from tests.measure_cli import measurement_parser, pool_map
-from tests.real_artifacts import write_export
+from validation import independent_sim as sim
+from validation.measure_cli import measurement_parser, pool_map
+from validation.real_artifacts import write_export
 
 __all__ = ["check_case", "main", "measure"]
 
@@ -65,7 +65,7 @@ def check_case(case: sim.IndependentCase) -> dict:
 
 
 def measure(n: int, seed: int, jobs: int = 1, real: bool = True) -> dict:
-    """``n`` draws of :func:`tests.independent_sim.draw_cases` (real-like or clean), each checked."""
+    """``n`` draws of :func:`validation.independent_sim.draw_cases` (real-like or clean), each checked."""
     if n < 1:
         raise ValueError(f"n must be >= 1, got {n}")
     rows = pool_map(check_case, sim.draw_cases(n, seed, real), jobs)

@@ -60,7 +60,7 @@ def payload_shown(dg, truth: dict, true_raw: dict[str, float], n_params: int, cf
 
     cfg = cfg or DEFAULT_PAYLOAD_CONFIG
     d = dg.data
-    sigma, rho2 = residual_noise(true_raw, d.theta_f, d.S_known, d.p, d.sos, d.dt, d.y)
+    sigma, rho2 = residual_noise(true_raw, d.theta_f, d.S_known, d.p, d.sos, d.dt, d.y, cfg.cutoff_hz)
     dt_ = replace(d, sigma=sigma, rho2=rho2)
     nominal_pred = d.y - dg.nominal.residual * d.sigma
     nominal = score_prediction("nominal", 0, nominal_pred, dt_)

@@ -33,8 +33,19 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["MASS", "INERTIA", "RHO", "S_PAPER", "MultiSine", "PayloadRecipe", "paper_excitation",
-           "random_excitation", "simulate", "theta_closed_form", "write_csv"]
+__all__ = [
+    "INERTIA",
+    "MASS",
+    "RHO",
+    "S_PAPER",
+    "MultiSine",
+    "PayloadRecipe",
+    "paper_excitation",
+    "random_excitation",
+    "simulate",
+    "theta_closed_form",
+    "write_csv",
+]
 
 MASS = 2.5  # [kg], Section 4 item 1
 INERTIA = 0.75  # [kg m^2], Section 4 item 1
@@ -175,7 +186,7 @@ def _peak(wrench: MultiSine, t: np.ndarray) -> np.ndarray:
 
 def simulate(recipe: PayloadRecipe, rng: np.random.Generator) -> dict[str, np.ndarray]:
     """One log: ``{"t", "M", "f_x", "f_y", "theta", "X", "Y"}`` arrays (SI units, stamps from ``recipe.t0``)."""
-    n = int(round(recipe.duration / recipe.dt)) + 1
+    n = round(recipe.duration / recipe.dt) + 1
     t = np.arange(n) * recipe.dt
     wr = recipe.excitation
     pose = states_at(t - recipe.delay, wr, recipe.damping)[:, :3]

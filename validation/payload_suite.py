@@ -283,8 +283,8 @@ def format_summary(s: dict) -> str:
     nn, nt = s["nominal_none"]
     dk, dn = s["delay_within_tol"]
     lines += [f"source {s['source']}, seed {s['seed']}, {s['n']} logs" + (f" (only {s['only']})" if s["only"] else ""),
-              f"data show the answer: {s['shown_share']:.1%}; right on those: {s['right_on_shown']:.1%}; "
-              f"wrong named effects: {s['wrong_named_share']:.1%}",
+              (f"data show the answer: {s['shown_share']:.1%}; right on those: {s['right_on_shown']:.1%}; "
+              f"wrong named effects: {s['wrong_named_share']:.1%}"),
               f"nominal logs 'none': {nn}/{nt}; vision delays within 15 % or 5 ms: {dk}/{dn}"]
     return "\n".join(lines)
 

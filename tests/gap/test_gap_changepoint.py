@@ -8,7 +8,7 @@ import numpy as np
 
 from fricenv.gap.quarter_car.changepoint import _local_minima
 from fricenv.gap.quarter_car.diagnose import DiagnoseConfig, diagnose_file
-from tests import independent_sim as ind
+from validation import independent_sim as ind
 
 
 def test_the_local_minima_of_a_split_profile_are_one_per_dip():

@@ -17,7 +17,7 @@ from fricenv.gap.quarter_car.params import ROAD_NAMES
 from fricenv.gap.quarter_car.simulate import simulate_log
 from fricenv.gap.quarter_car.stats import CandidateFit, window_mse
 from fricenv.plants.tire import DRY, MagicFormula
-from tests import independent_sim as ind
+from validation import independent_sim as ind
 
 CFG = DiagnoseConfig(jobs=2)
 ROAD = MagicFormula(B=11.0, C=1.9, E=0.8, theta=0.9, name="custom")  # none of the presets: the tool fits it
@@ -187,7 +187,7 @@ def test_a_joint_fit_that_fits_worse_than_its_set_is_fitted_again_from_the_start
 
 
 def test_a_relaxation_length_whose_single_fit_is_far_off_is_added_to_a_radius_error(tmp_path):
-    """Combos tuning seed 3011, log 36 (`tests.independent_sim --real --combos`): a radius error of 0.328 m and a
+    """Combos tuning seed 3011, log 36 (`validation.independent_sim --real --combos`): a radius error of 0.328 m and a
     relaxation length of 0.27 m, v and a_x logged. The relaxation length fitted alone ends at 1.18 m (the radius
     error it cannot model pulls it there); the joint fit started from it stayed near 1.2 m and fitted worse than the
     radius error alone, so the selection named the radius error only. Fitted again from the start list, the joint

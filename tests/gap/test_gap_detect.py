@@ -158,12 +158,12 @@ def test_report_markdown_names_confounded_effects():
 
 
 def test_a_brake_gain_the_power_analysis_under_rates_is_still_fitted_and_named(tmp_path):
-    """A real-like wheel-speed-only log (tuning seed 3000 of ``tests.independent_sim --real``, log 20: pedal, snow,
+    """A real-like wheel-speed-only log (tuning seed 3000 of ``validation.independent_sim --real``, log 20: pedal, snow,
     gain 0.77): the power analysis, linearised at the nominal road, rates a brake gain below noise (it acts through
     the wheel's lock-ups). It was not fitted, and the verdict was `none`; fitted all the same, it is significant and
     the verdict, with a caveat instead of a not-testable entry."""
     from fricenv.gap.quarter_car.diagnose import diagnose_file
-    from tests import independent_sim as ind
+    from validation import independent_sim as ind
 
     case = ind.draw_cases(60, 3000, real=True)[20]
     assert case.effects[0].name == "brake_gain" and not case.columns

@@ -5,7 +5,7 @@ from __future__ import annotations
 import warnings
 
 from fricenv.gap.quarter_car.diagnose import DiagnoseConfig, diagnose_file
-from tests import independent_sim as ind
+from validation import independent_sim as ind
 
 
 def test_a_brake_fade_read_as_a_gain_and_a_drag_drifts(tmp_path):

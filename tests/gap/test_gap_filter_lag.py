@@ -169,7 +169,7 @@ def _true_set_z(case, tmp) -> float:
     from fricenv.gap.quarter_car.params import ROAD_NAMES, param_names
     from fricenv.gap.quarter_car.stats import cross_fitted, fold_data, paired_z
     from fricenv.logs import read_log
-    from tests.independent_sim import write_real_log
+    from validation.independent_sim import write_real_log
 
     csv, mp, truth = write_real_log(tmp / "export", case)
     convert(csv, mp, "quarter-car", str(tmp / "log.csv"))
@@ -190,9 +190,9 @@ def _true_set_z(case, tmp) -> float:
 def test_true_two_effect_set_is_significant_on_a_filtered_log_only_once_realigned(tmp_path, monkeypatch):
     """A real-like export (IMU filter 5 Hz on v and a_x, 50 Hz) with a brake gain and drag: the true set started at
     the truth passes the significance rule once the channels are realigned, and did not without (tuning log of
-    issue 15, tests.independent_sim --real --combos seed 1801, log 5)."""
+    issue 15, validation.independent_sim --real --combos seed 1801, log 5)."""
     from fricenv.gap.quarter_car import windows
-    from tests.independent_sim import draw_cases
+    from validation.independent_sim import draw_cases
 
     case = draw_cases(8, 1801, real=True, combos=True)[5]
     assert [e.name for e in case.effects] == ["brake_gain", "drag"]

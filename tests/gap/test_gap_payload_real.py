@@ -74,7 +74,7 @@ def test_a_held_pose_with_filtered_sensor_and_glitches_is_diagnosed_none(tmp_pat
     from fricenv.gap.payload.diagnose import diagnose_payload
     from fricenv.gap.payload.validate import PayloadCase, simulate_payload_case
     from fricenv.logs import read_log
-    from tests.real_artifacts import PayloadArtifacts, real_like_payload, write_export
+    from validation.real_artifacts import PayloadArtifacts, real_like_payload, write_export
 
     case = PayloadCase("none", (), None, "paper", 1e-3, 4242)
     log, _ = simulate_payload_case(case)
@@ -94,7 +94,7 @@ def _real_like_diagnosis(tmp_path, case):
     from fricenv.gap.payload.diagnose import diagnose_payload
     from fricenv.gap.payload.validate import simulate_payload_case
     from fricenv.logs import read_log
-    from tests.real_artifacts import PayloadArtifacts, real_like_payload, write_export
+    from validation.real_artifacts import PayloadArtifacts, real_like_payload, write_export
 
     log, _ = simulate_payload_case(case)
     clean = {k: np.asarray(getattr(log, k), dtype=float) for k in ("t", "M", "f_x", "f_y", "theta", "X", "Y")}

@@ -61,7 +61,7 @@ def test_a_load_oscillation_under_the_gap_threshold_reads_unexplained():
     import tempfile
 
     from fricenv.gap.quarter_car.diagnose import DiagnoseConfig, diagnose_file
-    from tests import independent_sim as ind
+    from validation import independent_sim as ind
 
     case = ind.draw_cases(40, 3000, columns=())[12]
     assert case.effects[0].name == "load_oscillation"

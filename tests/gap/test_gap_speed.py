@@ -107,7 +107,7 @@ def test_the_speed_from_the_true_wheel_speed_follows_an_independent_simulator(dr
     shared with fricenv) and the true road, the reconstructed speed follows the true speed through the braking
     onset. Measured on these wet-road logs: at most 3, 12 and 17 mm/s (mean 0.4, 2.1, 6.5); the first-order step
     (the force at the step's first wheel-speed sample, IMPLICIT = 1) ran 47, 66 and 63 mm/s above it."""
-    from tests import independent_sim as ind
+    from validation import independent_sim as ind
 
     case = ind.draw_independent_case("none", np.random.default_rng(1), driver=driver)
     assert case.road.name == "wet"

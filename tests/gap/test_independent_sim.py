@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from tests import independent_sim as ind
-from tests.independent_sim import (
+from validation import independent_sim as ind
+from validation.independent_sim import (
     CATEGORIES,
     DT,
     ROADS,

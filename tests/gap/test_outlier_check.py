@@ -4,7 +4,7 @@ import dataclasses
 
 import pytest
 
-from tests import independent_sim as sim
+from validation import independent_sim as sim
 from tests.outlier_check import check_case, measure
 
 

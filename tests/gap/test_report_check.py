@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from fricenv.plants.quarter_car import QuarterCarParams
-from tests.report_check import (
+from validation.report_check import (
     combo_summary,
     miss_kind,
     miss_kinds,
@@ -97,7 +97,7 @@ def test_the_oracle_of_several_effects_shows_a_large_one_and_not_a_negligible_on
     from fricenv.gap.quarter_car.diagnose import diagnose
     from fricenv.gap.quarter_car.simulate import simulate_log
     from fricenv.plants.tire import MagicFormula
-    from tests.report_check import shown_effects
+    from validation.report_check import shown_effects
 
     road = MagicFormula(B=11.0, C=1.9, E=0.8, theta=0.9, name="custom")
     effects = {"brake_gain": {"gain": 0.8}, "drag": {"c0": 0.1, "c2": 0.0}}
@@ -128,8 +128,8 @@ def test_the_noise_free_truth_shows_a_strong_brake_fade_and_not_a_nominal_log(tm
     import warnings
 
     from fricenv.gap.quarter_car.diagnose import DiagnoseConfig, diagnose_file
-    from tests import independent_sim as ind
-    from tests.report_check import truth_shown
+    from validation import independent_sim as ind
+    from validation.report_check import truth_shown
 
     cfg = DiagnoseConfig(jobs=1)
     base = ind.draw_independent_case("none", np.random.default_rng(4), driver="pedal")

@@ -7,7 +7,7 @@ import pytest
 from fricenv import cli
 from fricenv.logs import LogFormatError, read_log
 from fricenv.logs.resample import MAX_FILL, MAX_JITTER
-from tests.real_artifacts import (
+from validation.real_artifacts import (
     PayloadArtifacts,
     QuarterCarArtifacts,
     held_camera,

@@ -17,7 +17,7 @@ from fricenv.logs import PayloadLog
 from fricenv.plants import payload as pl
 
 __all__ = ["CHANNELS", "DEFAULT_PAYLOAD_CONFIG", "WRENCH", "PayloadData", "PayloadDiagnoseConfig", "generalised_force_map", "lowpass",
-           "prepare_payload"]
+           "prepare_payload", "residual_noise"]
 
 CHANNELS = ("theta", "X", "Y")  # residual channels: I_G theta'' [N m], m X'' [N], m Y'' [N]
 WRENCH = ("M", "f_x", "f_y")
@@ -27,6 +27,11 @@ NUMEROV = np.array([1.0, 10.0, 1.0]) / 12.0  # 3-tap weights matching the second
 REL_NOISE_FLOOR = 1e-3  # smallest residual noise std as a share of the channel's RMS acceleration signal [-]
 MIN_BLOCKS = 4  # a log must have at least this many scored blocks
 FILTER_BAND = 2.0  # a filtered channel's noise density is read from this many times the diagnosis cut-off up [-]
+# Difference order of the force-moment filtering test (sensors.looks_filtered): at a coarse sample time a fast wrench
+# correlates second differences by itself (10 ms, sines up to 6 Hz: lag-1 autocorrelation -0.45 where white noise
+# gives -0.67, read as a filter with a lag of 9-22 ms); third differences keep such a signal at white noise's -0.75
+# (-0.73 to -0.75) while a 20 Hz order-2 sensor filter logged at 100-200 Hz reads -0.35 to -0.52 [-]
+FILTER_TEST_ORDER = 3
 
 
 @dataclass(frozen=True)
@@ -179,7 +184,7 @@ def _conditioned_columns(log: PayloadLog, filter_band_hz: float) -> tuple[dict, 
         share = max(float(np.mean(fresh)), 1e-3)
         noise = estimate_noise(cond.values[fresh], order=NOISE_DIFF_ORDER) if fresh.any() else float("nan")
         noise = max(noise if np.isfinite(noise) else NOISE_FLOOR, NOISE_FLOOR)
-        filtered = c in WRENCH and looks_filtered(cond.values)
+        filtered = c in WRENCH and looks_filtered(cond.values, FILTER_TEST_ORDER)
         lag = None
         if filtered:
             band = band_noise(cond.values, 1.0 / log.dt, filter_band_hz)
@@ -193,6 +198,31 @@ def _conditioned_columns(log: PayloadLog, filter_band_hz: float) -> tuple[dict, 
             sensors[c]["frame_rate_hz"] = float((np.count_nonzero(np.isfinite(clock)) - 1)
                                                 / (np.nanmax(clock) - np.nanmin(clock)))
     return cols, raw, sensors
+
+
+def residual_noise(raw: dict, theta_f: np.ndarray, S_known: np.ndarray, p: pl.PayloadParams, sos: np.ndarray,
+                   dt: float, y: np.ndarray, cutoff_hz: float) -> tuple[np.ndarray, float]:
+    """The residual's noise std per channel and its effective-sample divisor, propagated from the raw columns'
+    white-noise std (``raw``, at the log's rate) through both filters.
+
+    :param raw: noise std per column ``M, f_x, f_y, theta, X, Y`` (SI).
+    :param theta_f: the low-passed orientation (rotates the force noise); :param y: the pose side (its RMS sets the
+        relative floor); :param sos: the diagnosis' low-pass, of cut-off ``cutoff_hz`` [Hz].
+    :return: (sigma (3,) [N m, N, N], rho2 [-]).
+    """
+    n = len(theta_f)
+    fs = 1.0 / dt
+    n_imp = int(min(n, max(8 * fs / cutoff_hz, 64)))
+    h_force, h_pose, e_force, e_pose = _impulse_norms(sos, n_imp)
+    GS = generalised_force_map(theta_f, p) @ np.asarray(S_known, dtype=float)
+    w_var = np.array([raw[c] ** 2 for c in WRENCH])
+    force_var = np.mean(np.einsum("nij,j->ni", GS**2, w_var), axis=0) * e_force
+    pose_var = (np.array([raw[c] for c in CHANNELS]) * np.array([p.I_G, p.m, p.m]) / dt**2) ** 2 * e_pose
+    # a floor relative to the signal: a noise-free log is judged at a relative accuracy, not at rounding level
+    sigma = np.maximum(np.sqrt(force_var + pose_var), REL_NOISE_FLOOR * np.sqrt(np.mean(y**2, axis=0)))
+    share = pose_var / (force_var + pose_var)
+    rho2 = float(np.mean(share * _acf_sq_sum(h_pose) + (1 - share) * _acf_sq_sum(h_force)))
+    return sigma, rho2
 
 
 def prepare_payload(log: PayloadLog, S_known: np.ndarray, p: pl.PayloadParams, cfg: PayloadDiagnoseConfig) -> PayloadData:
@@ -214,17 +244,7 @@ def prepare_payload(log: PayloadLog, S_known: np.ndarray, p: pl.PayloadParams, c
     acc[1:-1] = (pose[2:] - 2.0 * pose[1:-1] + pose[:-2]) / dt**2
     acc[0], acc[-1] = 0.0, 0.0
     y = _zero_filtfilt(sos, acc) * np.array([p.I_G, p.m, p.m])
-    # noise propagation
-    n_imp = int(min(n, max(8 * fs / cfg.cutoff_hz, 64)))
-    h_force, h_pose, e_force, e_pose = _impulse_norms(sos, n_imp)
-    GS = generalised_force_map(pose_f[:, 0], p) @ S_known
-    w_var = np.array([raw[c] ** 2 for c in WRENCH])
-    force_var = np.mean(np.einsum("nij,j->ni", GS**2, w_var), axis=0) * e_force
-    pose_var = (np.array([raw[c] for c in CHANNELS]) * np.array([p.I_G, p.m, p.m]) / dt**2) ** 2 * e_pose
-    # a floor relative to the signal: a noise-free log is judged at a relative accuracy, not at rounding level
-    sigma = np.maximum(np.sqrt(force_var + pose_var), REL_NOISE_FLOOR * np.sqrt(np.mean(y**2, axis=0)))
-    share = pose_var / (force_var + pose_var)
-    rho2 = float(np.mean(share * _acf_sq_sum(h_pose) + (1 - share) * _acf_sq_sum(h_force)))
+    sigma, rho2 = residual_noise(raw, pose_f[:, 0], S_known, p, sos, dt, y, cfg.cutoff_hz)
     # blocks
     margin = round(cfg.margin_s / dt)
     blen = max(round(cfg.block_s / dt), 1)

@@ -32,7 +32,7 @@ The payload's dynamics are linear in the wrench, so the diagnosis compares accel
    are also fitted jointly (reported under ``where["joint_fit"]``).
 6. **Reported parameters.** Once the held-out blocks have chosen the model, its parameters are fitted again on every
    scored block (training and held-out, ``where["params_fit"]``): twice the data for the estimate, while every gap
-   and test stays held-out. On fresh real-like rig logs (``tests.real_payload`` seeds 2129-2131) this took the
+   and test stays held-out. On fresh real-like rig logs (``validation.real_payload`` seeds 2129-2131) this took the
    parameters within 15 % from 18/23 to 20/23 (tuning seeds 2125-2128: 24/32 to 27/32).
 """
 
@@ -59,6 +59,7 @@ from fricenv.gap.payload.data import (
     lowpass,
     prepare_payload,
 )
+from fricenv.gap.payload.localise import where_gap
 from fricenv.logs import PayloadLog, read_log
 from fricenv.plants import payload as pl
 from fricenv.utils import read_json_object
@@ -71,7 +72,9 @@ __all__ = [
     "PayloadDiagnosis",
     "diagnose_payload",
     "diagnose_payload_file",
+    "improvement_z",
     "load_payload_params",
+    "score_prediction",
     "summary_line",
 ]
 
@@ -231,20 +234,18 @@ def _fit(effects: Sequence[str], d: PayloadData, cfg: PayloadDiagnoseConfig,
                               options={"xatol": SEARCH_XTOL})
         return float(res.x), float(res.fun)
 
-    # the shift between pose and wrench: a vision delay (pose late, > 0) and, with a low-passed force-moment sensor,
-    # the filter's lag (wrench late, < 0), a nuisance of every model
+    # the shift between pose and wrench, fitted for every model: a vision delay (pose late, > 0), and the wrench late
+    # by a low-passed or averaging force-moment sensor (< 0), a nuisance of every model (_shift_range)
     delay, lo, hi = _shift_range(d, cfg, "vision_delay" in effects)
     if hi > lo:
-        grid = np.arange(lo, hi + 1e-12, max(DELAY_GRID_STEP, d.dt))
+        step = max(DELAY_GRID_STEP, d.dt)
+        grid = np.linspace(lo, hi, max(int(np.ceil((hi - lo) / step - 1e-9)) + 1, 2))
         costs = [best_rate(regs(g))[1] for g in grid]
         i = int(np.argmin(costs))
-        lo, hi = grid[max(i - 1, 0)], grid[min(i + 1, len(grid) - 1)]
-        if hi > lo:
-            res = minimize_scalar(lambda x: best_rate(regs(x))[1], bounds=(lo, hi), method="bounded",
-                                  options={"xatol": SEARCH_XTOL})
-            delay = float(res.x) if res.fun <= costs[i] else float(grid[i])
-        else:
-            delay = float(grid[i])
+        a, b = grid[max(i - 1, 0)], grid[min(i + 1, len(grid) - 1)]
+        res = minimize_scalar(lambda x: best_rate(regs(x))[1], bounds=(a, b), method="bounded",
+                              options={"xatol": SEARCH_XTOL})
+        delay = float(res.x) if res.fun <= costs[i] else float(grid[i])
     R = regs(delay)
     rate, _ = best_rate(R)
     S, o, pred = _solve(effects, R, rate, d, rows)
@@ -262,30 +263,42 @@ def _fit(effects: Sequence[str], d: PayloadData, cfg: PayloadDiagnoseConfig,
 
 
 def _shift_range(d: PayloadData, cfg: PayloadDiagnoseConfig, vision: bool) -> tuple[float, float, float]:
-    """(start, lower, upper) of the fitted pose-wrench shift [s]. With the force-moment sensor's lag ``L`` read from
-    its noise roll-off (``d.wrench_lag``), every model's shift is ``-L`` within ``LAG_TOLERANCE`` (its uncertainty),
-    and a vision delay adds up to ``max_delay_s`` on top: the delay is then the camera's own. Without it, a filtered
-    sensor's lag is fitted freely up to ``wrench_lag_max`` and a vision delay is net of it."""
-    if d.wrench_lag is None:
-        return 0.0, -d.wrench_lag_max, (cfg.max_delay_s if vision else 0.0)
-    tol = max(LAG_TOLERANCE[0] * d.wrench_lag, LAG_TOLERANCE[1])
-    return -d.wrench_lag, -d.wrench_lag - tol, (cfg.max_delay_s - d.wrench_lag if vision else -d.wrench_lag + tol)
+    """(start, lower, upper) of the fitted pose-wrench shift [s] (docs/contracts.md, payload timing).
+
+    Every model may read the wrench late, by down to ``-(L + tolerance + dt / 2)``: a sensor filter's lag ``L``
+    read from the force-moment noise's roll-off (``d.wrench_lag``, within ``LAG_TOLERANCE``; without a roll-off but
+    a filtered-looking channel, up to ``wrench_lag_max``) and half a sample for a logger that averages the reading
+    over its sample period. The upper bound is 0 (no shift) for every model but ``vision_delay``, whose pose may lag
+    by up to ``max_delay_s`` net of the lag: a lag read from the noise is a hypothesis that the motion can overrule
+    (a smoothing without lag, or one that the pose passed as well, leaves the nominal model at 0), so it can never
+    make a vision delay on its own. A fitted delay is reported as the camera's own (net shift plus ``L``)."""
+    lag = d.wrench_lag or 0.0
+    span = lag + max(LAG_TOLERANCE[0] * lag, LAG_TOLERANCE[1]) if d.wrench_lag is not None else d.wrench_lag_max
+    lo = -(span + 0.5 * d.dt)
+    return -lag, lo, (cfg.max_delay_s - lag if vision else 0.0)
 
 
 def _score(name: str, effects: Sequence[str], params: dict, pred: np.ndarray, d: PayloadData,
            seconds: float) -> PayloadCandidate:
+    return score_prediction(name, _n_params(effects), pred, d, params, seconds)
+
+
+def score_prediction(name: str, n_params: int, pred: np.ndarray, d: PayloadData, params: dict | None = None,
+                     seconds: float = 0.0) -> PayloadCandidate:
+    """A model's prediction ``pred`` (n, 3) scored on the prepared log ``d`` as every candidate is: normalised
+    residual, block and held-out mean squares, gap, and the held-out error penalised for ``n_params``."""
     r = (d.y - pred) / d.sigma
     sq = np.mean(r**2, axis=1)
     nb = len(d.block_test)
     scored = d.block >= 0
     sums = np.bincount(d.block[scored], weights=sq[scored], minlength=nb)
     counts = np.maximum(np.bincount(d.block[scored], minlength=nb), 1)
-    k = _n_params(effects)
     n_eff_train = np.count_nonzero(d.train) * len(CHANNELS) / d.rho2
     test_mse = float(np.mean(sq[d.test]))
-    return PayloadCandidate(effect=name, params=params, n_params=k, train_mse=float(np.mean(sq[d.train])),
-                            test_mse=test_mse, block_mse=sums / counts, residual=r, gap=gap_of(test_mse),
-                            penalised=test_mse + PENALTY_PER_PARAM * k / n_eff_train, seconds=seconds)
+    return PayloadCandidate(effect=name, params=params or {}, n_params=n_params,
+                            train_mse=float(np.mean(sq[d.train])), test_mse=test_mse, block_mse=sums / counts,
+                            residual=r, gap=gap_of(test_mse),
+                            penalised=test_mse + PENALTY_PER_PARAM * n_params / n_eff_train, seconds=seconds)
 
 
 def fit_payload_candidate(effects: Sequence[str], d: PayloadData, cfg: PayloadDiagnoseConfig) -> PayloadCandidate:
@@ -309,46 +322,6 @@ def improvement_z(base: PayloadCandidate, cand: PayloadCandidate, d: PayloadData
     robust = float(np.sum(gain) - max(float(np.max(gain)), 0.0))
     N = float(np.sum(counts))
     return robust / (np.sqrt(2.0) * N / np.sqrt(N / d.rho2))
-
-
-# --------------------------------------------------------------------------------------------- localisation
-def _where(d: PayloadData, nominal: PayloadCandidate, chosen: PayloadCandidate | None) -> dict:
-    scored = d.block >= 0
-    G = generalised_force_map(d.theta_f, d.p)
-    force = np.linalg.norm(np.einsum("nij,jk,nk->ni", G, d.S_known, d.w_hat), axis=1)
-    rate = np.abs(np.gradient(d.theta_f, d.dt))
-    t_mid = 0.5 * (d.t[0] + d.t[-1])
-    labels = {
-        "angular_rate_low": rate <= np.median(rate[scored]),
-        "angular_rate_high": rate > np.median(rate[scored]),
-        "wrench_low": force <= np.median(force[scored]),
-        "wrench_high": force > np.median(force[scored]),
-        "first_half": d.t < t_mid,
-        "second_half": d.t >= t_mid,
-    }
-    sq_b = np.mean(nominal.residual**2, axis=1)
-    sq_a = None if chosen is None else np.mean(chosen.residual**2, axis=1)
-    regimes = {}
-    for name, mask in labels.items():
-        m = mask & scored
-        n = int(np.count_nonzero(m))
-        regimes[name] = {"gap": gap_of(float(np.mean(sq_b[m]))) if n else None, "samples": n}
-        if sq_a is not None:
-            regimes[name]["gap_after"] = gap_of(float(np.mean(sq_a[m]))) if n else None
-    units = {"theta": "N m (I_G theta'')", "X": "N (m X'')", "Y": "N (m Y'')"}
-    channels = {}
-    for i, c in enumerate(CHANNELS):
-        channels[c] = {"gap": gap_of(float(np.mean(nominal.residual[scored, i] ** 2))),
-                       "noise_std": float(d.sigma[i]), "unit": units[c]}
-        if chosen is not None:
-            channels[c]["gap_after"] = gap_of(float(np.mean(chosen.residual[scored, i] ** 2)))
-    order = np.argsort(-nominal.block_mse)[:3]
-    segments = []
-    for b in order:
-        idx = np.flatnonzero(d.block == b)
-        segments.append({"t_start": float(d.t[idx[0]]), "t_end": float(d.t[idx[-1]]),
-                         "gap": gap_of(float(nominal.block_mse[b])), "held_out": bool(d.block_test[b])})
-    return {"segments": segments, "regimes": regimes, "channels": channels, "labels": labels}
 
 
 # --------------------------------------------------------------------------------------------- diagnosis
@@ -399,9 +372,10 @@ def diagnose_payload(log: PayloadLog, S_known=pl.PAPER_S, p: pl.PayloadParams = 
     joint_wins = joint is not None and significant(joint) and explains(joint) and bool(sig) and \
         joint.penalised < sig[0].penalised
     verdict, chosen, fits = decide_verdict(sig, fits, explains, joint_wins, nominal.gap > cfg.gap_none)
-    loc = _where(d, nominal, chosen)
+    loc = where_gap(d, nominal, chosen, getattr(log, "t_offset", 0.0))
     n_scored = int(np.count_nonzero(d.block >= 0))
     where = {
+        "time_base": loc["time_base"],
         "segments": loc["segments"],
         "regimes": loc["regimes"],
         "channels": loc["channels"],

@@ -1,4 +1,4 @@
-"""The plumbing every blind measurement command shares (tests.independent_sim, tests.real_payload,
+"""The plumbing every blind measurement command shares (validation.independent_sim, validation.real_payload,
 tests.outlier_check): its common options and its process pool."""
 
 from __future__ import annotations

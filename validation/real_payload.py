@@ -2,13 +2,13 @@
 
 The cases are those of ``fricenv gap validate --plant payload`` (:mod:`fricenv.gap.payload.validate`: each library
 effect, none, and viscous damping outside the library), simulated at 1 ms and then exported through
-:func:`tests.real_artifacts.real_like_payload`: the force-moment sensor low-passed and sampled at the logger rate, a
+:func:`validation.real_artifacts.real_like_payload`: the force-moment sensor low-passed and sampled at the logger rate, a
 30 Hz camera whose pose is held between frames, tracking glitches of 5 mm, jittered epoch-millisecond stamps with the
 odd dropped row, the pose in degrees and millimetres. Each export is read through its column map and diagnosed blind.
 
 Measurement command::
 
-    python -m tests.real_payload --n 12 --seed 41 [--jobs 2] [--json P]
+    python -m validation.real_payload --n 12 --seed 41 [--jobs 2] [--json P]
 """
 
 from __future__ import annotations
@@ -19,8 +19,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from tests.measure_cli import measurement_parser, pool_map
-from tests.real_artifacts import PayloadArtifacts, real_like_payload, write_export
+from validation.measure_cli import measurement_parser, pool_map
+from validation.real_artifacts import PayloadArtifacts, real_like_payload, write_export
 
 __all__ = ["LOGGER_RATES", "SIM_DT", "measure_payload", "real_payload_row"]
 
@@ -59,19 +59,19 @@ def measure_payload(n: int, seed: int, jobs: int = 1) -> dict:
     rates = np.random.default_rng([seed, 15]).uniform(*LOGGER_RATES, n)
     rows = pool_map(_task, list(zip(cases, (float(r) for r in rates))), jobs)
     s = summarize_payload(rows)
-    s.update(seed=seed, source="tests.real_payload")
+    s.update(seed=seed, source="validation.real_payload")
     return s
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Command line: ``python -m tests.real_payload --n 12 --seed 41 [--jobs 2] [--json P]``."""
+    """Command line: ``python -m validation.real_payload --n 12 --seed 41 [--jobs 2] [--json P]``."""
     ap = measurement_parser("Measure the payload gap diagnosis on real-like rig exports.", n=12, seed=41)
     args = ap.parse_args(argv)
     if args.n < 1 or args.jobs < 1:
         ap.error("--n and --jobs must be >= 1")
     from fricenv.gap.payload.validate import format_payload_summary
     from fricenv.utils import write_json
-    from tests import real_payload as mod  # noqa: PLW0406 -- by its import name, so that worker processes can unpickle
+    from validation import real_payload as mod  # noqa: PLW0406 -- by its import name, so that worker processes can unpickle
 
     s = mod.measure_payload(args.n, args.seed, args.jobs)
     for r in s["logs"]:

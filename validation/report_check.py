@@ -7,7 +7,7 @@ mostly not. :func:`size_ratio` is the true size over the reported one, :func:`po
 either side of 1 and the verdicts that are right or ``none`` on an effect the report sized out of reach.
 
 The report also says which channels looked filtered and how many outliers it set aside (``where["sensors"]``). A
-real-like log (:mod:`tests.real_artifacts`) low-passes every ``v`` and ``a_x`` it writes and puts outliers in the wheel
+real-like log (:mod:`validation.real_artifacts`) low-passes every ``v`` and ``a_x`` it writes and puts outliers in the wheel
 speed; a clean one does neither. :func:`sensor_flags` keeps a row's flags and :func:`sensor_summary` counts, per kind
 of log, how often a filtered channel was flagged and how often a clean one was.
 
@@ -88,7 +88,7 @@ def sensor_flags(dg) -> dict:
 def sensor_summary(rows: list[dict]) -> dict:
     """Over the rows with ``sensors``: per kind of log (``real``: written with a logger's artifacts, ``clean``) and
     channel, the logs that carry it and those where it was flagged filtered; and the outliers set aside in the wheel
-    speed (a real-like log has :class:`tests.real_artifacts.QuarterCarArtifacts` ``outliers`` of them)."""
+    speed (a real-like log has :class:`validation.real_artifacts.QuarterCarArtifacts` ``outliers`` of them)."""
     out = {}
     for kind in ("real", "clean"):
         group = [r for r in rows if "sensors" in r and bool(r.get("truth", {}).get("real")) == (kind == "real")]
@@ -200,7 +200,7 @@ def truth_shown(sim: dict, dg, cfg) -> bool:
     (:func:`fricenv.gap.quarter_car.stats.paired_z`). If the truth itself does not pass, the data cannot show the effect, and
     `none` is all that a tool can say. A clean log only: its rows are the simulator's samples.
 
-    :param sim: :func:`tests.independent_sim.simulate_case` of the log's case.
+    :param sim: :func:`validation.independent_sim.simulate_case` of the log's case.
     :param dg: the log's diagnosis (its prepared data and nominal model).
     :param cfg: the diagnosis settings (``sig_z``).
     """

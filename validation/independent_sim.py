@@ -17,13 +17,13 @@ DESIGN.md's equations only:
   noisy measured wheel speed, and a sinusoidally modulated torque;
 - a CSV writer following DESIGN.md's log contract directly (not through :mod:`fricenv.logs`).
 
-The physics (constants, model, RK4, drivers) lives in :mod:`tests.independent_model`; every name is re-exported here.
+The physics (constants, model, RK4, drivers) lives in :mod:`validation.independent_model`; every name is re-exported here.
 
 Measurement command (imports the diagnosis only there)::
 
-    python -m tests.independent_sim --n 45 --seed 7 --jobs 2 [--json P] [--real] [--combos] [--omega-only]
+    python -m validation.independent_sim --n 45 --seed 7 --jobs 2 [--json P] [--real] [--combos] [--omega-only]
 
-``--real`` writes each log through :mod:`tests.real_artifacts` (a real-like export with its column map, converted by
+``--real`` writes each log through :mod:`validation.real_artifacts` (a real-like export with its column map, converted by
 ``fricenv gap convert``); ``--combos`` puts several effects in each log.
 """
 
@@ -40,8 +40,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tests import report_check
-from tests.independent_model import (  # the physics; re-exported: tests and worker processes use these names
+from validation import report_check
+from validation.independent_model import (  # the physics; re-exported: tests and worker processes use these names
     AX_NOISE_RANGE,
     CATEGORIES,
     COLUMN_PROBS,
@@ -81,8 +81,8 @@ from tests.independent_model import (  # the physics; re-exported: tests and wor
     make_model,
     stopping_distance,
 )
-from tests.measure_cli import measurement_parser, pool_map
-from tests.real_artifacts import QuarterCarArtifacts, real_like_quarter_car, write_export
+from validation.measure_cli import measurement_parser, pool_map
+from validation.real_artifacts import QuarterCarArtifacts, real_like_quarter_car, write_export
 
 __all__ = ["CATEGORIES", "DRIVERS", "EFFECT_PARAMS", "H_STEP", "LIBRARY_EFFECTS", "OUT_OF_LIBRARY_EFFECTS", "ROADS",
            "V_STOP", "Effect", "G", "IndependentCase", "Road", "Vehicle", "draw_independent_case", "initial_state",
@@ -105,7 +105,7 @@ class IndependentCase:
     v_std: float  # reference-speed noise std [m/s]
     a_x_std: float  # accelerometer noise std [m/s^2]
     seed: int  # seed of driver and noise
-    real: dict | None = None  # with --real: tests.real_artifacts.QuarterCarArtifacts settings of the export
+    real: dict | None = None  # with --real: validation.real_artifacts.QuarterCarArtifacts settings of the export
 
     def truth(self) -> dict:
         """The truth in plain types: effect name, params, road, driver."""
@@ -259,7 +259,7 @@ def write_independent_log(path: str | os.PathLike, case: IndependentCase) -> dic
 
 def real_export(case: IndependentCase):
     """Simulate ``case`` and pass it through a logger's artifacts (tests/real_artifacts.py, settings ``case.real``):
-    a :class:`tests.real_artifacts.RealExport`, whose ``truth`` says where the artifacts went."""
+    a :class:`validation.real_artifacts.RealExport`, whose ``truth`` says where the artifacts went."""
     sim = simulate_case(case)
     spec = QuarterCarArtifacts(**case.real)
     # by default the logger interpolates the simulated 100 Hz measurement, noise and all (an export resampled from
@@ -412,7 +412,7 @@ def draw_cases(n: int, seed: int, real: bool = False, combos: bool = False,
     :param real: write each log as a real-like export (settings drawn from a second generator, so the cases
         themselves are those of the plain draw).
     :param combos: every case carries one of :data:`COMBOS` (several effects at once) instead of one category.
-    :param artifacts: with ``real``, settings of :class:`tests.real_artifacts.QuarterCarArtifacts` for every export
+    :param artifacts: with ``real``, settings of :class:`validation.real_artifacts.QuarterCarArtifacts` for every export
         (:data:`ARTIFACT_OPTIONS`: the sensor's white wheel-speed noise, the IMU filter stated in the map).
     """
     rng = np.random.default_rng(seed)
@@ -457,7 +457,7 @@ def measure(n: int, seed: int, jobs: int = 1, real: bool = False, combos: bool =
     t0 = time.perf_counter()
     results = pool_map(diagnose_case, cases, jobs)
     s = summarize(results)
-    s.update(n=n, seed=seed, jobs=jobs, wall_seconds=time.perf_counter() - t0, source="tests.independent_sim",
+    s.update(n=n, seed=seed, jobs=jobs, wall_seconds=time.perf_counter() - t0, source="validation.independent_sim",
              real=real, combos=combos, columns=None if columns is None else list(columns),
              artifacts=artifacts or {})
     s["right_or_untestable"] = float(np.mean([r.get("right_or_untestable", False) for r in results]))
@@ -474,7 +474,7 @@ def measure(n: int, seed: int, jobs: int = 1, real: bool = False, combos: bool =
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Command line: ``python -m tests.independent_sim --n 45 --seed 7 --jobs 2 [--json P]``."""
+    """Command line: ``python -m validation.independent_sim --n 45 --seed 7 --jobs 2 [--json P]``."""
     ap = measurement_parser("Measure the gap diagnosis on logs of an independent simulator.", n=45, seed=7)
     ap.add_argument("--real", action="store_true",
                     help="write each log as a real-like export (tests/real_artifacts.py: 25-100 Hz, jittered epoch "
@@ -493,7 +493,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         ap.error(f"--{', --'.join(ARTIFACT_OPTIONS)} need --real")
     from fricenv.gap.quarter_car.validate import format_summary
     from fricenv.utils import write_json
-    from tests import independent_sim as mod  # noqa: PLW0406 -- by its import name, so that the worker processes can unpickle
+    from validation import independent_sim as mod  # noqa: PLW0406 -- by its import name, so that the worker processes can unpickle
 
     s = mod.measure(args.n, args.seed, args.jobs, args.real, args.combos, () if args.omega_only else None,
                     artifacts)

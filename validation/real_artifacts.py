@@ -1,6 +1,6 @@
 """Real logger artifacts applied to a clean contract log: a real-like log source for any test (issue 15, item 6).
 
-A clean log (uniform step, SI contract channels, as :mod:`tests.independent_sim` or the payload simulator writes it)
+A clean log (uniform step, SI contract channels, as :mod:`validation.independent_sim` or the payload simulator writes it)
 goes in as a dict of arrays; out comes what a vehicle's CAN logger or a rig's acquisition would have written:
 
 quarter car (:func:`real_like_quarter_car`)
@@ -13,7 +13,7 @@ payload (:func:`real_like_payload`)
     a low-pass on the force-moment sensor, a 30 Hz camera whose pose is held between frames, tracking glitches
     (a 5 mm jump in one frame), jittered stamps with dropped rows, the pose in degrees and millimetres.
 
-Like :mod:`tests.independent_sim`, this module shares no code with :mod:`fricenv` (numpy and scipy only): the
+Like :mod:`validation.independent_sim`, this module shares no code with :mod:`fricenv` (numpy and scipy only): the
 artifacts and the map are written from the contract, so a reader bug cannot cancel a writer bug. The sampling rule:
 a continuous channel is the clean signal linearly interpolated at the (jittered, exactly stamped) sample instant;
 the commanded torque is the command in force at that instant (zero-order hold).

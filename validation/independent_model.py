@@ -1,7 +1,7 @@
-"""The physics of the independent quarter-car simulator (:mod:`tests.independent_sim`): constants, the model
+"""The physics of the independent quarter-car simulator (:mod:`validation.independent_sim`): constants, the model
 integrated by RK4, and the three drivers.
 
-Written from DESIGN.md's equations only and sharing no code with :mod:`fricenv` (see :mod:`tests.independent_sim`,
+Written from DESIGN.md's equations only and sharing no code with :mod:`fricenv` (see :mod:`validation.independent_sim`,
 which re-exports every name here).
 """
 
