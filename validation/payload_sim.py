@@ -93,11 +93,12 @@ def paper_excitation() -> MultiSine:
 
 
 def random_excitation(rng: np.random.Generator) -> MultiSine:
-    """Three to five sines per element, amplitudes and frequencies in the range of eq. (13), random phases."""
+    """Three to five sines per element, amplitudes in the range of eq. (13), angular frequencies from 0.8 to 40 rad/s
+    (eq. (13) spans 1-10 rad/s; a rig's excitation may be faster), random phases."""
     rows = []
     for scale in (1.0, 1.0, 2.0):
         k = int(rng.integers(3, 6))
-        rows.append(tuple((float(scale * rng.uniform(0.1, 1.0)), float(rng.uniform(0.8, 9.0)),
+        rows.append(tuple((float(scale * rng.uniform(0.1, 1.0)), float(rng.uniform(0.8, 40.0)),
                            float(rng.uniform(0.0, 2.0 * math.pi))) for _ in range(k)))
     return MultiSine(tuple(rows))
 
