@@ -27,9 +27,10 @@ def equivalent_white(std: float, drawn_rate_hz: float, log_rate_hz: float) -> fl
 def true_prediction(d, truth: dict) -> np.ndarray:
     """The model's filtered generalised force at the true effect parameters, on the prepared log ``d``.
 
-    :param truth: ``S`` (3x3, default the known S), ``rate`` [1/s], ``offset`` (M0, fx0, fy0), ``shift`` [s] (the
-        pose behind the wrench: a vision delay minus the F/T's own lag), ``damping_force`` ((n, 3) viscous
-        generalised force on the log's rows, out of library) -- each optional.
+    :param truth: ``S`` (3x3, default the known S), ``rate`` [1/s] (over the time since the first sample),
+        ``offset`` (M0, fx0, fy0), ``shift`` [s] (the pose behind the wrench: a vision delay minus the F/T's own
+        lag), ``damping_force`` ((n, 3) viscous generalised force on the log's rows, out of library) -- each
+        optional.
     """
     from fricenv.gap.payload.data import generalised_force_map, lowpass
 
@@ -39,7 +40,7 @@ def true_prediction(d, truth: dict) -> np.ndarray:
         w = np.column_stack([np.interp(d.t - shift, d.t, d.w_hat[:, k]) for k in range(3)])
     w = w - np.asarray(truth.get("offset", (0.0, 0.0, 0.0)), dtype=float)
     S = np.asarray(truth.get("S", d.S_known), dtype=float)
-    scale = 1.0 + float(truth.get("rate", 0.0)) * d.t
+    scale = 1.0 + float(truth.get("rate", 0.0)) * (d.t - d.t[0])
     force = np.einsum("nij,jk,nk->ni", generalised_force_map(d.theta_f, d.p), S, w) * scale[:, None]
     if truth.get("damping_force") is not None:
         force = force - np.asarray(truth["damping_force"], dtype=float)

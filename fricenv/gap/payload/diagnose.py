@@ -20,8 +20,8 @@ The payload's dynamics are linear in the wrench, so the diagnosis compares accel
 4. **Candidates.** ``wrench_offset`` (3 constants) and ``calibration_error`` (the full S, 9 entries) are linear least
    squares; ``calibration_drift`` is a 1-D bounded search over the rate; ``vision_delay`` a grid plus bounded search
    over the delay (the wrench is shifted by linear interpolation, the rotation uses the measured, i.e. delayed,
-   orientation). Every fit uses the training blocks only. The drift's ``t`` is the log's own time column (DESIGN.md:
-   ``S(t) = S (1 + rate t)``). Errors of m, I_G or rho map the generalised force by a constant matrix that commutes
+   orientation). Every fit uses the training blocks only. The drift's ``t`` is the time since the log's first sample
+   (DESIGN.md: ``S(t) = S (1 + rate t)``; the report's time base, so an epoch-stamped log drifts as one from 0). Errors of m, I_G or rho map the generalised force by a constant matrix that commutes
    with the rotation, so they show up (exactly) as a ``calibration_error``.
 5. **Scoring and verdict** as for the quarter car (:mod:`fricenv.gap.quarter_car.diagnose`): ``gap = sqrt(max(MSE - 1, 0))`` of
    the held-out normalised residual; a candidate is significant when its held-out improvement, without its largest
@@ -59,6 +59,7 @@ from fricenv.gap.payload.data import (
     lowpass,
     prepare_payload,
 )
+from fricenv.gap.payload.guard import ACF_SPAN, guarded_z, residual_rho2
 from fricenv.gap.payload.localise import where_gap
 from fricenv.logs import PayloadLog, read_log
 from fricenv.plants import payload as pl
@@ -160,7 +161,8 @@ def _regressors(d: PayloadData, delay: float, effects: Sequence[str]) -> _Regres
     if "wrench_offset" in effects:
         blocks.append(("g", G.reshape(n, 9)))
     if drift:
-        blocks += [(name + "_t", x * d.t[:, None]) for name, x in blocks]
+        since = (d.t - d.t[0])[:, None]  # the report's time base: from the first sample
+        blocks += [(name + "_t", x * since) for name, x in blocks]
     f = lowpass(d.sos, np.concatenate([x for _, x in blocks], axis=1))
     out = dict.fromkeys(("phi", "phi_t", "base", "base_t", "g", "g_t"))
     shapes = {"phi": (n, 3, 3, 3), "base": (n, 3), "g": (n, 3, 3)}
@@ -238,14 +240,7 @@ def _fit(effects: Sequence[str], d: PayloadData, cfg: PayloadDiagnoseConfig,
     # by a low-passed or averaging force-moment sensor (< 0), a nuisance of every model (_shift_range)
     delay, lo, hi = _shift_range(d, cfg, "vision_delay" in effects)
     if hi > lo:
-        step = max(DELAY_GRID_STEP, d.dt)
-        grid = np.linspace(lo, hi, max(int(np.ceil((hi - lo) / step - 1e-9)) + 1, 2))
-        costs = [best_rate(regs(g))[1] for g in grid]
-        i = int(np.argmin(costs))
-        a, b = grid[max(i - 1, 0)], grid[min(i + 1, len(grid) - 1)]
-        res = minimize_scalar(lambda x: best_rate(regs(x))[1], bounds=(a, b), method="bounded",
-                              options={"xatol": SEARCH_XTOL})
-        delay = float(res.x) if res.fun <= costs[i] else float(grid[i])
+        delay = _best_shift(lambda x: best_rate(regs(x))[1], lo, hi, max(DELAY_GRID_STEP, d.dt), d.dt)
     R = regs(delay)
     rate, _ = best_rate(R)
     S, o, pred = _solve(effects, R, rate, d, rows)
@@ -260,6 +255,26 @@ def _fit(effects: Sequence[str], d: PayloadData, cfg: PayloadDiagnoseConfig,
         elif e == "vision_delay":
             params["delay"] = delay + (d.wrench_lag or 0.0)  # the camera's own delay: the net shift plus the lag
     return params, pred, delay
+
+
+def _best_shift(cost, lo: float, hi: float, step: float, dt: float) -> float:
+    """The shift in ``[lo, hi]`` of least ``cost``: a grid of ``step`` and a bounded search around its best point;
+    over a range of at most one sample (the nuisance of an unfiltered sensor), the vertex of the parabola through
+    both ends and the middle (the cost is quadratic in so small a shift), whichever of the four costs least."""
+    if hi - lo <= dt + 1e-12:
+        xs = [lo, 0.5 * (lo + hi), hi]
+        cs = [cost(x) for x in xs]
+        curv = cs[0] - 2.0 * cs[1] + cs[2]
+        if curv > 0:
+            xs.append(float(np.clip(xs[1] + 0.5 * (hi - lo) * (cs[0] - cs[2]) / (2.0 * curv), lo, hi)))
+            cs.append(cost(xs[-1]))
+        return float(xs[int(np.argmin(cs))])
+    grid = np.linspace(lo, hi, max(int(np.ceil((hi - lo) / step - 1e-9)) + 1, 2))
+    costs = [cost(g) for g in grid]
+    i = int(np.argmin(costs))
+    a, b = grid[max(i - 1, 0)], grid[min(i + 1, len(grid) - 1)]
+    res = minimize_scalar(cost, bounds=(a, b), method="bounded", options={"xatol": SEARCH_XTOL})
+    return float(res.x) if res.fun <= costs[i] else float(grid[i])
 
 
 def _shift_range(d: PayloadData, cfg: PayloadDiagnoseConfig, vision: bool) -> tuple[float, float, float]:
@@ -356,8 +371,17 @@ def diagnose_payload(log: PayloadLog, S_known=pl.PAPER_S, p: pl.PayloadParams = 
         f.z = improvement_z(nominal, f, d)
     fits.sort(key=lambda f: f.penalised)
 
+    # the false-discovery guard: where the nominal model fits within the noise, its residual is the noise, and a
+    # candidate's evidence must also hold with the correlation that residual shows (a filtered, held or quantised
+    # channel: fewer independent samples than the propagation of white raw noise counts)
+    within_noise = nominal.gap <= cfg.gap_none
+    measured_rho2 = residual_rho2(nominal.residual, d.block >= 0, round(ACF_SPAN / (cfg.cutoff_hz * d.dt)))
+
+    def evidence(f: PayloadCandidate) -> float:
+        return guarded_z(f.z, d.rho2, measured_rho2) if within_noise else f.z
+
     def significant(f: PayloadCandidate) -> bool:
-        return f.z > cfg.sig_z and f.penalised < nominal.penalised
+        return evidence(f) > cfg.sig_z and f.penalised < nominal.penalised
 
     def explains(f: PayloadCandidate) -> bool:
         return f.gap <= cfg.ratio_explained * nominal.gap or f.gap <= cfg.gap_none
@@ -384,8 +408,12 @@ def diagnose_payload(log: PayloadLog, S_known=pl.PAPER_S, p: pl.PayloadParams = 
                  "scored_samples": n_scored, "effective_samples": n_scored * len(CHANNELS) / d.rho2,
                  "filter": f"zero-phase Butterworth order {cfg.filter_order}, {cfg.cutoff_hz:g} Hz",
                  "raw_noise_std": d.raw_noise},
-        "tests": {f.effect: {"z": f.z, "penalised_test_mse": f.penalised, "n_params": f.n_params,
-                             "significant": bool(significant(f))} for f in fits},
+        "tests": {f.effect: {"z": f.z, "z_measured_noise": evidence(f), "penalised_test_mse": f.penalised,
+                             "n_params": f.n_params, "significant": bool(significant(f))} for f in fits},
+        # candidates significant by the propagated noise alone on a log the nominal model fits within the noise
+        "red_flags": [f.effect for f in fits if within_noise and f.z > cfg.sig_z and not significant(f)
+                      and f.penalised < nominal.penalised],
+        "residual_rho2": {"propagated": d.rho2, "measured": measured_rho2},
     }
     where["sensors"] = d.sensors
     if d.wrench_lag_max > 0:  # a low-passed force-moment sensor: its lag, from its noise roll-off if it shows
