@@ -1,0 +1,90 @@
+"""The three numbers of a quarter-car suite (docs/validation.md), from the JSON that ``fricenv gap validate --json``
+or ``python -m validation.independent_sim --json`` writes:
+
+- the share of logs whose data show the answer: a nominal log always; a one-effect log when the true model passes
+  the diagnosis' significance test (``detectable``, :func:`fricenv.gap.quarter_car.validate.true_model_oracle`); a
+  log with several effects when every effect is shown (``shown``, :func:`validation.report_check.shown_effects`); an
+  out-of-library log when its noise-free truth beats the nominal model (``truth_shown``), and where no such oracle
+  ran (a rig export, ``gap validate``) it counts as shown;
+- the right verdicts on those logs (several effects: every effect named);
+- the share of all logs with at least one named effect that is not in the log.
+
+These quarter-car oracles judge with the noise level the tool estimated from the log; the payload's
+(:mod:`validation.payload_oracle`) with the noise level the source drew.
+
+Command::
+
+    python -m validation.scores RESULT.json [RESULT.json ...]
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from collections.abc import Sequence
+
+__all__ = ["quarter_car_numbers"]
+
+NONE, OUT = "none", "out_of_library"
+
+
+def _truth_effects(row: dict) -> list[str]:
+    if row.get("truth_effects"):
+        return list(row["truth_effects"])
+    return [] if row["category"] in (NONE, OUT) else [row["category"]]
+
+
+def _named(row: dict, library: set[str]) -> list[str]:
+    named = row.get("named") or [row["verdict"]]
+    return [e for e in named if e in library]
+
+
+def _shown(row: dict) -> bool:
+    if row["category"] == NONE:
+        return True
+    if row.get("truth_effects"):
+        return set(row.get("shown", ())) == set(row["truth_effects"])
+    if row["category"] == OUT:
+        return bool(row.get("truth_shown", True))
+    return bool(row.get("detectable", True))
+
+
+def _right(row: dict) -> bool:
+    if row.get("truth_effects") and len(row["truth_effects"]) > 1:
+        return bool(row.get("all_named", False))
+    return bool(row["right"])
+
+
+def quarter_car_numbers(rows: Sequence[dict]) -> dict:
+    """The three numbers over result rows (see the module docstring)."""
+    from fricenv.effects.quarter_car import EFFECTS
+
+    library = set(EFFECTS)
+    rows = list(rows)
+    shown = [r for r in rows if _shown(r)]
+    wrong = [r for r in rows if any(e not in _truth_effects(r) for e in _named(r, library))]
+    return {"n": len(rows), "shown": len(shown), "right_on_shown": sum(_right(r) for r in shown),
+            "wrong_named": len(wrong),
+            "shown_share": len(shown) / len(rows) if rows else float("nan"),
+            "right_on_shown_share": sum(_right(r) for r in shown) / len(shown) if shown else float("nan"),
+            "wrong_named_share": len(wrong) / len(rows) if rows else float("nan")}
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Print the three numbers of each result file."""
+    paths = list(sys.argv[1:] if argv is None else argv)
+    if not paths:
+        print("usage: python -m validation.scores RESULT.json [RESULT.json ...]", file=sys.stderr)
+        return 2
+    for path in paths:
+        with open(path) as fh:
+            s = json.load(fh)
+        q = quarter_car_numbers(s["logs"])
+        print(f"{path}: data show the answer on {q['shown']}/{q['n']} ({q['shown_share']:.0%}); right on those "
+              f"{q['right_on_shown']}/{q['shown']} ({q['right_on_shown_share']:.0%}); wrong named effects "
+              f"{q['wrong_named']}/{q['n']} ({q['wrong_named_share']:.0%})")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
