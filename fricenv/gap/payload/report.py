@@ -36,8 +36,8 @@ def payload_markdown(dg: PayloadDiagnosis, report: dict, images: Sequence[str] =
                                                                    for k, v in data["raw_noise_std"].items()),
              f"- diagnosis time: {dg.seconds:.1f} s", "",
              "## Where the gap lies", "",
-             f"Worst time blocks (nominal model; times from the log's first sample, at "
-             f"{w['time_base']['offset_s']:.3f} s in its own clock):", ""]
+             (f"Worst time blocks (nominal model; times from the log's first sample, at "
+              f"{w['time_base']['offset_s']:.3f} s in its own clock):"), ""]
     for s in w["segments"]:
         lines.append(f"- {s['t_start']:.2f}-{s['t_end']:.2f} s: gap {s['gap']:.2f}"
                      + (" (held out)" if s["held_out"] else ""))
