@@ -4,8 +4,8 @@ import dataclasses
 
 import pytest
 
-from validation import independent_sim as sim
 from tests.outlier_check import check_case, measure
+from validation import independent_sim as sim
 
 
 def test_a_28_hz_export_has_its_three_wheel_speed_outliers_set_aside():
