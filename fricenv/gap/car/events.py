@@ -1,0 +1,141 @@
+"""The braking events of a car's session: runs of samples with the brake applied, no drive, fast enough, lasting
+long enough, on a path straight enough; and why every other braking stretch was skipped.
+
+A brake is applied when ``T_b`` is above its resting level (the 1st percentile over the moving samples: a pedal at
+rest is its lowest reading) by more than ``brake_share`` of its largest excursion; the same rule with ``throttle`` finds a
+drive. The path is straight enough when the lateral acceleration ``v |yaw rate|`` (else ``v^2 |steer| / L``)
+stays below ``max_lateral`` [m/s^2] over the event.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from fricenv.gap.car.session import Session
+
+REST_PERCENTILE = 1.0  # a pedal's or a line's resting level: this percentile of its moving samples [%]
+
+__all__ = ["EventRules", "Event", "find_events", "runs", "applied", "lateral_acceleration", "session_summary"]
+
+
+@dataclass(frozen=True)
+class EventRules:
+    """What makes a braking event (thresholds in SI units)."""
+
+    min_speed: float = 5.0  # fast enough [m/s]
+    min_duration: float = 1.0  # long enough [s]
+    brake_share: float = 1e-3  # applied: above rest by this share of the largest excursion [-]
+    throttle_share: float = 1e-3  # a drive: above rest by this share of the largest excursion [-]
+    max_lateral: float = 4.0  # straight enough: lateral acceleration below this [m/s^2]
+
+
+@dataclass(frozen=True)
+class Event:
+    """One braking event: samples ``start`` to ``stop`` (exclusive) of the session."""
+
+    index: int
+    start: int
+    stop: int
+    t_start: float
+    t_end: float
+    v_start: float
+    v_end: float
+    max_lateral: float
+
+    def as_dict(self) -> dict:
+        return {"t_start": self.t_start, "t_end": self.t_end, "v_start": self.v_start, "v_end": self.v_end,
+                "max_lateral_accel": self.max_lateral}
+
+
+def runs(mask: np.ndarray) -> list[tuple[int, int]]:
+    """The (start, stop) index pairs of the True runs of ``mask``."""
+    m = np.diff(np.r_[0, np.asarray(mask, dtype=np.int8), 0])
+    return list(zip(np.flatnonzero(m == 1).tolist(), np.flatnonzero(m == -1).tolist()))
+
+
+def applied(x: np.ndarray, moving: np.ndarray, share: float) -> np.ndarray:
+    """Samples where ``x`` is above its resting level (the ``REST_PERCENTILE`` over the ``moving`` samples, else
+    over all) by more than ``share`` of its largest excursion above that level."""
+    x = np.nan_to_num(np.asarray(x, dtype=float), nan=-np.inf)
+    finite = np.isfinite(x)
+    base = x[moving & finite] if np.any(moving & finite) else x[finite]
+    rest = float(np.percentile(base, REST_PERCENTILE)) if base.size else 0.0
+    top = float(np.max(x[finite])) - rest if np.any(finite) else 0.0
+    return x > rest + max(share * top, 0.0) if top > 0 else np.zeros(len(x), dtype=bool)
+
+
+def lateral_acceleration(s: Session, wheelbase: float | None) -> np.ndarray:
+    """The lateral acceleration [m/s^2] from the yaw rate, else the steering angle, else zeros."""
+    if s.yaw_rate is not None:
+        return np.abs(s.v * np.nan_to_num(s.yaw_rate))
+    if s.steer is not None and wheelbase:
+        return s.v ** 2 * np.abs(np.nan_to_num(s.steer)) / wheelbase
+    return np.zeros(len(s))
+
+
+def _states(s: Session, rules: EventRules) -> dict:
+    moving = np.nan_to_num(s.v) > rules.min_speed
+    brake = applied(s.T_b, moving, rules.brake_share)
+    drive = applied(s.throttle, moving, rules.throttle_share) if s.throttle is not None else np.zeros(len(s), bool)
+    return {"moving": moving, "brake": brake, "drive": drive}
+
+
+def find_events(s: Session, rules: EventRules = EventRules(), wheelbase: float | None = None):
+    """The braking events of a session, and the braking stretches skipped with why.
+
+    :return: (events, skipped): ``skipped`` is a list of ``{"t_start", "t_end", "reason"}`` (times relative to the
+        first sample) covering every sample with the brake applied that is in no event.
+    """
+    st = _states(s, rules)
+    lat = lateral_acceleration(s, wheelbase)
+    t = s.t - s.t[0]
+    events, skipped = [], []
+    in_event = np.zeros(len(s), dtype=bool)
+    for a, b in runs(st["brake"] & ~st["drive"] & st["moving"]):
+        duration = (b - a) * s.dt
+        top = float(np.max(lat[a:b]))
+        if duration < rules.min_duration - 1e-9:
+            skipped.append(_skip(t, a, b, f"shorter than {rules.min_duration:g} s ({duration:.2f} s)"))
+        elif top > rules.max_lateral:
+            skipped.append(_skip(t, a, b, f"cornering (lateral acceleration {top:.2f} m/s^2 > "
+                                          f"{rules.max_lateral:g})"))
+        else:
+            events.append(Event(len(events), a, b, float(t[a]), float(t[b - 1]), float(s.v[a]), float(s.v[b - 1]),
+                                top))
+        in_event[a:b] = True
+    for a, b in runs(st["brake"] & ~in_event):
+        why = np.where(st["drive"][a:b], 0, 1)  # what is left: a drive, or too slow
+        for k, (x, y) in _split(why):
+            reason = ("throttle applied", f"slower than {rules.min_speed:g} m/s")[k]
+            skipped.append(_skip(t, a + x, a + y, reason))
+    skipped.sort(key=lambda r: r["t_start"])
+    return events, skipped
+
+
+def _split(codes: np.ndarray):
+    """(code, (start, stop)) of the constant runs of ``codes``."""
+    edges = np.flatnonzero(np.diff(codes)) + 1
+    bounds = np.r_[0, edges, len(codes)]
+    return [(int(codes[x]), (int(x), int(y))) for x, y in zip(bounds[:-1], bounds[1:])]
+
+
+def _skip(t: np.ndarray, a: int, b: int, reason: str) -> dict:
+    return {"t_start": float(t[a]), "t_end": float(t[b - 1]), "reason": reason}
+
+
+def session_summary(s: Session, events: list, rules: EventRules = EventRules()) -> dict:
+    """Seconds of the session by state: standing or slow, driving, braking in an event, braking skipped, coasting."""
+    st = _states(s, rules)
+    in_event = np.zeros(len(s), dtype=bool)
+    for e in events:
+        in_event[e.start:e.stop] = True
+    slow = ~st["moving"]
+    drive = st["moving"] & st["drive"]
+    skipped = st["brake"] & ~in_event & ~slow & ~drive
+    coast = st["moving"] & ~st["brake"] & ~st["drive"]
+    return {"duration_s": float(len(s) * s.dt), "events": len(events),
+            "seconds": {name: float(np.count_nonzero(m) * s.dt) for name, m in
+                        (("slow", slow & ~in_event), ("driving", drive), ("braking_events", in_event),
+                         ("braking_skipped", skipped), ("coasting", coast))}}

@@ -1,0 +1,186 @@
+"""The car's parameters fitted across its events: what belongs to the car (the effects' parameters of
+:data:`fricenv.gap.car.model.EFFECT_PARAMS`) is shared by all events, each event has its own slip stiffness (its
+road state) and each window its own start speed. Held out by event (each event predicted by a fit that did not see
+it; the held-out event's slip stiffness is fitted on its own samples, like its start speeds), or, with fewer than
+``CarConfig.min_events`` events, by blocks within the events.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import least_squares, minimize_scalar
+
+from fricenv.gap.car.config import CarConfig
+from fricenv.gap.car.model import (
+    EFFECT_PARAMS,
+    PARAM_BOUNDS,
+    SLIP_STIFFNESS_BOUNDS,
+    SLIP_STIFFNESS_START,
+    EventData,
+    window_mse,
+    window_residuals,
+)
+from fricenv.gap.car.session import CarParams
+
+__all__ = ["Fit", "HeldOut", "Problem", "cross_fit", "fit", "free_names", "scheme"]
+
+
+@dataclass
+class Problem:
+    """The events and what every fit shares: the car, the mapped corner, the noise levels, the nominal parameters,
+    the free-rolling radii and the coast-down drag (``radius_error``'s radii and ``drag``'s coefficients when
+    measured: held, not fitted on the events)."""
+
+    events: list  # EventData
+    car: CarParams
+    mapped: str
+    sigma: dict
+    base: dict  # nominal parameters
+    rolling: dict | None  # corner -> free-rolling radius
+    cfg: CarConfig
+    drag: dict | None = None  # c0, c2 measured in the session's coasting
+
+    def start(self, effects) -> dict:
+        """The parameters a fit of ``effects`` starts from (the radii measured in free rolling when known)."""
+        x = dict(self.base)
+        if "radius_error" in effects and self.rolling:
+            x.update({f"r_{c}": r for c, r in self.rolling.items()})
+        if "drag" in effects and self.drag:
+            x.update(self.drag)
+        return x
+
+    def corners(self) -> list[str]:
+        return list(self.events[0].wheels) if self.events else []
+
+
+@dataclass
+class Fit:
+    x: dict  # every car parameter
+    stiffness: np.ndarray  # per event (NaN: not fitted)
+
+
+@dataclass
+class HeldOut:
+    """Held-out window errors per event and the fold fits."""
+
+    mse: list  # per event (W_e,)
+    fits: list  # Fit per fold
+
+    def all(self) -> np.ndarray:
+        return np.concatenate(self.mse) if self.mse else np.zeros(0)
+
+
+def free_names(effects, pb: Problem) -> list[str]:
+    """The parameters a fit of ``effects`` frees (a radius only for a logged wheel; none measured outside the
+    events)."""
+    names = []
+    for e in effects:
+        if e == "drag" and pb.drag:
+            continue
+        for n in EFFECT_PARAMS[e]:
+            if n.startswith("r_") and (n[2:] not in pb.corners() or pb.rolling):
+                continue
+            names.append(n)
+    return names
+
+
+def _to_unit(n: str, v: float) -> float:
+    lo, hi = PARAM_BOUNDS[n]
+    return float(np.clip((v - lo) / (hi - lo), 1e-6, 1 - 1e-6))
+
+
+def _from_unit(n: str, u: float) -> float:
+    lo, hi = PARAM_BOUNDS[n]
+    return lo + (hi - lo) * float(u)
+
+
+def _residuals(pb: Problem, x: dict, stiffness, train: list) -> np.ndarray:
+    out = []
+    for e, s, w in zip(pb.events, stiffness, train):
+        if len(w):
+            r, _ = window_residuals(e, x, s, pb.car, pb.mapped, pb.sigma, w)
+            out.append(np.nan_to_num(r.ravel(), nan=0.0))
+    return np.concatenate(out) if out else np.zeros(1)
+
+
+def fit(pb: Problem, effects, train: list, start: dict | None = None) -> Fit:
+    """Least squares of the shared parameters of ``effects`` and every event's slip stiffness on the windows
+    ``train`` (per event, window indices)."""
+    names = free_names(effects, pb)
+    x0 = dict(start or pb.start(effects))
+    used = [i for i, w in enumerate(train) if len(w)]
+    ls0 = np.log(SLIP_STIFFNESS_START)
+
+    def unpack(z):
+        x = dict(x0)
+        x.update({n: _from_unit(n, u) for n, u in zip(names, z[:len(names)])})
+        s = np.full(len(pb.events), np.nan)
+        s[used] = np.exp(z[len(names):])
+        return x, s
+
+    z0 = np.r_[[_to_unit(n, x0[n]) for n in names], np.full(len(used), ls0)]
+    lo = np.r_[np.zeros(len(names)), np.full(len(used), np.log(SLIP_STIFFNESS_BOUNDS[0]))]
+    hi = np.r_[np.ones(len(names)), np.full(len(used), np.log(SLIP_STIFFNESS_BOUNDS[1]))]
+    sol = least_squares(lambda z: _residuals(pb, *unpack(z), train), z0, bounds=(lo, hi), loss=pb.cfg.fit_loss,
+                        f_scale=pb.cfg.loss_scale, max_nfev=pb.cfg.max_nfev, x_scale=1.0, method="trf")
+    x, s = unpack(sol.x)
+    return Fit(x=x, stiffness=s)
+
+
+def fit_stiffness(pb: Problem, x: dict, i: int, widx: np.ndarray) -> float:
+    """An event's slip stiffness on its windows ``widx`` with the car's parameters held."""
+    e = pb.events[i]
+
+    def cost(ls):
+        r, _ = window_residuals(e, x, np.exp(ls), pb.car, pb.mapped, pb.sigma, widx)
+        z = (np.nan_to_num(r) / pb.cfg.loss_scale) ** 2
+        return float(np.sum(2.0 * (np.sqrt(1.0 + z) - 1.0)))
+
+    res = minimize_scalar(cost, bounds=np.log(SLIP_STIFFNESS_BOUNDS), method="bounded", options={"xatol": 1e-3})
+    return float(np.exp(res.x))
+
+
+def scheme(pb: Problem) -> str:
+    """``"event"`` with at least ``min_events`` events, else ``"blocks"``."""
+    return "event" if len(pb.events) >= pb.cfg.min_events else "blocks"
+
+
+def _score(pb: Problem, x: dict, s: float, i: int, widx: np.ndarray) -> np.ndarray:
+    r, counts = window_residuals(pb.events[i], x, s, pb.car, pb.mapped, pb.sigma, widx)
+    return window_mse(r, counts)
+
+
+def cross_fit(pb: Problem, effects, warm: HeldOut | None = None) -> HeldOut:
+    """Every window predicted by a fit that did not see it (:func:`scheme`)."""
+    E = len(pb.events)
+    mse = [np.full(len(e.starts), np.nan) for e in pb.events]
+    fits = []
+    if scheme(pb) == "event":
+        for k in range(E):
+            train = [np.arange(len(e.starts)) if i != k else np.zeros(0, int) for i, e in enumerate(pb.events)]
+            f = fit(pb, effects, train, _warm(pb, effects, warm, k))
+            w = np.arange(len(pb.events[k].starts))
+            mse[k] = _score(pb, f.x, fit_stiffness(pb, f.x, k, w), k, w)
+            fits.append(f)
+    else:
+        for j in range(pb.cfg.blocks):
+            train = [np.flatnonzero(e.block != j) for e in pb.events]
+            f = fit(pb, effects, train, _warm(pb, effects, warm, j))
+            for i, e in enumerate(pb.events):
+                w = np.flatnonzero(e.block == j)
+                if len(w):
+                    s = f.stiffness[i] if np.isfinite(f.stiffness[i]) else fit_stiffness(pb, f.x, i, w)
+                    mse[i][w] = _score(pb, f.x, s, i, w)
+            fits.append(f)
+    return HeldOut(mse=mse, fits=fits)
+
+
+def _warm(pb: Problem, effects, warm: HeldOut | None, k: int) -> dict:
+    """A fold's start: the previous set's fit of the same fold (its parameters stay where they were), and the new
+    effect's nominal start."""
+    x = pb.start(effects)
+    if warm is not None and k < len(warm.fits):
+        x.update({n: v for n, v in warm.fits[k].x.items() if n in free_names(effects, pb)})
+    return x
