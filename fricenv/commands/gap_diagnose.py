@@ -9,7 +9,9 @@ A fleet: fricenv gap diagnose logs/ --out fleet_dir (a folder: its *.csv logs; o
 code is then 1.
 
 Writes DIR/report.json (DESIGN.md schema), DIR/report.md and PNG plots (atomically: temporary name, then rename)
-and prints a short summary. --params FILE.json overrides the nominal vehicle parameters (m, J, r, Fz, g); for
+and prints a short summary. --params FILE.json overrides the nominal vehicle parameters (m, J, r, Fz, g) and may
+hold a car section ({"car": {"mass": 790.0, "lf": 1.248, "lr": 1.7328}}); a car's session (a log with a throttle,
+yaw rate or several wheels) is diagnosed across its braking events (fricenv.gap.car); for
 --plant payload (log columns t, M, f_x, f_y, theta, X, Y) it gives the known calibration "S" (3x3 row-major) and
 optionally m, I_G, rho_x, rho_y.
 """
@@ -102,10 +104,32 @@ def run(args: argparse.Namespace) -> int:
     from fricenv.gap.diagnose import DiagnoseConfig, diagnose_file
     from fricenv.gap.report import summary_line, write_report
 
+    path = _mapped_log(args)
+    if (code := _run_session(args, path)) is not None:
+        return code
     names = _candidates(args, DiagnoseConfig().candidates)
     cfg = DiagnoseConfig(jobs=args.jobs) if names is None else DiagnoseConfig(jobs=args.jobs, candidates=names)
-    dg = diagnose_file(_mapped_log(args), args.plant, args.params, cfg)  # reports its phases through fricenv.progress
+    dg = diagnose_file(path, args.plant, args.params, cfg)  # reports its phases through fricenv.progress
     return _report(args, dg, write_report(dg, args.out, args.plant, plots=not args.no_plots), summary_line(dg))
+
+
+def _run_session(args: argparse.Namespace, path: str) -> int | None:
+    """A car's session (fricenv.gap.car): its braking events diagnosed together; None when the log is not one."""
+    from fricenv.gap.car.config import CarConfig
+    from fricenv.gap.car.entry import car_session
+    from fricenv.gap.car.report import summary_line, write_session_report
+
+    found = car_session(path, args.params)
+    if found is None:
+        return None
+    from fricenv.gap.car.diagnose import diagnose_session
+
+    names = _candidates(args, CarConfig().candidates)
+    cfg = CarConfig() if names is None else CarConfig(candidates=names)
+    s, car, p = found
+    dg = diagnose_session(s, car, p, cfg)
+    return _report(args, dg, write_session_report(dg, args.out, args.plant, plots=not args.no_plots),
+                   summary_line(dg))
 
 
 def _report(args: argparse.Namespace, dg, report: dict, summary: str) -> int:

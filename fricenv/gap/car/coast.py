@@ -34,7 +34,10 @@ class CoastDown:
 
 
 def coast_down(s: Session, mass: float, wheelbase: float, rules: EventRules = EventRules()) -> CoastDown | None:
-    """The coast-down drag, or None with fewer than ``MIN_SAMPLES`` coasting samples."""
+    """The coast-down drag, or None with fewer than ``MIN_SAMPLES`` coasting samples.
+
+    :param mass: the mass the deceleration moves (with the wheels' rotation) [kg].
+    """
     if len(s) < 4 * SAVGOL[0]:
         return None
     v = np.nan_to_num(s.v)

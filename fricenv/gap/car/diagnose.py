@@ -66,7 +66,8 @@ def _problem(s: Session, car: CarParams, p: qc.QuarterCarParams, cfg: CarConfig,
         raise InvalidInputError(f"{s.source}: no braking event (brake applied, no throttle, above "
                                 f"{cfg.rules.min_speed:g} m/s for {cfg.rules.min_duration:g} s or more)")
     rolling = free_rolling_radii(s, car.wheelbase, cfg.rules)
-    coast = coast_down(s, car.mass, car.wheelbase, cfg.rules)
+    radii = [rolling.radii.get(c, p.r) if rolling is not None else p.r for c in CORNERS]
+    coast = coast_down(s, car.effective_mass(radii), car.wheelbase, cfg.rules)
     check = ax_agreement(s, np.nan_to_num(s.v) > cfg.rules.min_speed)
     use_ax = check is not None and check["used"]
     if check is not None and not use_ax:

@@ -3,14 +3,14 @@
 The body's deceleration comes from every wheel's brake force and the drag, the wheels' speeds from the body's
 speed and each tire's slip:
 
-    m v'      = -(sum_c T_c / r_c) - c0 - c2 v^2             (the four wheels; T_c the brake torque of corner c)
+    m_e v'    = -(sum_c T_c / r_c) - c0 - c2 v^2             (the four wheels; T_c the brake torque of corner c)
     omega_c   = v (1 - lambda_c) / r_c,  lambda_c = (T_c / r_c) / (F_z,c S)
 
 The wheels are quasi-static (a braked tire's slip settles within milliseconds, far below a 25 Hz sample) and the
 tires linear in slip (``S``: the event's slip stiffness per unit load, its road state). The mapped wheel's torque is
 ``gain`` times the nominal ``T_b`` (pressure times the map's factor), through the actuator's lag ``tau`` and delay;
 the other axle's wheels carry ``(1 - balance) / balance`` (front mapped) or ``balance / (1 - balance)`` (rear
-mapped) of it, ``balance`` being the front axle's share of the brake torque. ``F_z,c`` is the static wheel load.
+mapped) of it, ``balance`` being the front axle's share of the brake torque. ``F_z,c`` is the static wheel load, ``m_e = m + sum_c J / r_c^2`` the mass with the wheels' rotation.
 
 A window starts from the speed ``v0`` that best fits its own samples (a linear least squares: every predicted
 channel is linear in ``v0``); the drag uses the logged speed. ``a_x``, when used, is compared with ``v'``.
@@ -97,7 +97,7 @@ def predict_event(e: EventData, x: dict, stiffness: float, car: CarParams, mappe
     T = _actuator(x["gain"] * e.T, e.dt, x["tau"], x["delay"])[e.pre:]
     torque = _corner_torques(T, x, mapped)
     force = sum(torque[c] / x[f"r_{c}"] for c in CORNERS)
-    a = -(force + x["c0"] + x["c2"] * e.v ** 2) / car.mass
+    a = -(force + x["c0"] + x["c2"] * e.v ** 2) / car.effective_mass([x[f"r_{c}"] for c in CORNERS])
     slip = {c: torque[c] / x[f"r_{c}"] / (car.static_load(c) * stiffness) for c in e.wheels}
     return a, slip
 

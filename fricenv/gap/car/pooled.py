@@ -96,37 +96,57 @@ def _from_unit(n: str, u: float) -> float:
     return lo + (hi - lo) * float(u)
 
 
-def _residuals(pb: Problem, x: dict, stiffness, train: list) -> np.ndarray:
-    out = []
-    for e, s, w in zip(pb.events, stiffness, train):
-        if len(w):
-            r, _ = window_residuals(e, x, s, pb.car, pb.mapped, pb.sigma, w)
-            out.append(np.nan_to_num(r.ravel(), nan=0.0))
-    return np.concatenate(out) if out else np.zeros(1)
+def _event_residuals(pb: Problem, x: dict, stiffness: float, i: int, w: np.ndarray) -> np.ndarray:
+    r, _ = window_residuals(pb.events[i], x, stiffness, pb.car, pb.mapped, pb.sigma, w)
+    return np.nan_to_num(r.ravel(), nan=0.0)
+
+
+FD_STEP = 1e-5  # forward-difference step of the fits' Jacobian, in the unit-scaled parameters and log-stiffness
 
 
 def fit(pb: Problem, effects, train: list, start: dict | None = None) -> Fit:
     """Least squares of the shared parameters of ``effects`` and every event's slip stiffness on the windows
-    ``train`` (per event, window indices)."""
+    ``train`` (per event, window indices). The Jacobian is formed by forward differences, an event's stiffness
+    perturbing that event's residuals only."""
     names = free_names(effects, pb)
     x0 = dict(start or pb.start(effects))
     used = [i for i, w in enumerate(train) if len(w)]
-    ls0 = np.log(SLIP_STIFFNESS_START)
+    P = len(names)
 
     def unpack(z):
         x = dict(x0)
-        x.update({n: _from_unit(n, u) for n, u in zip(names, z[:len(names)])})
-        s = np.full(len(pb.events), np.nan)
-        s[used] = np.exp(z[len(names):])
-        return x, s
+        x.update({n: _from_unit(n, u) for n, u in zip(names, z[:P])})
+        return x, np.exp(z[P:])
 
-    z0 = np.r_[[_to_unit(n, x0[n]) for n in names], np.full(len(used), ls0)]
-    lo = np.r_[np.zeros(len(names)), np.full(len(used), np.log(SLIP_STIFFNESS_BOUNDS[0]))]
-    hi = np.r_[np.ones(len(names)), np.full(len(used), np.log(SLIP_STIFFNESS_BOUNDS[1]))]
-    sol = least_squares(lambda z: _residuals(pb, *unpack(z), train), z0, bounds=(lo, hi), loss=pb.cfg.fit_loss,
-                        f_scale=pb.cfg.loss_scale, max_nfev=pb.cfg.max_nfev, x_scale=1.0, method="trf")
+    def fun(z):
+        x, s = unpack(z)
+        return np.concatenate([_event_residuals(pb, x, s[k], i, train[i]) for k, i in enumerate(used)])
+
+    def jac(z):
+        x, s = unpack(z)
+        base = [_event_residuals(pb, x, s[k], i, train[i]) for k, i in enumerate(used)]
+        sizes = np.cumsum([0] + [len(b) for b in base])
+        J = np.zeros((sizes[-1], len(z)))
+        for j in range(P):
+            zj = z.copy()
+            zj[j] += FD_STEP if zj[j] + FD_STEP <= 1.0 else -FD_STEP
+            xj, _ = unpack(zj)
+            J[:, j] = np.concatenate([_event_residuals(pb, xj, s[k], i, train[i]) - base[k]
+                                      for k, i in enumerate(used)]) / (zj[j] - z[j])
+        for k, i in enumerate(used):
+            J[sizes[k]:sizes[k + 1], P + k] = (_event_residuals(pb, x, s[k] * np.exp(FD_STEP), i, train[i])
+                                               - base[k]) / FD_STEP
+        return J
+
+    z0 = np.r_[[_to_unit(n, x0[n]) for n in names], np.full(len(used), np.log(SLIP_STIFFNESS_START))]
+    lo = np.r_[np.zeros(P), np.full(len(used), np.log(SLIP_STIFFNESS_BOUNDS[0]))]
+    hi = np.r_[np.ones(P), np.full(len(used), np.log(SLIP_STIFFNESS_BOUNDS[1]))]
+    sol = least_squares(fun, z0, jac=jac, bounds=(lo, hi), loss=pb.cfg.fit_loss, f_scale=pb.cfg.loss_scale,
+                        max_nfev=pb.cfg.max_nfev, x_scale=1.0, method="trf")
     x, s = unpack(sol.x)
-    return Fit(x=x, stiffness=s)
+    stiffness = np.full(len(pb.events), np.nan)
+    stiffness[used] = s
+    return Fit(x=x, stiffness=stiffness)
 
 
 def fit_stiffness(pb: Problem, x: dict, i: int, widx: np.ndarray) -> float:

@@ -22,11 +22,15 @@ GRAVITY = 9.81  # [m/s^2]
 @dataclass(frozen=True)
 class CarParams:
     """The car section of ``--params``: mass [kg] and the centre of gravity's distance to the front and to the
-    rear axle [m]; ``omega_wheel`` names the corner of the log's ``omega`` when the map does not show it."""
+    rear axle [m]; optional: each wheel's moment of inertia [kg m^2] (0: not modelled), the front axle's share of the
+    brake torque (default: its share of the static load), and ``omega_wheel``, the corner of the log's ``omega`` when
+    the map does not show it."""
 
     mass: float
     lf: float
     lr: float
+    wheel_inertia: float = 0.0
+    brake_balance: float | None = None
     omega_wheel: str | None = None
 
     def __post_init__(self):
@@ -34,6 +38,10 @@ class CarParams:
             value = getattr(self, name)
             if not np.isfinite(value) or value <= 0:
                 raise ValueError(f"car.{name} must be finite and > 0, got {value!r}")
+        if not np.isfinite(self.wheel_inertia) or self.wheel_inertia < 0:
+            raise ValueError(f"car.wheel_inertia must be finite and >= 0, got {self.wheel_inertia!r}")
+        if self.brake_balance is not None and not 0.0 < self.brake_balance < 1.0:
+            raise ValueError(f"car.brake_balance must lie in (0, 1), got {self.brake_balance!r}")
         if self.omega_wheel is not None and self.omega_wheel not in CORNERS:
             raise ValueError(f"car.omega_wheel must be one of {', '.join(CORNERS)}, got {self.omega_wheel!r}")
 
@@ -48,8 +56,12 @@ class CarParams:
 
     @property
     def front_share(self) -> float:
-        """The front axle's share of the static load [-]."""
-        return self.lr / self.wheelbase
+        """The front axle's share of the brake torque: stated, else its share of the static load [-]."""
+        return self.brake_balance if self.brake_balance is not None else self.lr / self.wheelbase
+
+    def effective_mass(self, radii) -> float:
+        """The mass the body's deceleration moves: the car and its wheels' rotation, ``m + sum J / r_c^2`` [kg]."""
+        return self.mass + sum(self.wheel_inertia / r ** 2 for r in radii)
 
 
 def load_car_params(path) -> tuple[qc.QuarterCarParams, CarParams | None]:

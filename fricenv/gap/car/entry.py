@@ -1,0 +1,39 @@
+"""From a log file to a car's session diagnosis: the log read once, and diagnosed as a session when it carries a
+car's channels (:func:`fricenv.gap.car.session.is_session`) or ``--params`` has a car section."""
+
+from __future__ import annotations
+
+from fricenv.errors import InvalidInputError
+from fricenv.gap.car.config import CarConfig
+from fricenv.gap.car.diagnose import SessionDiagnosis, diagnose_session
+from fricenv.gap.car.session import is_session, load_car_params, session_of
+from fricenv.logs import read_log
+from fricenv.plants import quarter_car as qc
+from fricenv.utils import read_json_object
+
+__all__ = ["car_session", "diagnose_car_file"]
+
+
+def car_session(path, params_file=None):
+    """``(session, car, quarter-car params)`` when the log at ``path`` is a car's session, else None.
+
+    :raises InvalidInputError: a session without a car section in ``--params``.
+    """
+    has_car = params_file is not None and "car" in read_json_object(params_file, "vehicle parameters")
+    log = read_log(path, "quarter-car")
+    if not (is_session(log) or has_car):
+        return None
+    if not has_car:
+        raise InvalidInputError(f"{path}: a car's session (throttle, yaw rate or several wheels) needs --params with "
+                                'a car section, e.g. {"r": 0.33, "car": {"mass": 790.0, "lf": 1.248, "lr": 1.7328}}')
+    p, car = load_car_params(params_file)
+    return session_of(log, car), car, p
+
+
+def diagnose_car_file(path, params_file=None, cfg: CarConfig = CarConfig()) -> SessionDiagnosis | None:
+    """The session diagnosis of the log at ``path``, or None when it is not a car's session."""
+    found = car_session(path, params_file)
+    if found is None:
+        return None
+    s, car, p = found
+    return diagnose_session(s, car, p if p is not None else qc.PAPER_PARAMS, cfg)
