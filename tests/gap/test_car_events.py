@@ -1,0 +1,79 @@
+"""Braking events of a car's session: every run of the brake applied with no throttle, above the speed floor, for at
+least the shortest duration, is found; every other braking stretch is skipped with its reason."""
+
+import numpy as np
+import pytest
+
+from fricenv.errors import InvalidInputError
+from fricenv.gap.car.events import EventRules, applied, find_events, runs
+from fricenv.gap.car.session import CarParams, Session, load_car_params
+
+DT = 0.04
+
+
+def _session(n=2000, **kw) -> Session:
+    t = np.arange(n) * DT
+    base = {"t": t, "T_b": np.zeros(n), "v": np.full(n, 15.0), "wheels": {"fl": np.full(n, 15.0 / 0.33)},
+            "mapped": "fl", "throttle": np.full(n, 20.0), "yaw_rate": np.zeros(n)}
+    base.update(kw)
+    return Session(**base)
+
+
+def _brake(s: Session, t0: float, t1: float, level=300.0, throttle=0.0, yaw=None):
+    k = (s.t >= t0 - 1e-9) & (s.t < t1 - 1e-9)
+    s.T_b[k] = level
+    s.throttle[k] = throttle
+    if yaw is not None:
+        s.yaw_rate[k] = yaw
+    return k
+
+
+def test_runs_gives_start_stop_pairs():
+    assert runs(np.array([0, 1, 1, 0, 1], bool)) == [(1, 3), (4, 5)]
+    assert runs(np.zeros(3, bool)) == []
+
+
+def test_applied_reads_a_rest_level_above_zero():
+    x = np.r_[np.full(90, 50.0), np.full(10, 900.0)]  # a sensor resting at 50 kPa
+    assert applied(x, np.ones(100, bool), 1e-3).sum() == 10
+
+
+def test_every_event_of_one_second_or_more_is_found_and_the_rest_skipped_with_why():
+    s = _session()
+    _brake(s, 4.0, 5.0)  # exactly 1 s: an event
+    _brake(s, 10.0, 10.96)  # 0.96 s: too short
+    _brake(s, 20.0, 23.0, throttle=5.0)  # with throttle: not an event
+    _brake(s, 30.0, 33.0, yaw=0.5)  # 7.5 m/s^2 lateral: cornering
+    k = _brake(s, 40.0, 44.0)
+    s.v[k] = np.linspace(15.0, 3.0, k.sum())  # crosses the floor: the event ends there
+    events, skipped = find_events(s, EventRules(), 2.98)
+    assert [round(e.t_start, 2) for e in events] == [4.0, 40.0]
+    assert round(events[0].t_end - events[0].t_start + DT, 2) == 1.0
+    assert events[1].v_end > 5.0 and events[1].stop < np.flatnonzero(k)[-1]
+    reasons = {round(x["t_start"]): x["reason"] for x in skipped}
+    assert reasons[10].startswith("shorter than 1 s")
+    assert reasons[20] == "throttle applied"
+    assert reasons[30].startswith("cornering")
+    assert any(x["reason"].startswith("slower than 5") and x["t_start"] > 40 for x in skipped)
+
+
+def test_an_event_is_split_by_a_throttle_blip():
+    s = _session()
+    _brake(s, 4.0, 8.0)
+    s.throttle[(s.t >= 5.96) & (s.t < 6.04)] = 3.0
+    events, skipped = find_events(s, EventRules(), 2.98)
+    assert len(events) == 2 and any(x["reason"] == "throttle applied" for x in skipped)
+
+
+def test_car_section_of_params(tmp_path):
+    f = tmp_path / "p.json"
+    f.write_text('{"r": 0.33, "car": {"mass": 790.0, "lf": 1.248, "lr": 1.7328}}')
+    p, car = load_car_params(f)
+    assert p.r == 0.33 and car == CarParams(790.0, 1.248, 1.7328)
+    assert car.front_share == pytest.approx(1.7328 / 2.9808)
+    f.write_text('{"r": 0.33, "car": {"mass": 790.0, "lf": 1.248}}')
+    with pytest.raises(InvalidInputError, match="missing lr"):
+        load_car_params(f)
+    f.write_text('{"r": 0.33, "car": {"mass": 790.0, "lf": 1.248, "lr": 1.7, "cg": 1}}')
+    with pytest.raises(InvalidInputError, match="unknown key"):
+        load_car_params(f)
