@@ -14,7 +14,7 @@ from fricenv.gap.car.config import CarConfig
 from fricenv.gap.car.diagnose import diagnose_session
 from fricenv.gap.car.report import write_session_report
 from fricenv.gap.car.session import CarParams, session_of
-from fricenv.gap.report import REPORT_KEYS
+from fricenv.gap.core.report import REPORT_KEYS
 from fricenv.plants import quarter_car as qc
 from tests.gap import car_sim
 

@@ -10,7 +10,7 @@ from scipy.signal import savgol_filter
 from fricenv.gap.car.config import CarConfig
 from fricenv.gap.car.model import EventData
 from fricenv.gap.car.session import Session
-from fricenv.gap.stats import estimate_noise
+from fricenv.gap.core.noise import estimate_noise
 
 __all__ = ["AX_LAG_MAX_S", "ax_agreement", "event_data", "noise_levels"]
 
