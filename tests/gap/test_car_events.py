@@ -77,3 +77,19 @@ def test_car_section_of_params(tmp_path):
     f.write_text('{"r": 0.33, "car": {"mass": 790.0, "lf": 1.248, "lr": 1.7, "cg": 1}}')
     with pytest.raises(InvalidInputError, match="unknown key"):
         load_car_params(f)
+
+
+def test_session_of_finds_the_mapped_corner_and_the_maps_radii():
+    import types
+
+    from fricenv.gap.car.model import nominal_params
+    from fricenv.gap.car.session import session_of
+
+    n = 50
+    w = {c: np.full(n, 40.0 + i) for i, c in enumerate(("fl", "fr", "rl", "rr"))}
+    log = types.SimpleNamespace(t=np.arange(n) * DT, T_b=np.zeros(n), v=np.full(n, 13.0), omega=w["rl"].copy(),
+                                **{f"omega_{c}": x for c, x in w.items()}, radii={"omega": 0.34, "omega_fl": 0.33})
+    s = session_of(log, CarParams(790.0, 1.248, 1.7328))
+    assert s.mapped == "rl" and s.radii == {"fl": 0.33, "rl": 0.34}
+    x = nominal_params(0.3, CarParams(790.0, 1.248, 1.7328), s.radii)
+    assert (x["r_fl"], x["r_fr"], x["r_rl"]) == (0.33, 0.3, 0.34)

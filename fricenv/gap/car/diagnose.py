@@ -66,7 +66,7 @@ def _problem(s: Session, car: CarParams, p: qc.QuarterCarParams, cfg: CarConfig,
         raise InvalidInputError(f"{s.source}: no braking event (brake applied, no throttle, above "
                                 f"{cfg.rules.min_speed:g} m/s for {cfg.rules.min_duration:g} s or more)")
     rolling = free_rolling_radii(s, car.wheelbase, cfg.rules)
-    radii = [rolling.radii.get(c, p.r) if rolling is not None else p.r for c in CORNERS]
+    radii = [(rolling.radii if rolling is not None else s.radii).get(c, s.radii.get(c, p.r)) for c in CORNERS]
     coast = coast_down(s, car.effective_mass(radii), car.wheelbase, cfg.rules)
     check = ax_agreement(s, np.nan_to_num(s.v) > cfg.rules.min_speed)
     use_ax = check is not None and check["used"]
@@ -76,7 +76,7 @@ def _problem(s: Session, car: CarParams, p: qc.QuarterCarParams, cfg: CarConfig,
     if sum(len(e.starts) for e in data) < 2 * cfg.blocks:
         raise InvalidInputError(f"{s.source}: the braking events hold {sum(len(e.starts) for e in data)} prediction "
                                 f"windows of {cfg.horizon_s:g} s; need at least {2 * cfg.blocks}")
-    pb = Problem(events=data, car=car, mapped=s.mapped, sigma=noise_levels(data), base=nominal_params(p.r, car),
+    pb = Problem(events=data, car=car, mapped=s.mapped, sigma=noise_levels(data), base=nominal_params(p.r, car, s.radii),
                  rolling=None if rolling is None else rolling.radii, cfg=cfg,
                  drag=None if coast is None else {"c0": coast.c0, "c2": coast.c2})
     return pb, events, skipped, rolling, check, coast
@@ -103,7 +103,8 @@ def diagnose_session(s: Session, car: CarParams, p: qc.QuarterCarParams = qc.PAP
     # radii measured in free rolling, away from the nominal one beyond sig_z standard errors, are in the car
     # calibrations, in the set from the start: the radii and the drag measured outside the events (free rolling,
     # coasting) away from nominal beyond sig_z standard errors, and a nominal pressure factor's gain
-    calibrations = (("radius_error",) if rolling is not None and rolling.z(p.r) > cfg.sig_z else ()) + \
+    nominal_radii = {c: pb.base[f"r_{c}"] for c in CORNERS}
+    calibrations = (("radius_error",) if rolling is not None and rolling.z(nominal_radii) > cfg.sig_z else ()) + \
         (("drag",) if coast is not None and coast.z > cfg.sig_z else ()) + \
         tuple(e for attr, e in EXPECTED.items() if getattr(s, attr, False))
     chosen, after, steps = forward_select(pb, before, tuple(c for c in calibrations if c in cfg.candidates))
@@ -174,7 +175,7 @@ def _car(pb: Problem, whole, rolling) -> dict:
                 "mapped_wheel": pb.mapped, "brake_balance": whole.x["balance"], "mass": pb.car.mass,
                 "lf": pb.car.lf, "lr": pb.car.lr})
     if rolling is not None:
-        out["free_rolling"] = rolling.summary(pb.base["r_fl"])
+        out["free_rolling"] = rolling.summary({c: pb.base[f"r_{c}"] for c in CORNERS})
     return out
 
 

@@ -59,11 +59,12 @@ class EventData:
         return ["v"] + [f"omega_{c}" for c in self.wheels] + (["a_x"] if self.a_x is not None else [])
 
 
-def nominal_params(r: float, car: CarParams) -> dict:
-    """The nominal car: the map's brake factor, the static load's brake balance, every radius ``r``, no drag and an
-    ideal actuator."""
-    return {"gain": 1.0, "balance": car.front_share, **{f"r_{c}": r for c in CORNERS}, "c0": 0.0, "c2": 0.0,
-            "tau": 0.0, "delay": 0.0}
+def nominal_params(r: float, car: CarParams, radii: dict | None = None) -> dict:
+    """The nominal car: the map's brake factor, the stated or static brake balance, each wheel's radius as the map
+    converted it (``radii``, corner -> m) else ``r``, no drag and an ideal actuator."""
+    radii = radii or {}
+    return {"gain": 1.0, "balance": car.front_share, **{f"r_{c}": radii.get(c, r) for c in CORNERS}, "c0": 0.0,
+            "c2": 0.0, "tau": 0.0, "delay": 0.0}
 
 
 def _actuator(T: np.ndarray, dt: float, tau: float, delay: float) -> np.ndarray:

@@ -28,13 +28,13 @@ class FreeRolling:
     samples: int
     spread: dict
 
-    def z(self, nominal: float) -> float:
-        """The largest distance of a radius from ``nominal`` in standard errors of its median
+    def z(self, nominal: dict) -> float:
+        """The largest distance of a radius from its ``nominal`` (corner -> m) in standard errors of its median
         (``1.2533 spread / sqrt(samples)``)."""
-        return max(abs(r - nominal) / max(1.2533 * self.spread[c] / np.sqrt(self.samples), 1e-12)
+        return max(abs(r - nominal[c]) / max(1.2533 * self.spread[c] / np.sqrt(self.samples), 1e-12)
                    for c, r in self.radii.items())
 
-    def summary(self, nominal: float | None = None) -> dict:
+    def summary(self, nominal: dict | None = None) -> dict:
         out = {"samples": self.samples, "radius": dict(self.radii), "spread": dict(self.spread)}
         if nominal is not None:
             out["z_from_nominal"] = self.z(nominal)

@@ -111,6 +111,7 @@ class Session:
     t_offset: float = 0.0
     torque_from_pressure: bool = False
     warnings: tuple = field(default=())
+    radii: dict = field(default_factory=dict)  # corner -> the radius the map converted its rim speed with [m]
 
     @property
     def dt(self) -> float:
@@ -152,8 +153,12 @@ def session_of(log, car: CarParams | None = None) -> Session:
     wheels = {c: wheels[c] for c in CORNERS if c in wheels}
     opt = {k: (None if getattr(log, k, None) is None else np.asarray(getattr(log, k), dtype=float))
            for k in ("a_x", "throttle", "yaw_rate", "steer")}
+    mapped_radii = dict(getattr(log, "radii", None) or {})  # channel -> radius, when the log keeps the map's
+    radii = {c: float(mapped_radii[f"omega_{c}"]) for c in wheels if f"omega_{c}" in mapped_radii}
+    if mapped in wheels and "omega" in mapped_radii:
+        radii.setdefault(mapped, float(mapped_radii["omega"]))
     return Session(t=np.asarray(log.t, dtype=float), T_b=np.asarray(log.T_b, dtype=float),
                    v=np.asarray(log.v, dtype=float), wheels=wheels, mapped=mapped, **opt,
                    source=getattr(log, "source", "<memory>"), t_offset=float(getattr(log, "t_offset", 0.0) or 0.0),
                    torque_from_pressure=bool(getattr(log, "torque_from_pressure", False)),
-                   warnings=tuple(getattr(log, "warnings", ()) or ()))
+                   warnings=tuple(getattr(log, "warnings", ()) or ()), radii=radii)
