@@ -93,3 +93,12 @@ def test_session_of_finds_the_mapped_corner_and_the_maps_radii():
     assert s.mapped == "rl" and s.radii == {"fl": 0.33, "rl": 0.34}
     x = nominal_params(0.3, CarParams(790.0, 1.248, 1.7328), s.radii)
     assert (x["r_fl"], x["r_fr"], x["r_rl"]) == (0.33, 0.3, 0.34)
+
+
+def test_a_noisy_resting_sensor_is_not_a_brake():
+    rng = np.random.default_rng(0)
+    x = 30.0 + 2.0 * rng.standard_normal(1000)  # a pressure sensor resting at 30 kPa with 2 kPa of noise
+    x[500:520] = 400.0
+    on = applied(x, np.ones(1000, bool), 1e-6)
+    assert on[500:520].all() and on.sum() <= 22
+    assert applied(np.r_[np.zeros(99), 1e-3], np.ones(100, bool), 1e-6)[-1]  # a command resting at exactly 0

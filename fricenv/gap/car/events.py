@@ -2,7 +2,7 @@
 long enough, on a path straight enough; and why every other braking stretch was skipped.
 
 A brake is applied when ``T_b`` is above its resting level (the 1st percentile over the moving samples: a pedal at
-rest is its lowest reading) by more than ``brake_share`` of its largest excursion; the same rule with ``throttle`` finds a
+rest is its lowest reading) by more than its resting noise (:func:`applied`); the same rule with ``throttle`` finds a
 drive. The path is straight enough when the lateral acceleration ``v |yaw rate|`` (else ``v^2 |steer| / L``)
 stays below ``max_lateral`` [m/s^2] over the event.
 """
@@ -16,6 +16,8 @@ import numpy as np
 from fricenv.gap.car.session import Session
 
 REST_PERCENTILE = 1.0  # a pedal's or a line's resting level: this percentile of its moving samples [%]
+REST_BAND = 0.05  # samples within this share of the largest excursion above rest give the resting noise [-]
+REST_SIGMAS = 4.0  # applied: above the resting level by this many resting noise std [-]
 
 __all__ = ["EventRules", "Event", "find_events", "runs", "applied", "lateral_acceleration", "session_summary"]
 
@@ -26,9 +28,10 @@ class EventRules:
 
     min_speed: float = 5.0  # fast enough [m/s]
     min_duration: float = 1.0  # long enough [s]
-    brake_share: float = 1e-3  # applied: above rest by this share of the largest excursion [-]
-    throttle_share: float = 1e-3  # a drive: above rest by this share of the largest excursion [-]
-    max_lateral: float = 4.0  # straight enough: lateral acceleration below this [m/s^2]
+    brake_share: float = 1e-6  # applied: above rest by at least this share of the largest excursion [-]
+    throttle_share: float = 1e-6  # a drive: the same for the throttle [-]
+    # straight enough: lateral acceleration below this [m/s^2]; beyond, combined slip leaves the longitudinal model
+    max_lateral: float = 6.0
 
 
 @dataclass(frozen=True)
@@ -56,14 +59,22 @@ def runs(mask: np.ndarray) -> list[tuple[int, int]]:
 
 
 def applied(x: np.ndarray, moving: np.ndarray, share: float) -> np.ndarray:
-    """Samples where ``x`` is above its resting level (the ``REST_PERCENTILE`` over the ``moving`` samples, else
-    over all) by more than ``share`` of its largest excursion above that level."""
+    """Samples where ``x`` is above its resting level by more than ``REST_SIGMAS`` times its resting noise and at
+    least ``share`` of its largest excursion. The resting samples are the ``moving`` ones (else all) within
+    ``REST_BAND`` of the largest excursion above their ``REST_PERCENTILE``; their median is the level and 1.4826 times
+    their median absolute deviation the noise. A command that rests at exactly zero is applied at any positive
+    value."""
     x = np.nan_to_num(np.asarray(x, dtype=float), nan=-np.inf)
     finite = np.isfinite(x)
     base = x[moving & finite] if np.any(moving & finite) else x[finite]
-    rest = float(np.percentile(base, REST_PERCENTILE)) if base.size else 0.0
-    top = float(np.max(x[finite])) - rest if np.any(finite) else 0.0
-    return x > rest + max(share * top, 0.0) if top > 0 else np.zeros(len(x), dtype=bool)
+    low = float(np.percentile(base, REST_PERCENTILE)) if base.size else 0.0
+    top = float(np.max(x[finite])) - low if np.any(finite) else 0.0
+    if top <= 0:
+        return np.zeros(len(x), dtype=bool)
+    near = base[base <= low + REST_BAND * top]
+    rest = float(np.median(near)) if near.size else low
+    noise = 1.4826 * float(np.median(np.abs(near - rest))) if near.size else 0.0
+    return x > rest + max(REST_SIGMAS * noise, share * top)
 
 
 def lateral_acceleration(s: Session, wheelbase: float | None) -> np.ndarray:
