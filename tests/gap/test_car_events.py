@@ -102,3 +102,13 @@ def test_a_noisy_resting_sensor_is_not_a_brake():
     on = applied(x, np.ones(1000, bool), 1e-6)
     assert on[500:520].all() and on.sum() <= 22
     assert applied(np.r_[np.zeros(99), 1e-3], np.ones(100, bool), 1e-6)[-1]  # a command resting at exactly 0
+
+
+def test_an_event_right_after_the_throttle_is_fitted_once_the_drive_settled():
+    s = _session()
+    _brake(s, 10.0, 13.0)
+    s.throttle[(s.t >= 3.0) & (s.t < 9.0)] = 0.0  # coasting before the brake
+    _brake(s, 20.0, 23.0)  # the throttle held up to the brake
+    (a, b), _ = find_events(s, EventRules(drive_settle=0.6), 2.98)
+    assert a.fit_start == a.start
+    assert b.fit_start - b.start == 15 and b.t_start == pytest.approx(20.0)

@@ -53,13 +53,13 @@ def ax_warning(check: dict) -> str:
 
 
 def event_data(s: Session, events: list, cfg: CarConfig, use_ax: bool) -> list[EventData]:
-    """Each event's samples, cut into prediction windows of ``cfg.horizon_s`` (at least 3 samples), dealt into
-    ``cfg.blocks`` contiguous blocks."""
+    """Each event's samples from its ``fit_start`` (the drive settled), cut into prediction windows of
+    ``cfg.horizon_s`` (at least 3 samples), dealt into ``cfg.blocks`` contiguous blocks."""
     H = max(3, round(cfg.horizon_s / s.dt))
     pre = max(1, round(cfg.pre_s / s.dt))
     out = []
     for ev in events:
-        a, b = ev.start, ev.stop
+        a, b = ev.fit_start, ev.stop
         n = b - a
         starts = np.arange(0, n - H + 1, H) if n >= H else np.zeros(0, dtype=int)
         W = len(starts)

@@ -32,11 +32,15 @@ class EventRules:
     throttle_share: float = 1e-6  # a drive: the same for the throttle [-]
     # straight enough: lateral acceleration below this [m/s^2]; beyond, combined slip leaves the longitudinal model
     max_lateral: float = 6.0
+    # the drive's torque outlasts its command: an event is fitted from this long after the last drive sample [s]
+    # (this car's deceleration reaches 90 % of its coasting level about 0.6 s after a throttle release)
+    drive_settle: float = 0.6
 
 
 @dataclass(frozen=True)
 class Event:
-    """One braking event: samples ``start`` to ``stop`` (exclusive) of the session."""
+    """One braking event: samples ``start`` to ``stop`` (exclusive) of the session; the model is fitted from
+    ``fit_start`` on (the drive settled)."""
 
     index: int
     start: int
@@ -46,10 +50,12 @@ class Event:
     v_start: float
     v_end: float
     max_lateral: float
+    fit_start: int
+    t_fit_start: float
 
     def as_dict(self) -> dict:
         return {"t_start": self.t_start, "t_end": self.t_end, "v_start": self.v_start, "v_end": self.v_end,
-                "max_lateral_accel": self.max_lateral}
+                "max_lateral_accel": self.max_lateral, "t_fit_start": self.t_fit_start}
 
 
 def runs(mask: np.ndarray) -> list[tuple[int, int]]:
@@ -102,6 +108,8 @@ def find_events(s: Session, rules: EventRules = EventRules(), wheelbase: float |
     st = _states(s, rules)
     lat = lateral_acceleration(s, wheelbase)
     t = s.t - s.t[0]
+    drive_at = np.flatnonzero(st["drive"])
+    settle = int(np.ceil(rules.drive_settle / s.dt - 1e-9))
     events, skipped = [], []
     in_event = np.zeros(len(s), dtype=bool)
     for a, b in runs(st["brake"] & ~st["drive"] & st["moving"]):
@@ -113,8 +121,10 @@ def find_events(s: Session, rules: EventRules = EventRules(), wheelbase: float |
             skipped.append(_skip(t, a, b, f"cornering (lateral acceleration {top:.2f} m/s^2 > "
                                           f"{rules.max_lateral:g})"))
         else:
+            before = drive_at[drive_at < a]
+            fit_start = min(max(a, int(before[-1]) + 1 + settle if before.size else a), b - 1)
             events.append(Event(len(events), a, b, float(t[a]), float(t[b - 1]), float(s.v[a]), float(s.v[b - 1]),
-                                top))
+                                top, fit_start, float(t[fit_start])))
         in_event[a:b] = True
     for a, b in runs(st["brake"] & ~in_event):
         why = np.where(st["drive"][a:b], 0, 1)  # what is left: a drive, or too slow

@@ -163,8 +163,8 @@ def fit_stiffness(pb: Problem, x: dict, i: int, widx: np.ndarray) -> float:
 
 
 def scheme(pb: Problem) -> str:
-    """``"event"`` with at least ``min_events`` events, else ``"blocks"``."""
-    return "event" if len(pb.events) >= pb.cfg.min_events else "blocks"
+    """``"event"`` with at least ``min_events`` events holding a prediction window, else ``"blocks"``."""
+    return "event" if sum(len(e.starts) > 0 for e in pb.events) >= pb.cfg.min_events else "blocks"
 
 
 def _score(pb: Problem, x: dict, s: float, i: int, widx: np.ndarray) -> np.ndarray:
@@ -178,7 +178,7 @@ def cross_fit(pb: Problem, effects, warm: HeldOut | None = None) -> HeldOut:
     mse = [np.full(len(e.starts), np.nan) for e in pb.events]
     fits = []
     if scheme(pb) == "event":
-        for k in range(E):
+        for k in (k for k in range(E) if len(pb.events[k].starts)):
             train = [np.arange(len(e.starts)) if i != k else np.zeros(0, int) for i, e in enumerate(pb.events)]
             f = fit(pb, effects, train, _warm(pb, effects, warm, k))
             w = np.arange(len(pb.events[k].starts))

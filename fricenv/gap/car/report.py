@@ -51,8 +51,10 @@ def _event_table(w: dict) -> list[str]:
                   f"| speed | {e['v_start']:.2f} -> {e['v_end']:.2f} m/s |",
                   f"| prediction windows | {e['windows']} |",
                   f"| largest lateral acceleration | {e['max_lateral_accel']:.2f} m/s^2 |",
-                  f"| verdict | `{e['verdict']}` |",
-                  f"| gap before / after (held out) | {e['gap_before']:.3f} / {e['gap_after']:.3f} |"]
+                  f"| fitted from | {e['t_fit_start']:.2f} s (the drive settled) |",
+                  f"| verdict | `{e['verdict']}`" + (f" ({e['note']})" if e.get("note") else "") + " |"]
+        if e["gap_before"] is not None:
+            lines.append(f"| gap before / after (held out) | {e['gap_before']:.3f} / {e['gap_after']:.3f} |")
         if e.get("slip_stiffness") is not None:
             lines.append(f"| slip stiffness per unit load (this event) | {e['slip_stiffness']:.3g} |")
         lines += [f"| {x['effect']} (this event alone) | {_params(x['params'])} |" for x in e["effects"]]
