@@ -107,7 +107,7 @@ def test_a_noisy_resting_sensor_is_not_a_brake():
 def test_an_event_right_after_the_throttle_is_fitted_once_the_drive_settled():
     s = _session()
     _brake(s, 10.0, 13.0)
-    s.throttle[(s.t >= 3.0) & (s.t < 9.0)] = 0.0  # coasting before the brake
+    s.throttle[(s.t >= 3.0) & (s.t < 10.0)] = 0.0  # coasting before the brake
     _brake(s, 20.0, 23.0)  # the throttle held up to the brake
     (a, b), _ = find_events(s, EventRules(drive_settle=0.6), 2.98)
     assert a.fit_start == a.start
