@@ -76,10 +76,13 @@ def test_two_events_hold_out_by_blocks(session):
     assert gain == pytest.approx(GAIN, rel=0.05)
 
 
-def test_nominal_factor_wrong_by_the_gain_is_a_calibration(three):
-    """The brake gain's held-out z is reported, and without it the held-out gap is larger."""
-    steps = {st["added"]: st for st in three.where["forward_selection"]}
-    assert steps["brake_gain"]["calibration"] and steps["brake_gain"]["z_paired"] > 3.0
+def test_calibrations_enter_together_and_are_tested_on_held_out_events(three):
+    """The measured radii and drag and the nominal factor's gain enter first, together, and beat the nominal car on
+    held-out events; the brake's lag (absent from the simulation) is not added."""
+    first = three.where["forward_selection"][0]
+    assert first["calibration"] and set(first["added"].split("+")) == {"radius_error", "drag", "brake_gain"}
+    assert first["z_paired"] > 3.0
+    assert "brake_lag" not in [e["effect"] for e in three.effects]
 
 
 def test_report_keeps_the_contract_and_drives_the_env(three, tmp_path):

@@ -18,6 +18,7 @@ class CarConfig:
     horizon_s: float = 0.4  # prediction window [s]
     pre_s: float = 1.0  # actuator history before an event [s]
     min_events: int = 3  # hold out by event from this many events on; below, by blocks within the events [-]
+    max_folds: int = 6  # events dealt in turn into at most this many held-out folds [-]
     blocks: int = 3  # blocks per event when holding out within the events [-]
     sig_z: float = 3.0  # paired z (over held-out windows) an added effect must exceed [-]
     ratio_explained: float = 0.5  # a verdict leaves at most this share: gap_after <= ratio * gap_before [-]

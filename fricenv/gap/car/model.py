@@ -21,6 +21,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.signal import lfilter
 
 from fricenv.gap.car.session import CORNERS, CarParams
 
@@ -73,14 +74,9 @@ def _actuator(T: np.ndarray, dt: float, tau: float, delay: float) -> np.ndarray:
     if delay > 0:
         k = np.arange(len(T)) - delay / dt
         T = np.interp(k, np.arange(len(T)), T, left=T[0])
-    if tau > 0:
+    if tau > 0:  # y[k] = y[k-1] + a (T[k-1] - y[k-1]), y[0] = T[0]
         a = 1.0 - np.exp(-dt / tau)
-        out = np.empty_like(T)
-        y = T[0]
-        for k, x in enumerate(T):
-            out[k] = y
-            y = y + a * (x - y)
-        T = out
+        T = lfilter([0.0, a], [1.0, a - 1.0], T, zi=[T[0]])[0]
     return T
 
 

@@ -1,8 +1,9 @@
 """The car's parameters fitted across its events: what belongs to the car (the effects' parameters of
 :data:`fricenv.gap.car.model.EFFECT_PARAMS`) is shared by all events, each event has its own slip stiffness (its
 road state) and each window its own start speed. Held out by event (each event predicted by a fit that did not see
-it; the held-out event's slip stiffness is fitted on its own samples, like its start speeds), or, with fewer than
-``CarConfig.min_events`` events, by blocks within the events.
+it; the held-out event's slip stiffness is fitted on its own samples, like its start speeds; with more events than
+``CarConfig.max_folds``, several events are held out together), or, with fewer than ``CarConfig.min_events``
+events, by blocks within the events.
 """
 
 from __future__ import annotations
@@ -24,7 +25,7 @@ from fricenv.gap.car.model import (
 )
 from fricenv.gap.car.session import CarParams
 
-__all__ = ["Fit", "HeldOut", "Problem", "cross_fit", "fit", "free_names", "scheme"]
+__all__ = ["Fit", "HeldOut", "Problem", "cross_fit", "event_folds", "fit", "free_names", "scheme"]
 
 
 @dataclass
@@ -142,7 +143,7 @@ def fit(pb: Problem, effects, train: list, start: dict | None = None) -> Fit:
     lo = np.r_[np.zeros(P), np.full(len(used), np.log(SLIP_STIFFNESS_BOUNDS[0]))]
     hi = np.r_[np.ones(P), np.full(len(used), np.log(SLIP_STIFFNESS_BOUNDS[1]))]
     sol = least_squares(fun, z0, jac=jac, bounds=(lo, hi), loss=pb.cfg.fit_loss, f_scale=pb.cfg.loss_scale,
-                        max_nfev=pb.cfg.max_nfev, x_scale=1.0, method="trf")
+                        max_nfev=pb.cfg.max_nfev, x_scale=1.0, method="trf", tr_solver="lsmr")
     x, s = unpack(sol.x)
     stiffness = np.full(len(pb.events), np.nan)
     stiffness[used] = s
@@ -167,6 +168,13 @@ def scheme(pb: Problem) -> str:
     return "event" if sum(len(e.starts) > 0 for e in pb.events) >= pb.cfg.min_events else "blocks"
 
 
+def event_folds(pb: Problem) -> list[list[int]]:
+    """The events with a prediction window dealt in turn into at most ``max_folds`` held-out folds."""
+    held = [i for i, e in enumerate(pb.events) if len(e.starts)]
+    n = min(len(held), pb.cfg.max_folds)
+    return [held[j::n] for j in range(n)]
+
+
 def _score(pb: Problem, x: dict, s: float, i: int, widx: np.ndarray) -> np.ndarray:
     r, counts = window_residuals(pb.events[i], x, s, pb.car, pb.mapped, pb.sigma, widx)
     return window_mse(r, counts)
@@ -178,11 +186,12 @@ def cross_fit(pb: Problem, effects, warm: HeldOut | None = None) -> HeldOut:
     mse = [np.full(len(e.starts), np.nan) for e in pb.events]
     fits = []
     if scheme(pb) == "event":
-        for k in (k for k in range(E) if len(pb.events[k].starts)):
-            train = [np.arange(len(e.starts)) if i != k else np.zeros(0, int) for i, e in enumerate(pb.events)]
-            f = fit(pb, effects, train, _warm(pb, effects, warm, k))
-            w = np.arange(len(pb.events[k].starts))
-            mse[k] = _score(pb, f.x, fit_stiffness(pb, f.x, k, w), k, w)
+        for j, out in enumerate(event_folds(pb)):
+            train = [np.zeros(0, int) if i in out else np.arange(len(e.starts)) for i, e in enumerate(pb.events)]
+            f = fit(pb, effects, train, _warm(pb, effects, warm, j))
+            for k in out:
+                w = np.arange(len(pb.events[k].starts))
+                mse[k] = _score(pb, f.x, fit_stiffness(pb, f.x, k, w), k, w)
             fits.append(f)
     else:
         for j in range(pb.cfg.blocks):

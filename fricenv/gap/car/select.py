@@ -32,20 +32,22 @@ def forward_select(pb: Problem, nominal: HeldOut, calibrations: tuple = ()) -> t
     """Add, while it helps on held-out windows (paired z above ``sig_z``), the candidate that lowers the held-out
     error most; at most ``max_effects``.
 
-    :param calibrations: effects in the set from the start, their held-out z reported only (measured outside the
-        events, or a calibration the log's provenance predicts).
+    :param calibrations: effects in the set from the start, fitted together, their held-out z reported only
+        (measured outside the events, or a calibration the log's provenance predicts).
     :return: (the effects in the order added, their held-out errors, the steps tried).
     """
     chosen, cur, steps = [], nominal, []
     left = list(pb.cfg.candidates)
-    for e in calibrations:
-        if e in left:
-            h = cross_fit(pb, chosen + [e], cur)
-            steps.append({"added": e, "gap": gap(h.all()), "z_paired": paired_z(cur.all(), h.all()),
-                          "tried": {e: gap(h.all())}, "accepted": True, "calibration": True})
-            chosen.append(e)
-            left.remove(e)
-            cur = h
+    cal = [e for e in calibrations if e in left]
+    if cal:  # together: one calibration alone can move the model away from the data the others correct
+        with progress.task("fit the car's calibrations", total=1) as advance:
+            h = cross_fit(pb, cal)
+            advance()
+        steps.append({"added": "+".join(cal), "gap": gap(h.all()), "z_paired": paired_z(cur.all(), h.all()),
+                      "tried": {"+".join(cal): gap(h.all())}, "accepted": True, "calibration": True})
+        chosen += cal
+        left = [c for c in left if c not in cal]
+        cur = h
     while left and len(chosen) < pb.cfg.max_effects:
         tried = {}
         with progress.task(f"fit the car with {len(chosen) + 1} effect(s)", total=len(left)) as advance:
