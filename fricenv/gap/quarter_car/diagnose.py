@@ -302,6 +302,8 @@ def diagnose(log: QuarterCarLog, p: qc.QuarterCarParams = qc.PAPER_PARAMS,
         if whole is not None and s.chosen is None and drift_check:
             whole = _set_drifts(ctx, s, whole)
     effects = [] if whole is None else _order(split_params(whole), expected)
+    if s.periodic is not None and whole is not None:  # the line is the effect's own signature if the set removes it
+        s.periodic["remains_with_effects"] = periodic_line(whole, d) is not None
     not_testable = not_testable.shown({f.effect for f in s.significant} | {e["effect"] for e in effects})
     findings = _findings(nominal, s, d, cfg, not_testable, steps, expected)
     verdict = effects[0]["effect"] if effects else s.verdict  # a discovery before an expected calibration
