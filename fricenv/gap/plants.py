@@ -44,12 +44,17 @@ def _qc_config(candidates, jobs):
 
 
 def _qc_diagnose(path, params_file, cfg):
-    """A quarter-car log; a car's session (fricenv.gap.car) is diagnosed across its braking events."""
-    from fricenv.gap.car.entry import diagnose_car_file
-    from fricenv.gap.quarter_car.diagnose import diagnose_file
+    """A quarter-car log, read once; a car's session (fricenv.gap.car) is diagnosed across its braking events."""
+    from fricenv.gap.car.entry import diagnose_car_log
+    from fricenv.gap.quarter_car.diagnose import diagnose, load_params
+    from fricenv.logs import read_log
+    from fricenv.plants.quarter_car import PAPER_PARAMS
 
-    session = diagnose_car_file(path, params_file, candidates=cfg.candidates)
-    return session if session is not None else diagnose_file(path, "quarter-car", params_file, cfg)
+    log = read_log(path, "quarter-car")
+    session = diagnose_car_log(log, params_file, candidates=cfg.candidates)
+    if session is not None:
+        return session
+    return diagnose(log, load_params(params_file) if params_file is not None else PAPER_PARAMS, cfg)
 
 
 def _qc_report(dg, out, plots: bool = True) -> dict:

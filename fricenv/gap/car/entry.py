@@ -12,15 +12,15 @@ from fricenv.logs import read_log
 from fricenv.plants import quarter_car as qc
 from fricenv.utils import read_json_object
 
-__all__ = ["car_session", "diagnose_car_file", "is_session_diagnosis"]
+__all__ = ["car_session", "diagnose_car_file", "diagnose_car_log", "is_session_diagnosis"]
 
 
-def car_session(path, params_file=None):
-    """``(session, car, quarter-car params)`` when the log at ``path`` is a car's session, else None.
+def car_session(log, params_file=None):
+    """``(session, car, quarter-car params)`` when ``log`` (a read quarter-car log) is a car's session, else None.
 
     :raises InvalidInputError: a session without a car section in ``--params``.
     """
-    log = read_log(path, "quarter-car")
+    path = getattr(log, "source", "log")
     if not is_session(log):
         return None
     has_car = params_file is not None and "car" in read_json_object(params_file, "vehicle parameters")
@@ -31,19 +31,24 @@ def car_session(path, params_file=None):
     return session_of(log, car), car, p
 
 
-def diagnose_car_file(path, params_file=None, candidates=None) -> SessionDiagnosis | None:
-    """The session diagnosis of the log at ``path``, or None when it is not a car's session.
+def diagnose_car_log(log, params_file=None, candidates=None) -> SessionDiagnosis | None:
+    """The session diagnosis of a read quarter-car log, or None when it is not a car's session.
 
     :param candidates: effects to try (None: every effect the car model holds); those it does not hold are left
         out.
     """
-    found = car_session(path, params_file)
+    found = car_session(log, params_file)
     if found is None:
         return None
     s, car, p = found
     cfg = CarConfig() if candidates is None else \
         CarConfig(candidates=tuple(c for c in candidates if c in EFFECT_PARAMS))
     return diagnose_session(s, car, p if p is not None else qc.PAPER_PARAMS, cfg)
+
+
+def diagnose_car_file(path, params_file=None, candidates=None) -> SessionDiagnosis | None:
+    """:func:`diagnose_car_log` of the log at ``path`` (:func:`fricenv.logs.read_log`)."""
+    return diagnose_car_log(read_log(path, "quarter-car"), params_file, candidates)
 
 
 def is_session_diagnosis(dg) -> bool:
