@@ -43,17 +43,17 @@ def test_every_event_of_one_second_or_more_is_found_and_the_rest_skipped_with_wh
     _brake(s, 4.0, 5.0)  # exactly 1 s: an event
     _brake(s, 10.0, 10.96)  # 0.96 s: too short
     _brake(s, 20.0, 23.0, throttle=5.0)  # with throttle: not an event
-    _brake(s, 30.0, 33.0, yaw=0.5)  # 7.5 m/s^2 lateral: cornering
+    _brake(s, 30.0, 33.0, yaw=0.5)  # 7.5 m/s^2 lateral: cornering, found and not diagnosed
     k = _brake(s, 40.0, 44.0)
     s.v[k] = np.linspace(15.0, 3.0, k.sum())  # crosses the floor: the event ends there
     events, skipped = find_events(s, EventRules(), 2.98)
-    assert [round(e.t_start, 2) for e in events] == [4.0, 40.0]
+    assert [round(e.t_start, 2) for e in events] == [4.0, 30.0, 40.0]
     assert round(events[0].t_end - events[0].t_start + DT, 2) == 1.0
-    assert events[1].v_end > 5.0 and events[1].stop < np.flatnonzero(k)[-1]
+    assert events[1].skip.startswith("cornering") and events[0].skip is None  # found, not diagnosed
+    assert events[2].v_end > 5.0 and events[2].stop < np.flatnonzero(k)[-1]
     reasons = {round(x["t_start"]): x["reason"] for x in skipped}
     assert reasons[10].startswith("shorter than 1 s")
     assert reasons[20] == "throttle applied"
-    assert reasons[30].startswith("cornering")
     assert any(x["reason"].startswith("slower than 5") and x["t_start"] > 40 for x in skipped)
 
 

@@ -96,3 +96,14 @@ def test_report_keeps_the_contract_and_drives_the_env(three, tmp_path):
     env = gym.make("fricenv/Braking-v0", effects=str(tmp_path / "report.json"))
     env.reset(seed=0)
     env.close()
+
+
+def test_a_cornering_event_is_found_and_not_diagnosed(session):
+    log, segs = session
+    third = [s for s in segs if s[0] == "brake"][2]
+    turning = types.SimpleNamespace(**vars(log))
+    turning.yaw_rate = np.where((log.t >= third[1]) & (log.t < third[2]), 1.0, 0.0)  # 9.7 m/s^2 at 9.7 m/s
+    dg = diagnose_session(session_of(turning, CAR), CAR, P, CFG)
+    rows = dg.where["events"]
+    assert len(rows) == 3 and rows[2]["verdict"] == "not_diagnosed" and rows[2]["note"].startswith("cornering")
+    assert dg.where["held_out"]["scheme"] == "blocks"  # two diagnosed events

@@ -61,7 +61,7 @@ def event_data(s: Session, events: list, cfg: CarConfig, use_ax: bool) -> list[E
     for ev in events:
         a, b = ev.fit_start, ev.stop
         n = b - a
-        starts = np.arange(0, n - H + 1, H) if n >= H else np.zeros(0, dtype=int)
+        starts = np.arange(0, n - H + 1, H) if n >= H and ev.skip is None else np.zeros(0, dtype=int)
         W = len(starts)
         block = (np.arange(W) * cfg.blocks) // max(W, 1)
         lead = np.asarray(s.T_b[max(0, a - pre):a], dtype=float)

@@ -147,7 +147,8 @@ def _event_rows(events, pb: Problem, before: HeldOut, after: HeldOut, alone: lis
         if not len(pb.events[i].starts):
             rows.append({**ev.as_dict(), "windows": 0, "verdict": "not_diagnosed", "effects": [], "gap_before": None,
                          "gap_after": None, "slip_stiffness": None,
-                         "note": f"no prediction window of {pb.cfg.horizon_s:g} s after the drive settled"})
+                         "note": ev.skip or f"no prediction window of {pb.cfg.horizon_s:g} s after the drive "
+                                            "settled"})
             continue
         g0, g1 = gap(before.mse[i]), gap(after.mse[i])
         f = alone[i]

@@ -1,5 +1,6 @@
 """The braking events of a car's session: runs of samples with the brake applied, no drive, fast enough, lasting
-long enough, on a path straight enough; and why every other braking stretch was skipped.
+long enough; those on a path straight enough are diagnosed, the others found and reported with why; and why every
+other braking stretch was skipped.
 
 A brake is applied when ``T_b`` is above its resting level (the 1st percentile over the moving samples: a pedal at
 rest is its lowest reading) by more than its resting noise (:func:`applied`); the same rule with ``throttle`` finds a
@@ -52,6 +53,7 @@ class Event:
     max_lateral: float
     fit_start: int
     t_fit_start: float
+    skip: str | None = None  # why the event is found but not diagnosed (cornering), None when it is
 
     def as_dict(self) -> dict:
         return {"t_start": self.t_start, "t_end": self.t_end, "v_start": self.v_start, "v_end": self.v_end,
@@ -102,8 +104,9 @@ def _states(s: Session, rules: EventRules) -> dict:
 def find_events(s: Session, rules: EventRules = EventRules(), wheelbase: float | None = None):
     """The braking events of a session, and the braking stretches skipped with why.
 
-    :return: (events, skipped): ``skipped`` is a list of ``{"t_start", "t_end", "reason"}`` (times relative to the
-        first sample) covering every sample with the brake applied that is in no event.
+    :return: (events, skipped): an event too far from straight has ``skip`` set (found, not diagnosed);
+        ``skipped`` is a list of ``{"t_start", "t_end", "reason"}`` (times relative to the first sample) covering
+        every sample with the brake applied that is in no event.
     """
     st = _states(s, rules)
     lat = lateral_acceleration(s, wheelbase)
@@ -117,14 +120,13 @@ def find_events(s: Session, rules: EventRules = EventRules(), wheelbase: float |
         top = float(np.max(lat[a:b]))
         if duration < rules.min_duration - 1e-9:
             skipped.append(_skip(t, a, b, f"shorter than {rules.min_duration:g} s ({duration:.2f} s)"))
-        elif top > rules.max_lateral:
-            skipped.append(_skip(t, a, b, f"cornering (lateral acceleration {top:.2f} m/s^2 > "
-                                          f"{rules.max_lateral:g})"))
         else:
             before = drive_at[drive_at < a]
             fit_start = min(max(a, int(before[-1]) + 1 + settle if before.size else a), b - 1)
+            corner = (f"cornering: lateral acceleration {top:.2f} m/s^2 > {rules.max_lateral:g}, outside the "
+                      "longitudinal model") if top > rules.max_lateral else None
             events.append(Event(len(events), a, b, float(t[a]), float(t[b - 1]), float(s.v[a]), float(s.v[b - 1]),
-                                top, fit_start, float(t[fit_start])))
+                                top, fit_start, float(t[fit_start]), corner))
         in_event[a:b] = True
     for a, b in runs(st["brake"] & ~in_event):
         why = np.where(st["drive"][a:b], 0, 1)  # what is left: a drive, or too slow
