@@ -72,7 +72,7 @@ def run(export: Path, out: Path) -> dict:
     cmd = [sys.executable, "-m", "fricenv", "gap", "diagnose", str(export), "--map", str(MAPS / "av21.json"),
            "--params", str(MAPS / "av21_params.json"), "--out", str(out)]
     t0 = time.perf_counter()
-    proc = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True)
+    proc = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, check=False)
     seconds = time.perf_counter() - t0
     if proc.returncode != 0:
         return {"ok": False, "error": proc.stderr.strip().splitlines()[-1:] or ["exit " + str(proc.returncode)],

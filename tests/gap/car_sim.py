@@ -66,7 +66,7 @@ def simulate(brakes=(1.2e6, 0.8e6, 1.5e6, 1.0e6), dt=0.04, seed=0, gain=1.4, v0=
     driven = [c[0] == "r" for c in corners]
     B, C, D = TIRE
     h = step
-    sub = int(round(dt / h))
+    sub = round(dt / h)
     t = np.arange(0.0, T_end, dt)
     v, w = v0, [v0 / x for x in r]
 

@@ -10,7 +10,7 @@ import numpy as np
 from scipy.optimize import nnls
 from scipy.signal import savgol_filter
 
-from fricenv.gap.car.events import EventRules, applied, lateral_acceleration
+from fricenv.gap.car.events import DEFAULT_RULES, EventRules, applied, lateral_acceleration
 from fricenv.gap.car.session import Session
 
 __all__ = ["CoastDown", "coast_down"]
@@ -33,7 +33,7 @@ class CoastDown:
         return {"c0": self.c0, "c2": self.c2, "samples": self.samples, "z": self.z}
 
 
-def coast_down(s: Session, mass: float, wheelbase: float, rules: EventRules = EventRules()) -> CoastDown | None:
+def coast_down(s: Session, mass: float, wheelbase: float, rules: EventRules = DEFAULT_RULES) -> CoastDown | None:
     """The coast-down drag, or None with fewer than ``MIN_SAMPLES`` coasting samples.
 
     :param mass: the mass the deceleration moves (with the wheels' rotation) [kg].

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from fricenv.gap.car.events import EventRules
 from fricenv.gap.car.model import EFFECT_PARAMS
@@ -14,7 +14,7 @@ __all__ = ["CarConfig"]
 class CarConfig:
     """How events are found, cut into prediction windows, held out and scored."""
 
-    rules: EventRules = EventRules()
+    rules: EventRules = field(default_factory=EventRules)
     horizon_s: float = 0.4  # prediction window [s]
     pre_s: float = 1.0  # actuator history before an event [s]
     min_events: int = 3  # hold out by event from this many events on; below, by blocks within the events [-]

@@ -88,12 +88,13 @@ def _order(effects: list, s: Session) -> list:
 
 
 def diagnose_session(s: Session, car: CarParams, p: qc.QuarterCarParams = qc.PAPER_PARAMS,
-                     cfg: CarConfig = CarConfig()) -> SessionDiagnosis:
+                     cfg: CarConfig | None = None) -> SessionDiagnosis:
     """Diagnose a car's session (see the module docstring).
 
     :raises InvalidInputError: a session without a braking event, or too short events.
     """
     t_start = time.perf_counter()
+    cfg = cfg or CarConfig()
     cfg.check()
     warnings = list(s.warnings)
     pb, events, skipped, rolling, check, coast = _problem(s, car, p, cfg, warnings)
@@ -152,7 +153,7 @@ def _event_rows(events, pb: Problem, before: HeldOut, after: HeldOut, alone: lis
             continue
         g0, g1 = gap(before.mse[i]), gap(after.mse[i])
         f = alone[i]
-        rows.append({**ev.as_dict(), "windows": int(len(pb.events[i].starts)),
+        rows.append({**ev.as_dict(), "windows": len(pb.events[i].starts),
                      "verdict": verdict(effects, g0, g1, pb.cfg.ratio_explained, pb.cfg.gap_none),
                      "effects": [] if f is None else [{"effect": e, "params": effect_params(e, f.x, mapped)}
                                                        for e in effects],

@@ -11,6 +11,7 @@ stays below ``max_lateral`` [m/s^2] over the event.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from itertools import pairwise
 
 import numpy as np
 
@@ -20,7 +21,7 @@ REST_PERCENTILE = 1.0  # a pedal's or a line's resting level: this percentile of
 REST_BAND = 0.05  # samples within this share of the largest excursion above rest give the resting noise [-]
 REST_SIGMAS = 4.0  # applied: above the resting level by this many resting noise std [-]
 
-__all__ = ["EventRules", "Event", "find_events", "runs", "applied", "lateral_acceleration", "session_summary"]
+__all__ = ["Event", "EventRules", "applied", "find_events", "lateral_acceleration", "runs", "session_summary"]
 
 
 @dataclass(frozen=True)
@@ -36,6 +37,9 @@ class EventRules:
     # the drive's torque outlasts its command: an event is fitted from this long after the last drive sample [s]
     # (this car's deceleration reaches 90 % of its coasting level about 0.6 s after a throttle release)
     drive_settle: float = 0.6
+
+
+DEFAULT_RULES = EventRules()
 
 
 @dataclass(frozen=True)
@@ -101,7 +105,7 @@ def _states(s: Session, rules: EventRules) -> dict:
     return {"moving": moving, "brake": brake, "drive": drive}
 
 
-def find_events(s: Session, rules: EventRules = EventRules(), wheelbase: float | None = None):
+def find_events(s: Session, rules: EventRules = DEFAULT_RULES, wheelbase: float | None = None):
     """The braking events of a session, and the braking stretches skipped with why.
 
     :return: (events, skipped): an event too far from straight has ``skip`` set (found, not diagnosed);
@@ -141,14 +145,14 @@ def _split(codes: np.ndarray):
     """(code, (start, stop)) of the constant runs of ``codes``."""
     edges = np.flatnonzero(np.diff(codes)) + 1
     bounds = np.r_[0, edges, len(codes)]
-    return [(int(codes[x]), (int(x), int(y))) for x, y in zip(bounds[:-1], bounds[1:])]
+    return [(int(codes[x]), (int(x), int(y))) for x, y in pairwise(bounds)]
 
 
 def _skip(t: np.ndarray, a: int, b: int, reason: str) -> dict:
     return {"t_start": float(t[a]), "t_end": float(t[b - 1]), "reason": reason}
 
 
-def session_summary(s: Session, events: list, rules: EventRules = EventRules()) -> dict:
+def session_summary(s: Session, events: list, rules: EventRules = DEFAULT_RULES) -> dict:
     """Seconds of the session by state: standing or slow, driving, braking in an event, braking skipped, coasting."""
     st = _states(s, rules)
     in_event = np.zeros(len(s), dtype=bool)

@@ -25,7 +25,7 @@ from scipy.signal import lfilter
 
 from fricenv.gap.car.session import CORNERS, CarParams
 
-__all__ = ["EFFECT_PARAMS", "EventData", "PARAM_BOUNDS", "nominal_params", "predict_event", "window_residuals"]
+__all__ = ["EFFECT_PARAMS", "PARAM_BOUNDS", "EventData", "nominal_params", "predict_event", "window_residuals"]
 
 # The car's parameters each library effect frees (radius_error: one radius per logged wheel).
 EFFECT_PARAMS = {"brake_gain": ("gain",), "radius_error": tuple(f"r_{c}" for c in CORNERS),

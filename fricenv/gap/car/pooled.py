@@ -19,7 +19,6 @@ from fricenv.gap.car.model import (
     PARAM_BOUNDS,
     SLIP_STIFFNESS_BOUNDS,
     SLIP_STIFFNESS_START,
-    EventData,
     window_mse,
     window_residuals,
 )
@@ -182,7 +181,6 @@ def _score(pb: Problem, x: dict, s: float, i: int, widx: np.ndarray) -> np.ndarr
 
 def cross_fit(pb: Problem, effects, warm: HeldOut | None = None) -> HeldOut:
     """Every window predicted by a fit that did not see it (:func:`scheme`)."""
-    E = len(pb.events)
     mse = [np.full(len(e.starts), np.nan) for e in pb.events]
     fits = []
     if scheme(pb) == "event":

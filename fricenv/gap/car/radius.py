@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fricenv.gap.car.events import EventRules, applied
+from fricenv.gap.car.events import DEFAULT_RULES, EventRules, applied
 from fricenv.gap.car.session import Session
 
 __all__ = ["FreeRolling", "free_rolling_radii"]
@@ -49,7 +49,7 @@ def _straight(s: Session, wheelbase: float) -> np.ndarray:
     return np.ones(len(s), dtype=bool)
 
 
-def free_rolling_radii(s: Session, wheelbase: float, rules: EventRules = EventRules()) -> FreeRolling | None:
+def free_rolling_radii(s: Session, wheelbase: float, rules: EventRules = DEFAULT_RULES) -> FreeRolling | None:
     """The free-rolling radius of every logged wheel, or None with fewer than ``MIN_SAMPLES`` free-rolling samples
     (the brake applied and the drive as :func:`fricenv.gap.car.events.applied` reads them)."""
     v = np.nan_to_num(s.v)

@@ -9,8 +9,6 @@ import shutil
 import tempfile
 from pathlib import Path
 
-import numpy as np
-
 from fricenv.gap.car.diagnose import SessionDiagnosis
 from fricenv.utils import atomic_write, to_jsonable, write_json
 
@@ -70,9 +68,9 @@ def report_markdown(dg: SessionDiagnosis, report: dict, images=(PLOT_TIMELINE,))
              f"**Verdict: `{report['verdict']}`**" + (f" with {report['params']}" if report["params"] else ""), "",
              "- effects: " + ("; ".join(f"`{e['effect']}` {_params(e['params'])}" for e in report["effects"])
                              or "none"),
-             f"- held-out gap before: {report['gap_before']:.3f}, after: {report['gap_after']:.3f} (noise units; "
-             f"held out by {w['held_out']['scheme']}, {w['held_out']['windows']} windows of "
-             f"{w['held_out']['horizon_s']:.2f} s)",
+             (f"- held-out gap before: {report['gap_before']:.3f}, after: {report['gap_after']:.3f} (noise units; "
+              f"held out by {w['held_out']['scheme']}, {w['held_out']['windows']} windows of "
+              f"{w['held_out']['horizon_s']:.2f} s)"),
              f"- session: {sess['duration_s']:.1f} s, " + ", ".join(f"{k} {v:.1f} s" for k, v in
                                                                    sess["seconds"].items()),
              f"- time base: {w['time_base']['origin']}, offset {w['time_base']['offset_s']:.6f} s",

@@ -8,7 +8,7 @@ import numpy as np
 from fricenv import progress
 from fricenv.gap.car.pooled import HeldOut, Problem, cross_fit
 
-__all__ = ["gap", "paired_z", "forward_select", "verdict"]
+__all__ = ["forward_select", "gap", "paired_z", "verdict"]
 
 
 def gap(mse: np.ndarray) -> float:
