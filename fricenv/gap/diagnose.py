@@ -355,12 +355,14 @@ def _where(nominal: CandidateFit, s: _Selection, d: Data, cfg: DiagnoseConfig) -
 
 
 def load_params(path) -> qc.QuarterCarParams:
-    """Vehicle parameters from a JSON file (keys of :class:`QuarterCarParams`; unknown keys rejected)."""
+    """Vehicle parameters from a JSON file (keys of :class:`QuarterCarParams`; unknown keys rejected). A ``car``
+    section (a car's mass and axle positions, docs/contracts.md section 2) is not a quarter-car key: it is passed
+    over here and read by the car's own loader."""
     from dataclasses import fields as dc_fields
 
     from fricenv.utils import read_json_object
 
-    raw = read_json_object(path, "vehicle parameters")
+    raw = {k: v for k, v in read_json_object(path, "vehicle parameters").items() if k != "car"}
     valid = [f.name for f in dc_fields(qc.QuarterCarParams)]
     unknown = sorted(set(raw) - set(valid))
     if unknown:

@@ -343,6 +343,8 @@ def read_log(path: str | os.PathLike, plant: str = "quarter-car",
     if column_map is None:  # a mapped time is re-based already, in its own unit (apply_map)
         info.offset = float(cols["t"][0])
         cols["t"] = cols["t"] - info.offset
+    if plant == "quarter-car":
+        checks.check_speeds(path, cols, info.radii.get("omega", _NOMINAL_RADIUS))
     _PLANT_CHECKS[plant](path, cols, lines)  # on the values as logged, held ones included
     step = grid.median_step if grid is not None else float(np.median(np.diff(cols["t"])))
     slow = _mark_held(cols, step)

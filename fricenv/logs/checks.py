@@ -24,6 +24,7 @@ from fricenv.logs.csvfile import LogFormatError
 from fricenv.logs.logmap import WHEELS
 
 __all__ = ["RATE_HZ", "AxAgreement", "LogCheckWarning", "ax_agreement", "check_rate", "check_session",
+           "check_speeds",
            "one_line_warnings"]
 
 RATE_HZ = (10.0, 1000.0)  # the sample rates a log may have (median step)
@@ -156,9 +157,9 @@ def _check_ax(cols: dict[str, np.ndarray], step: float) -> list[str]:
         problem = (f"its sign disagrees with the slope of v (gain {gain:.2f} at lag {lag:.2f} s, correlation "
                    f"{corr:.2f}); is it negated?")
     elif abs(lag) > _AX_LAG_OK or not _AX_GAIN_OK[0] <= gain <= _AX_GAIN_OK[1]:
-        when = f"trails it by {lag:.2f} s" if lag >= 0 else f"leads it by {-lag:.2f} s"
-        problem = (f"{when} at {gain:.2f} times its size, against the slope of v (correlation {corr:.2f}): a "
-                   f"delayed, filtered or mis-scaled channel")
+        when = f"trails the slope of v by {lag:.2f} s" if lag >= 0 else f"leads the slope of v by {-lag:.2f} s"
+        problem = (f"{when} at {gain:.2f} times its size (correlation {corr:.2f}): a delayed, filtered or "
+                   f"mis-scaled channel")
     else:
         return []
     del cols["a_x"]
@@ -201,8 +202,13 @@ def _check_brake(path: Path, cols: dict[str, np.ndarray], step: float, radius: f
             f"vehicle is {lo:g}-{hi:g} kg); check its unit (a pressure's unit and factor in the map)")
 
 
-def _check_speeds(path: Path, cols: dict[str, np.ndarray], radius: float) -> None:
-    """v and omega mostly positive; omega not constant while v changes."""
+def check_speeds(path: Path, cols: dict[str, np.ndarray], radius: float) -> None:
+    """v and omega mostly positive; omega not constant while v changes (first: a sign or a stuck wheel would
+    otherwise read as a wrong unit).
+
+    :param radius: the wheel radius [m] of ``omega`` (the map's, else a nominal one).
+    :raises LogFormatError: one line naming the file and column.
+    """
     for name, floor in (("v", _MOVING_V), ("omega", _MOVING_V / radius)):
         if name in cols:
             share, n = _moving_sign_share(cols[name], floor)
@@ -270,7 +276,7 @@ def _check_wheels(path: Path, cols: dict[str, np.ndarray], step: float, radii: d
 
 def check_session(path: Path, cols: dict[str, np.ndarray], step: float, radii: dict[str, float],
                   nominal_radius: float) -> list[str]:
-    """The quarter-car channels on the uniform grid: errors raised, warnings returned (channels they leave out are
+    """The quarter-car channels on the uniform grid, after :func:`check_speeds`: errors raised, warnings returned (channels they leave out are
     removed from ``cols``).
 
     :param step: the uniform sample step [s].
@@ -279,6 +285,5 @@ def check_session(path: Path, cols: dict[str, np.ndarray], step: float, radii: d
     :raises LogFormatError: one line naming the file and column.
     """
     radius = radii.get("omega", nominal_radius)
-    _check_speeds(path, cols, radius)
     _check_brake(path, cols, step, radius)
     return _check_ax(cols, step) + _check_wheels(path, cols, step, radii, nominal_radius)
