@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from fricenv import cli
-from fricenv.gap.simulate import simulate_log
+from fricenv.gap.quarter_car.simulate import simulate_log
 from fricenv.logs import LogCheckWarning, read_log
 from fricenv.plants.tire import ROADS
 

@@ -149,6 +149,6 @@ def test_the_racecar_export_reads_with_its_map(tmp_path):
 
 
 def test_the_car_params_file_reads_as_quarter_car_params():
-    from fricenv.gap.diagnose import load_params
+    from fricenv.gap.quarter_car.diagnose import load_params
 
     assert load_params(ROOT / "validation" / "maps" / "av21_params.json").r == 0.33
