@@ -38,6 +38,7 @@ _AX_MIN_SPREAD = 0.05  # [m/s^2]: an a_x this flat has no shape to compare
 _AX_MIN_CORR = 0.5  # a_x that correlates less with the slope of v follows something else
 _AX_LAG_OK = 0.3  # [s]: a longer lag is a delayed or heavily filtered channel (shorter ones the diagnosis undoes)
 _AX_GAIN_OK = (0.67, 1.5)
+_MIN_BRAKING_S = 0.2  # [s] of braking samples before the brake's size is judged
 _BRAKED_MASS_KG = (15.0, 1.0e4)  # T_b / (r x deceleration): a wheel's share of a vehicle, bicycle to truck
 _FREE_ROLL_V = 5.0  # [m/s]
 _FREE_ROLL_RATIO = 0.05  # |wheel x radius / v - 1| above this while rolling freely: check the radius or unit
@@ -191,7 +192,7 @@ def _check_brake(path: Path, cols: dict[str, np.ndarray], step: float, radius: f
     speed = cols["v"] if "v" in cols else cols["omega"] * radius
     dec = -_slope(step, speed)
     braking = (tb > 0.1 * peak) & (dec > 0.5) & (_filled(speed) > 2.0)
-    if np.count_nonzero(braking) < 5:
+    if np.count_nonzero(braking) < max(5, round(_MIN_BRAKING_S / step)):
         return
     mass = float(np.median(tb[braking] / (radius * dec[braking])))
     lo, hi = _BRAKED_MASS_KG
