@@ -9,6 +9,10 @@ Real exports (docs/contracts.md, section 1): ``read_log(path, plant, column_map=
 a column map (:mod:`fricenv.logs.logmap`) names, in the map's units. Jittered time stamps and dropped rows are
 resampled onto a uniform grid, held samples of a slower channel are marked missing (NaN), and the log records what was done
 (``resampled``, ``missing``, ``torque_from_pressure``); the rules are in :mod:`fricenv.logs.resample`.
+
+A header written as the last ``#`` line before the data is read as the header (:mod:`fricenv.logs.csvfile`); time is
+re-based to the first sample (``t_offset``); a car's session may add ``throttle``, ``yaw_rate``, ``steer`` and the four
+wheels; :mod:`fricenv.logs.checks` catches a person's or a logger's mistakes before any long work (``warnings``).
 """
 
 from __future__ import annotations
