@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import argparse
 from collections import Counter
+from pathlib import Path
 
 from fricenv.errors import InvalidInputError
 from fricenv.gap.plants import GAP_PLANTS
@@ -123,7 +124,7 @@ def _report(args: argparse.Namespace, dg, report: dict, summary: str) -> int:
     print(summary)
     top = ", ".join(f"{c['effect']} {c['gap_after']:.3g}" for c in report["candidates"][:3])
     print(f"best candidates (held-out gap): {top}")
-    print(f"report: {args.out}/report.json, report.md ({dg.seconds:.1f} s)")
+    print(f"report: {Path(args.out) / 'report.json'}, report.md ({dg.seconds:.1f} s)")
     return 0
 
 
@@ -160,5 +161,5 @@ def _run_fleet(args: argparse.Namespace) -> int:
     rate = s["diagnosed"] / s["wall_seconds"] * 3600 if s["diagnosed"] else 0.0
     print(f"diagnosed {s['diagnosed']} in {s['wall_seconds']:.0f} s ({rate:.0f} logs/hour), "
           f"skipped {s['skipped']} already reported, {s['failed']} failed")
-    print(f"fleet: {args.out}/fleet.json, fleet.md")
+    print(f"fleet: {Path(args.out) / 'fleet.json'}, fleet.md")
     return 1 if s["failed"] else 0
