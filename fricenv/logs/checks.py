@@ -156,7 +156,7 @@ def _check_ax(cols: dict[str, np.ndarray], step: float) -> list[str]:
         problem = f"does not follow the slope of v (best correlation {corr:.2f} within {_AX_MAX_LAG_S:g} s)"
     elif corr < 0:
         problem = (f"its sign disagrees with the slope of v (gain {gain:.2f} at lag {lag:.2f} s, correlation "
-                   f"{corr:.2f}); is it negated?")
+                   f"{corr:.2f}), as if negated")
     elif abs(lag) > _AX_LAG_OK or not _AX_GAIN_OK[0] <= gain <= _AX_GAIN_OK[1]:
         when = f"trails the slope of v by {lag:.2f} s" if lag >= 0 else f"leads the slope of v by {-lag:.2f} s"
         problem = (f"{when} at {gain:.2f} times its size (correlation {corr:.2f}): a delayed, filtered or "
