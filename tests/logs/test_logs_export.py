@@ -152,3 +152,49 @@ def test_the_car_params_file_reads_as_quarter_car_params():
     from fricenv.gap.quarter_car.diagnose import load_params
 
     assert load_params(ROOT / "validation" / "maps" / "av21_params.json").r == 0.33
+
+
+def _car_export(tmp_path, wheel_rr, radius_rr=0.34):
+    """A coasting car (no brake, no throttle) then a stop; the rear-right wheel as given."""
+    n = 600
+    t = np.arange(n) * 0.02
+    v = np.where(t < 6.0, 25.0 - 0.1 * t, 24.4 - 6.0 * (t - 6.0))
+    v = np.maximum(v, 1.0)
+    brake = np.where(t < 6.0, 0.0, 2000.0)
+    cols = {"time": t, "brake": brake, "thr": np.zeros(n), "vx": v, "w_fl": 3.6 * v * 1.01, "w_rr": wheel_rr(v)}
+    path = tmp_path / "car.csv"
+    path.write_text(",".join(cols) + "\n" + "\n".join(",".join(repr(float(cols[k][i])) for k in cols)
+                                                      for i in range(n)) + "\n")
+    cmap = tmp_path / "car.map.json"
+    cmap.write_text(json.dumps({"channels": {
+        "t": "time", "T_b": {"column": "brake", "unit": "kPa", "factor": 3.4e-4},
+        "omega": {"column": "w_fl", "unit": "km/h", "radius": 0.33}, "v": "vx", "throttle": "thr",
+        "omega_rr": {"column": "w_rr", "unit": "km/h", "radius": radius_rr}}}))
+    return path, cmap
+
+
+def _read_car(tmp_path, wheel_rr):
+    path, cmap = _car_export(tmp_path, wheel_rr)
+    return read_log(path, column_map=cmap)
+
+
+def test_a_wheel_off_v_while_rolling_freely_is_a_warning(tmp_path):
+    """A rim speed 8 % above v while coasting: its radius or unit is to be checked; the wheel is kept."""
+    with pytest.warns(Warning, match=r"omega_rr: wheel speed x radius / v = 1\.08"):
+        log = _read_car(tmp_path, lambda v: 3.6 * v * 1.08)
+    assert log.omega_rr is not None and [w.split(":")[0] for w in log.warnings] == ["omega_rr"]
+    assert "median of 300 samples" in log.warnings[0]
+
+
+def test_a_clean_car_export_has_no_warning(tmp_path, recwarn):
+    log = _read_car(tmp_path, lambda v: 3.6 * v * 1.01)
+    assert log.warnings == () and log.omega_rr is not None and len(recwarn) == 0
+
+
+@pytest.mark.parametrize("wheel, said", [(lambda v: -3.6 * v, "negative in 100%"),
+                                         (lambda v: np.full_like(v, 80.0), "constant"),
+                                         (lambda v: v, r"x r / v = 0\.278")])
+def test_another_wheel_that_cannot_be_one_is_left_out(tmp_path, wheel, said):
+    with pytest.warns(Warning, match=said):
+        log = _read_car(tmp_path, wheel)
+    assert log.omega_rr is None and log.warnings[0].startswith("omega_rr: ") and log.warnings[0].endswith("left out")
