@@ -306,6 +306,8 @@ def diagnose(log: QuarterCarLog, p: qc.QuarterCarParams = qc.PAPER_PARAMS,
         s.periodic["remains_with_effects"] = periodic_line(whole, d) is not None
     not_testable = not_testable.shown({f.effect for f in s.significant} | {e["effect"] for e in effects})
     findings = _findings(nominal, s, d, cfg, not_testable, steps, expected)
+    findings.extra.update(time_base={"origin": "first_sample", "offset_s": float(log.t_offset)},
+                          warnings=list(log.warnings))
     verdict = effects[0]["effect"] if effects else s.verdict  # a discovery before an expected calibration
     return Diagnosis(verdict=verdict, gap_before=nominal.gap,
                      gap_after=nominal.gap if whole is None else whole.gap,
