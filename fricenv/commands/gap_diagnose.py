@@ -94,7 +94,15 @@ def _candidates(args: argparse.Namespace, valid: tuple[str, ...]) -> tuple[str, 
 
 
 def run(args: argparse.Namespace) -> int:
-    """Read, diagnose, report (a fleet: every log of a folder or glob pattern, and the fleet summary)."""
+    """Read, diagnose, report (a fleet: every log of a folder or glob pattern, and the fleet summary); each warning
+    of the log checks is one line on stderr."""
+    from fricenv.logs.checks import one_line_warnings
+
+    with one_line_warnings():
+        return _run(args)
+
+
+def _run(args: argparse.Namespace) -> int:
     from fricenv.gap.fleet.run import is_fleet_source
 
     if is_fleet_source(args.source):
