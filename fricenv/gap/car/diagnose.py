@@ -126,20 +126,25 @@ def diagnose_session(s: Session, car: CarParams, p: qc.QuarterCarParams = qc.PAP
     where["car"]["coast_down"] = None if coast is None else coast.summary()
     return SessionDiagnosis(verdict=v, gap_before=g0, gap_after=g1 if effects else g0,
                             params=next((e["params"] for e in out_effects if e["effect"] == v), {}),
-                            effects=out_effects, candidates=_candidates(pb, steps, before, s.mapped, g0),
+                            effects=out_effects, candidates=_candidates(pb, before, s.mapped, g0),
                             where=where, session=s, events=events, seconds=time.perf_counter() - t_start,
                             source=s.source, heldout={"before": before, "after": after})
 
 
-def _candidates(pb: Problem, steps: list, before: HeldOut, mapped: str, g0: float) -> list:
-    """Each library effect alone (the first selection step), best first: held-out gap and score."""
-    if not steps:
-        return []
+def _candidates(pb: Problem, before: HeldOut, mapped: str, g0: float) -> list:
+    """Each library effect alone on the nominal car, held out like the set, best first: its held-out gap, its
+    score (the share of the nominal held-out excess error it closes) and its parameters (mean over the folds)."""
     out = []
-    for e, g in sorted(steps[0]["tried"].items(), key=lambda kv: kv[1]):
-        score = float(1.0 - g ** 2 / g0 ** 2) if g0 > 0 else 0.0
-        out.append({"effect": e, "params": {}, "gap_after": g, "score": score})
-    return out
+    with progress.task("fit each effect alone", total=len(pb.cfg.candidates)) as advance:
+        for e in pb.cfg.candidates:
+            h = cross_fit(pb, [e], before)
+            g = gap(h.all())
+            params = {k: float(np.mean([effect_params(e, f.x, mapped)[k] for f in h.fits]))
+                      for k in effect_params(e, h.fits[0].x, mapped)} if h.fits else {}
+            out.append({"effect": e, "params": params, "gap_after": g,
+                        "score": float(1.0 - g ** 2 / g0 ** 2) if g0 > 0 else 0.0})
+            advance()
+    return sorted(out, key=lambda c: c["gap_after"])
 
 
 def _event_rows(events, pb: Problem, before: HeldOut, after: HeldOut, alone: list, effects: list, mapped: str):

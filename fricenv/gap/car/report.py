@@ -86,6 +86,10 @@ def report_markdown(dg: SessionDiagnosis, report: dict, images=(PLOT_TIMELINE,))
                   "| parameter | per event | mean | std |", "| --- | --- | --- | --- |"]
         lines += [f"| {k} | {', '.join(f'{x:.4g}' for x in v['per_event'])} | {v['mean']:.4g} | {v['std']:.3g} |"
                   for k, v in w["event_spread"].items()] + [""]
+    lines += ["## Each effect alone on the nominal car (held out)", "", "| effect | params | gap after | score |",
+              "| --- | --- | --- | --- |"]
+    lines += [f"| {c['effect']} | {_params(c['params'])} | {c['gap_after']:.3f} | {c['score']:.3f} |"
+              for c in report["candidates"]] + [""]
     lines += ["## Forward selection (held out)", "", "| step | added | gap after | z paired | accepted |",
               "| --- | --- | --- | --- | --- |"]
     lines += [f"| {i} | {st['added']}{' (calibration)' if st.get('calibration') else ''} | {st['gap']:.3f} | "
