@@ -348,6 +348,27 @@ def payload_untestable(d: PayloadData) -> dict[str, str]:
     return {e: r for e, rule in PAYLOAD_TESTABLE.items() if (r := rule(x)) is not None}
 
 
+def _data_summary(d: PayloadData, cfg: PayloadDiagnoseConfig) -> dict:
+    """``where["data"]``: samples, blocks, effective samples, the filter and the raw noise levels."""
+    n_scored = int(np.count_nonzero(d.block >= 0))
+    return {"samples": d.n, "dt": d.dt, "blocks": len(d.block_test),
+            "held_out_blocks": int(np.count_nonzero(d.block_test)), "block_s": cfg.block_s,
+            "scored_samples": n_scored, "effective_samples": n_scored * len(CHANNELS) / d.rho2,
+            "filter": f"zero-phase Butterworth order {cfg.filter_order}, {cfg.cutoff_hz:g} Hz",
+            "raw_noise_std": d.raw_noise}
+
+
+def _sensors(d: PayloadData, nominal: PayloadCandidate) -> dict:
+    """``where["sensors"]``; a low-passed force-moment sensor also gets its lag (from its noise roll-off if it
+    shows, else the nominal model's shift) and ``lag_fit_s``, the nominal model's shift (the motion's view)."""
+    sensors = d.sensors
+    if d.wrench_lag_max > 0:
+        for c in WRENCH:
+            sensors[c]["lag_s"] = -nominal.shift if d.wrench_lag is None else d.wrench_lag
+            sensors[c]["lag_fit_s"] = -nominal.shift
+    return sensors
+
+
 def diagnose_payload(log: PayloadLog, S_known=pl.PAPER_S, p: pl.PayloadParams = pl.PAPER_PARAMS,
                      cfg: PayloadDiagnoseConfig = DEFAULT_PAYLOAD_CONFIG) -> PayloadDiagnosis:
     """Diagnose the sim-to-real gap of a payload log (see the module docstring).
@@ -397,17 +418,12 @@ def diagnose_payload(log: PayloadLog, S_known=pl.PAPER_S, p: pl.PayloadParams = 
         joint.penalised < sig[0].penalised
     verdict, chosen, fits = decide_verdict(sig, fits, explains, joint_wins, nominal.gap > cfg.gap_none)
     loc = where_gap(d, nominal, chosen, getattr(log, "t_offset", 0.0))
-    n_scored = int(np.count_nonzero(d.block >= 0))
     where = {
         "time_base": loc["time_base"],
         "segments": loc["segments"],
         "regimes": loc["regimes"],
         "channels": loc["channels"],
-        "data": {"samples": d.n, "dt": d.dt, "blocks": len(d.block_test),
-                 "held_out_blocks": int(np.count_nonzero(d.block_test)), "block_s": cfg.block_s,
-                 "scored_samples": n_scored, "effective_samples": n_scored * len(CHANNELS) / d.rho2,
-                 "filter": f"zero-phase Butterworth order {cfg.filter_order}, {cfg.cutoff_hz:g} Hz",
-                 "raw_noise_std": d.raw_noise},
+        "data": _data_summary(d, cfg),
         "tests": {f.effect: {"z": f.z, "z_measured_noise": evidence(f), "penalised_test_mse": f.penalised,
                              "n_params": f.n_params, "significant": bool(significant(f))} for f in fits},
         # candidates significant by the propagated noise alone on a log the nominal model fits within the noise
@@ -415,11 +431,7 @@ def diagnose_payload(log: PayloadLog, S_known=pl.PAPER_S, p: pl.PayloadParams = 
                       and f.penalised < nominal.penalised],
         "residual_rho2": {"propagated": d.rho2, "measured": measured_rho2},
     }
-    where["sensors"] = d.sensors
-    if d.wrench_lag_max > 0:  # a low-passed force-moment sensor: its lag, from its noise roll-off if it shows
-        for c in WRENCH:
-            where["sensors"][c]["lag_s"] = -nominal.shift if d.wrench_lag is None else d.wrench_lag
-            where["sensors"][c]["lag_fit_s"] = -nominal.shift  # the nominal model's shift (the motion's view)
+    where["sensors"] = _sensors(d, nominal)
     where["not_testable"] = payload_untestable(d)
     if joint is not None:
         where["joint_fit"] = {"effects": joint.effect.split("+"), "params": joint.effect_params(),
