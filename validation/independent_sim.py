@@ -258,7 +258,7 @@ def write_independent_log(path: str | os.PathLike, case: IndependentCase) -> dic
 
 
 def real_export(case: IndependentCase):
-    """Simulate ``case`` and pass it through a logger's artifacts (tests/real_artifacts.py, settings ``case.real``):
+    """Simulate ``case`` and pass it through a logger's artifacts (validation/real_artifacts.py, settings ``case.real``):
     a :class:`validation.real_artifacts.RealExport`, whose ``truth`` says where the artifacts went."""
     sim = simulate_case(case)
     spec = QuarterCarArtifacts(**case.real)
@@ -273,7 +273,7 @@ def real_export(case: IndependentCase):
 
 
 def write_real_log(stem: str | os.PathLike, case: IndependentCase) -> tuple[str, str, dict]:
-    """Simulate ``case`` and write it as a real-like export with its column map (tests/real_artifacts.py, settings
+    """Simulate ``case`` and write it as a real-like export with its column map (validation/real_artifacts.py, settings
     ``case.real``): ``STEM.csv`` and ``STEM.map.json``. Returns the two paths and the truth."""
     export = real_export(case)
     csv_path, map_path = write_export(stem, export)
@@ -477,7 +477,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Command line: ``python -m validation.independent_sim --n 45 --seed 7 --jobs 2 [--json P]``."""
     ap = measurement_parser("Measure the gap diagnosis on logs of an independent simulator.", n=45, seed=7)
     ap.add_argument("--real", action="store_true",
-                    help="write each log as a real-like export (tests/real_artifacts.py: 25-100 Hz, jittered epoch "
+                    help="write each log as a real-like export (validation/real_artifacts.py: 25-100 Hz, jittered epoch "
                          "stamps, km/h and kPa with a map, filtered a_x and v, quantised wheel speed, outliers) and "
                          "diagnose it through its map")
     ap.add_argument("--omega-only", action="store_true",

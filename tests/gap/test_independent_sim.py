@@ -1,4 +1,4 @@
-"""Tests of the independent quarter-car log simulator (tests/independent_sim.py) and one slow blind-diagnosis check."""
+"""Tests of the independent quarter-car log simulator (validation/independent_sim.py) and one slow blind-diagnosis check."""
 
 from __future__ import annotations
 
@@ -253,7 +253,7 @@ def test_written_log_is_readable_with_the_right_columns(tmp_path):
 
 
 def test_real_like_export_reads_back_to_the_simulated_log(tmp_path):
-    """--real: the export (tests/real_artifacts.py) read through its map is the simulated log on a coarser grid."""
+    """--real: the export (validation/real_artifacts.py) read through its map is the simulated log on a coarser grid."""
     from fricenv.logs import read_log
 
     plain = ind.draw_cases(4, seed=3)

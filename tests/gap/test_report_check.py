@@ -1,4 +1,4 @@
-"""The checks of what a report says on blind logs (tests/report_check.py) count what they say they count."""
+"""The checks of what a report says on blind logs (validation/report_check.py) count what they say they count."""
 
 from types import SimpleNamespace
 

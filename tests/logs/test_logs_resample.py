@@ -1,5 +1,5 @@
 """Resampling and held samples in the log reader (fricenv/resample.py through fricenv.logs.read_log), and the convert
-round trip of a real-like export (tests/real_artifacts.py) back to the clean log."""
+round trip of a real-like export (validation/real_artifacts.py) back to the clean log."""
 
 import numpy as np
 import pytest

@@ -6,7 +6,7 @@ is one linearly implicit step, a map ``x_{k+1} = Phi_k(x_k)`` of the state ``x =
 the step's start, with the slip from the step's mean wheel speed (:func:`step_wheel_speed`), over
 ``1 - IMPLICIT dt df/dv`` (the linearly implicit trapezoidal rule for ``IMPLICIT = 1/2``, second order in the step).
 A first-order step (the force at the step's first wheel-speed sample, ``IMPLICIT = 1``) lags the braking onset by
-about a sample: from an independent simulator's noise-free wheel speed (``tests/independent_model.py``, 100 Hz) its
+about a sample: from an independent simulator's noise-free wheel speed (``validation/independent_model.py``, 100 Hz) its
 speed ran 28-43 mm/s (at most 66) above the truth on wet-road logs, which moved the windows' predicted wheel speed
 by 0.2-0.8 noise std; this step stays within 17 mm/s (0.4-6.5 mm/s on average).
 
