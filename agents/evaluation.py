@@ -25,8 +25,9 @@ from __future__ import annotations
 import contextlib
 import csv
 import dataclasses
+import json
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -57,16 +58,18 @@ ROAD_NAMES = ("dry", "wet", "snow", "ice")
 TRANSITIONS = ("dry->ice", "ice->dry")
 CHANGE_DISTANCE = 15.0  # [m]
 DEFAULT_SEEDS = 3
-ROW_KEYS = ("policy", "estimator", "scenario", "ratio_mean", "ratio_std", "locks", "slip_err_mean", "stopped",
+ROW_KEYS = ("policy", "estimator", "scenario", "cell", "effects", "ratio_mean", "ratio_std", "locks", "slip_err_mean", "stopped",
             "episodes")
 
 
 @dataclass(frozen=True)
 class Scenario:
-    """One evaluation scenario."""
+    """One evaluation scenario: a road, a speed and the plant's effects (``[]``: the nominal plant)."""
 
     road: str  # road spec of Braking-v0
     v0: float  # initial speed [m/s]
+    effects: tuple = field(default=(), compare=False)  # {"effect", "params"} entries of Braking-v0's effects=
+    cell: str = "nominal"  # the effects' label in tables (an effect-grid cell, "custom" or "nominal")
 
     @property
     def name(self) -> str:
@@ -103,7 +106,7 @@ def _controller(spec: PolicySpec, env):
 
 
 def run_episode(spec: PolicySpec, scenario: Scenario, seed: int) -> dict[str, Any]:
-    """One episode of a policy on a scenario: ratio, lock, mean |slip - lambda*|, stopped.
+    """One episode of a policy on a scenario (its plant's effects on): ratio, lock, mean |slip - lambda*|, stopped.
 
     :param spec: the policy.
     :param scenario: the scenario.
@@ -112,7 +115,7 @@ def run_episode(spec: PolicySpec, scenario: Scenario, seed: int) -> dict[str, An
     from fricenv.envs.factory import make_braking
 
     env = make_braking(spec.estimator, road=scenario.road, v0=scenario.v0, change_distance=CHANGE_DISTANCE,
-                       observation=spec.observation)
+                       observation=spec.observation, effects=list(scenario.effects) or None)
     try:
         return run_controller(_controller(spec, env), env, seed)
     finally:
@@ -188,17 +191,19 @@ def evaluate(policies: Sequence[str | PolicySpec], scenarios: Sequence[Scenario]
 
 def summarize(jobs, results) -> list[dict[str, Any]]:
     """Group episode results by (policy, scenario) into summary rows."""
-    groups: dict[tuple[str, str], dict[str, Any]] = {}
+    groups: dict[tuple[str, str, str], dict[str, Any]] = {}
     for (spec, sc, _), res in zip(jobs, results):
-        g = groups.setdefault((spec.label, sc.name), {"spec": spec, "res": []})
+        g = groups.setdefault((spec.label, sc.name, sc.cell), {"spec": spec, "effects": sc.effects, "res": []})
         g["res"].append(res)
     rows = []
-    for (label, scenario), g in groups.items():
+    for (label, scenario, cell), g in groups.items():
         ratios = np.array([r["ratio"] for r in g["res"]])
         rows.append({
             "policy": label,
             "estimator": g["spec"].estimator,
             "scenario": scenario,
+            "cell": cell,
+            "effects": [dict(e) for e in g["effects"]],
             "ratio_mean": float(np.mean(ratios)),
             "ratio_std": float(np.std(ratios)),
             "locks": int(sum(r["lock"] for r in g["res"])),
@@ -211,10 +216,13 @@ def summarize(jobs, results) -> list[dict[str, Any]]:
 
 def format_table(rows: Sequence[dict[str, Any]]) -> str:
     """A plain-text table: one line per (policy, scenario)."""
-    head = f"{'policy':<26} {'scenario':<14} {'ratio':>16} {'locks':>5} {'|slip-l*|':>9} {'stopped':>7}"
+    cells = any(r.get("cell", "nominal") != "nominal" for r in rows)
+    head = f"{'policy':<26} {'scenario':<14} " + (f"{'plant':<24} " if cells else "") + \
+        f"{'ratio':>16} {'locks':>5} {'|slip-l*|':>9} {'stopped':>7}"
     lines = [head, "-" * len(head)]
     for r in rows:
-        lines.append(f"{r['policy']:<26} {r['scenario']:<14} {r['ratio_mean']:>8.3f} +- {r['ratio_std']:<5.3f} "
+        plant = f"{r.get('cell', 'nominal'):<24} " if cells else ""
+        lines.append(f"{r['policy']:<26} {r['scenario']:<14} {plant}{r['ratio_mean']:>8.3f} +- {r['ratio_std']:<5.3f} "
                      f"{r['locks']:>5d} {r['slip_err_mean']:>9.3f} {r['stopped']:>3d}/{r['episodes']:<3d}")
     return "\n".join(lines)
 
@@ -237,9 +245,12 @@ def write_outputs(rows: Sequence[dict[str, Any]], out_dir: str | Path | None = N
         w = csv.DictWriter(fh, fieldnames=list(ROW_KEYS), lineterminator="\n")
         w.writeheader()
         for r in rows:
-            w.writerow({k: r[k] for k in ROW_KEYS})
+            w.writerow({k: json.dumps(r[k]) if k == "effects" else r.get(k, "nominal") if k == "cell" else r[k]
+                        for k in ROW_KEYS})
     written["csv"] = out / "results.csv"
-    written["png"] = _bar_chart(rows, out / "ratios.png", title)
+    cells = set(r.get("cell", "nominal") for r in rows)
+    chart = [r for r in rows if r.get("cell", "nominal") == "nominal"] if len(cells) > 1 else rows
+    written["png"] = _bar_chart(chart, out / "ratios.png", title)  # one plant per chart: the nominal of a grid
     return written
 
 
@@ -323,8 +334,6 @@ def _run_trainings(jobs: list[dict], workers: int, ray: str | None = None) -> li
 
 
 def _finished_run(run_dir: Path) -> dict | None:
-    import json
-
     meta, model = run_dir / "train.json", run_dir / "model.zip"
     return json.loads(meta.read_text()) if meta.is_file() and model.is_file() else None
 
