@@ -48,6 +48,7 @@ DRIVERS = ("abs", "open-loop")
 ROADS = ("dry", "wet", "snow")
 SETTLE_S = 0.5  # errors count from this long after the brake is first applied [s]
 DURATION = 5.0  # longest stop [s]
+DT = 0.01  # sample time [s]
 SUBSTEPS = 5  # physics substeps per 10 ms sample (the plant's verified setting)
 A_X_NOISE_STD = 0.1  # accelerometer noise [m/s^2], as the gap tool's stand-in
 
@@ -90,6 +91,8 @@ def simulate_stop(cell: GridCell, road: str, driver: str, seed: int, duration: f
     from fricenv.plants.tire import longitudinal_slip, get_road
 
     p, dt, tire = qc.PAPER_PARAMS, gs.DT, get_road(road)
+    if abs(dt - DT) > 1e-12:
+        raise ValueError(f"the stand-in samples at {dt} s, the study at {DT} s")
     rng = np.random.default_rng(seed)
     v0 = float(rng.uniform(*gs.V0_RANGE))
     n = round(duration / dt)
@@ -117,33 +120,62 @@ def simulate_stop(cell: GridCell, road: str, driver: str, seed: int, duration: f
     return Stop(**arr, brake_start=free, v0=v0, effects=entries)
 
 
-def run_estimator(name: str, stop: Stop) -> dict[str, np.ndarray]:
-    """Run the env estimator ``name`` over a stop; its speed, slip, friction in use and health per sample."""
+def run_estimator(name: str, stops: Sequence[Stop]) -> list[dict[str, np.ndarray]]:
+    """Run the env estimator ``name`` over each stop: its speed, slip, friction in use and health per sample.
+
+    An estimator with a batched form (:data:`estimators.batched.BATCHED`, equal to the single one; what the
+    native vector env runs) runs every stop in one batch, a stop that has ended holding its last sample; the
+    others run one stop after the other.
+    """
+    from estimators.batched import make_batched
     from estimators.registry import get_estimator
     from fricenv.plants import quarter_car as qc
 
-    entry = get_estimator(name)
-    est = entry.make(qc.PAPER_PARAMS, 0.01)
-    values = dict(entry.values)
+    p, values = qc.PAPER_PARAMS, dict(get_estimator(name).values)
+    keys = {q: values.get(q, q) for q in ("v", "slip", "mu")}
+    starts = np.array([float(s.omega[0]) * p.r for s in stops])
+    batched = make_batched(name, len(stops), p, DT)
+    if batched is None:
+        return [_run_single(name, stop, v0, keys) for stop, v0 in zip(stops, starts)]
+    lengths = np.array([len(s.t) for s in stops])
+    out = {q: np.zeros((len(stops), lengths.max())) for q in (*keys, "health")}
+    batched.reset(np.ones(len(stops), dtype=bool), starts)
+    for k in range(lengths.max()):
+        idx = np.minimum(k, lengths - 1)
+        vals, health = batched.update(np.array([s.omega[i] for s, i in zip(stops, idx)]),
+                                      np.array([s.a_x[i] for s, i in zip(stops, idx)]),
+                                      np.array([s.T_b[i] for s, i in zip(stops, idx)]))
+        for q, key in keys.items():
+            out[q][:, k] = vals[key]
+        out["health"][:, k] = health
+    return [{q: (a[j, :n].astype(int) if q == "health" else a[j, :n]) for q, a in out.items()}
+            for j, n in enumerate(lengths)]
+
+
+def _run_single(name: str, stop: Stop, v_start: float, keys: dict[str, str]) -> dict[str, np.ndarray]:
+    """One single estimator over one stop, started from ``v_start``."""
+    from estimators.registry import get_estimator
+    from fricenv.plants import quarter_car as qc
+
+    est = get_estimator(name).make(qc.PAPER_PARAMS, DT)
     columns = {"omega": stop.omega, "a_x": stop.a_x}
     y = np.column_stack([columns[c] for c in est.measurement_columns])
-    v_start = float(stop.omega[0]) * qc.PAPER_PARAMS.r
     accepted = inspect.signature(est.reset).parameters
     est.reset(**{k: val for k, val in (("v", v_start), ("v0", v_start), ("slip", 0.0)) if k in accepted})
-    out: dict[str, list[float]] = {"v": [], "slip": [], "mu": [], "health": []}
+    out: dict[str, list[float]] = {q: [] for q in (*keys, "health")}
     for k in range(len(stop.t)):
         e = est.update(y[k], [float(stop.T_b[k])])
-        for q in ("v", "slip", "mu"):
-            out[q].append(float(np.asarray(e.values[values.get(q, q)], dtype=float)))
+        for q, key in keys.items():
+            out[q].append(float(np.asarray(e.values[key], dtype=float)))
         out["health"].append(int(e.health))
-    return {k: np.asarray(v) for k, v in out.items()}
+    return {q: np.asarray(v) for q, v in out.items()}
 
 
 def stop_metrics(stop: Stop, estimate: dict[str, np.ndarray]) -> dict[str, Any]:
     """Errors of one estimator on one stop (module docstring); the health shares by :class:`Health` name."""
     from estimators.base import Health
 
-    start = stop.brake_start + round(SETTLE_S / 0.01)
+    start = stop.brake_start + round(SETTLE_S / DT)
     after = slice(min(start, len(stop.t)), None)
 
     def rms(q: str) -> float:
@@ -157,11 +189,16 @@ def stop_metrics(stop: Stop, estimate: dict[str, np.ndarray]) -> dict[str, Any]:
             "samples": int(len(stop.t))}
 
 
-def _stop_job(cell: GridCell, road: str, driver: str, seed: int, estimators: tuple[str, ...]) -> dict[str, Any]:
-    """One stop, every estimator over it: the stop's effects and speed, one metrics dict per estimator."""
-    stop = simulate_stop(cell, road, driver, seed)
-    return {"effects": stop.effects, "v0": stop.v0,
-            "metrics": [{"estimator": name, **stop_metrics(stop, run_estimator(name, stop))} for name in estimators]}
+def _stops_job(cells: tuple[GridCell, ...], road: str, driver: str, seed: int,
+               estimators: tuple[str, ...]) -> list[dict[str, Any]]:
+    """The stops of every cell for one (road, driver, seed), every estimator over them: per cell, the stop's
+    effects and speed and one metrics dict per estimator."""
+    stops = [simulate_stop(cell, road, driver, seed) for cell in cells]
+    metrics: list[list[dict]] = [[] for _ in cells]
+    for name in estimators:
+        for j, (stop, est) in enumerate(zip(stops, run_estimator(name, stops))):
+            metrics[j].append({"estimator": name, **stop_metrics(stop, est)})
+    return [{"effects": stop.effects, "v0": stop.v0, "metrics": m} for stop, m in zip(stops, metrics)]
 
 
 def study(estimators: Sequence[str] = ESTIMATORS, cells: Sequence[GridCell] | None = None,
@@ -191,14 +228,15 @@ def study(estimators: Sequence[str] = ESTIMATORS, cells: Sequence[GridCell] | No
     if not seeds:
         raise ValueError("seeds must name at least one seed")
     cells = grid_cells() if cells is None else list(cells)
-    jobs = [(c, r, d, int(s), tuple(estimators)) for c in cells for d in drivers for r in roads for s in seeds]
-    results = map_tasks(_stop_job, jobs, default_jobs(workers), "stops", ray=ray)
+    jobs = [(tuple(cells), r, d, int(s), tuple(estimators)) for d in drivers for r in roads for s in seeds]
+    results = map_tasks(_stops_job, jobs, default_jobs(workers), "stops", ray=ray)
     rows = []
-    for (cell, road, driver, seed, _), res in zip(jobs, results):
-        for r in res["metrics"]:
-            rows.append({"estimator": r["estimator"], "cell": cell.label, "effects": res["effects"], "road": road,
-                         "driver": driver, "seed": seed, "v0": res["v0"],
-                         **{k: v for k, v in r.items() if k != "estimator"}})
+    for (_, road, driver, seed, _), per_cell in zip(jobs, results):
+        for cell, res in zip(cells, per_cell):
+            for r in res["metrics"]:
+                rows.append({"estimator": r["estimator"], "cell": cell.label, "effects": res["effects"],
+                             "road": road, "driver": driver, "seed": seed, "v0": res["v0"],
+                             **{k: v for k, v in r.items() if k != "estimator"}})
     return rows
 
 

@@ -40,6 +40,7 @@ VERBS: dict[tuple[str, str | None], str] = {
     ("paper", "mhe"): "fricenv.commands.paper_mhe",
     ("paper", "ekf-rls"): "fricenv.commands.paper_ekf_rls",
     ("paper", "fms"): "fricenv.commands.paper_fms",
+    ("paper", "robustness"): "fricenv.commands.paper_robustness",
     ("excitation", None): "agents.commands.excitation",
     ("train", None): "agents.commands.train",
     ("tune", None): "agents.commands.tune",
