@@ -32,7 +32,7 @@ def _zoo_env(run: Path):
 @pytest.fixture(scope="module")
 def run_dir(tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("run")
-    train(out, estimator="ekf-rls", steps=100, seed=0, config=TINY, progress_bar=False, checkpoint_every=0)
+    train(out, estimator="ekf", steps=100, seed=0, config=TINY, progress_bar=False, checkpoint_every=0)
     return out
 
 
@@ -41,7 +41,7 @@ def test_run_leaves_the_rl_zoo_files(run_dir):
     assert (run_dir / "model.zip").is_file() and (run_dir / "vecnormalize.pkl").is_file()
     assert config["env_id"] == "fricenv/Braking-v0" and config["algo"] == "ppo"
     assert config["hyperparams"]["action_map"] == "log" and config["normalize"]["norm_obs"] is True
-    assert kwargs == {"estimator": "ekf-rls", "action_map": "log"}
+    assert kwargs == {"estimator": "ekf", "action_map": "log"}
 
 
 def test_plain_sb3_gives_the_commands_of_load_policy(run_dir):
