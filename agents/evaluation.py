@@ -352,18 +352,32 @@ def _training_jobs(out: Path, estimators: Sequence[str], baselines: Sequence[str
     """Row label with seed -> :func:`agents.training.train` arguments, one per (row, training seed)."""
     rows: dict[str, dict] = {f"{algo}-{est}": {"estimator": est, "algo": algo} for est in estimators}
     for name in baselines:
-        if name not in MEMORY_BASELINES:
-            raise ValueError(f"unknown memory baseline {name!r}; valid: {', '.join(MEMORY_BASELINES)}")
         rows[name] = {"estimator": "none", **MEMORY_BASELINES[name]}
     return {f"{name}#s{seed}": {"out": out / f"{name}-s{seed}", "env": "braking", "steps": steps, "seed": seed,
                                 "progress_bar": False, **kw}
             for name, kw in rows.items() for seed in train_seeds}
 
 
+def check_compare_args(estimators: Sequence[str], baselines: Sequence[str], pipeline: str,
+                       train_seeds: Sequence[int]) -> None:
+    """Validate the rows of :func:`compare_abs` before any training (ValueError naming the bad one)."""
+    from fricenv.envs.estimator_observation import check_estimator_name
+
+    for est in estimators:
+        check_estimator_name(est)
+    for name in baselines:
+        if name not in MEMORY_BASELINES:
+            raise ValueError(f"unknown memory baseline {name!r}; valid: {', '.join(MEMORY_BASELINES)}")
+    parse_policy(f"{PIPELINE_PREFIX}{pipeline}")
+    if not train_seeds:
+        raise ValueError("train_seeds must name at least one training seed")
+
+
 def compare_abs(out: str | Path, estimators: Sequence[str] = ("none", "ekf-rls", "oracle"),
                 algo: str = "ppo", steps: int = 300_000, pipeline: str = "ekf-rls", train_seeds: Sequence[int] = (0,),
                 seeds: int = DEFAULT_SEEDS, workers: int = 2, reuse: bool = False,
-                baselines: Sequence[str] = tuple(MEMORY_BASELINES), ray: str | None = None) -> dict[str, Any]:
+                baselines: Sequence[str] = tuple(MEMORY_BASELINES), ray: str | None = None,
+                scenarios: Sequence[Scenario] | None = None) -> dict[str, Any]:
     """Train every row on every training seed, then evaluate them with the rule ABS and the pipeline.
 
     :param out: directory; runs go to ``out/<row>-s<seed>`` (rows ``<algo>-<estimator>`` and the baselines).
@@ -378,19 +392,15 @@ def compare_abs(out: str | Path, estimators: Sequence[str] = ("none", "ekf-rls",
     :param baselines: memory baselines (:data:`MEMORY_BASELINES`) trained without estimates.
     :param ray: None (local processes), ``"auto"`` or a Ray cluster address: trainings and evaluation jobs run as
         Ray tasks (``out`` must then be on a file system every node sees).
+    :param scenarios: evaluation scenarios (default :data:`SCENARIOS`; the effect grid's:
+        :func:`agents.effect_scenarios.grid_scenarios`).
     :return: ``rows`` (:data:`COMPARE_KEYS` and more), ``training`` (:data:`TRAINING_KEYS` per run),
         ``evaluation_time_s``.
     """
     import time
 
-    from fricenv.envs.estimator_observation import check_estimator_name
-
     out = Path(out)
-    for est in estimators:
-        check_estimator_name(est)
-    parse_policy(f"{PIPELINE_PREFIX}{pipeline}")
-    if not train_seeds:
-        raise ValueError("train_seeds must name at least one training seed")
+    check_compare_args(estimators, baselines, pipeline, train_seeds)
     jobs = _training_jobs(out, estimators, baselines, algo, steps, train_seeds)
     metas = {key: _finished_run(job["out"]) if reuse else None for key, job in jobs.items()}
     todo = [key for key, meta in metas.items() if meta is None]
@@ -400,8 +410,8 @@ def compare_abs(out: str | Path, estimators: Sequence[str] = ("none", "ekf-rls",
         spec = parse_policy(str(job["out"]))
         specs.append(dataclasses.replace(spec, label=f"{spec.label}#s{job['seed']}"))
     t0 = time.perf_counter()
-    rows = evaluate(specs + ["rule-abs", f"{PIPELINE_PREFIX}{pipeline}"], seeds=seeds, workers=workers,
-                    ray=ray)
+    rows = evaluate(specs + ["rule-abs", f"{PIPELINE_PREFIX}{pipeline}"], scenarios=scenarios or SCENARIOS,
+                    seeds=seeds, workers=workers, ray=ray)
     for row in rows:
         label, _, seed = row["policy"].partition("#s")
         row["policy"], row["train_seed"] = label, int(seed) if seed else None

@@ -153,7 +153,8 @@ def test_a_bug_keeps_its_traceback(monkeypatch, exc):
     (InvalidInputError("--x must be > 0"), "fricenv fake: error: --x must be > 0"),
     (OSError(errno.ENOSPC, "No space left on device", "/data/out.csv"),
      "fricenv fake: error: /data/out.csv: No space left on device"),
-    (SystemExit("fricenv fake: --steps must be >= 1\n(really)"), "fricenv fake: --steps must be >= 1 (really)"),
+    (SystemExit("fricenv fake: --steps must be >= 1\n(really)"), "fricenv fake: error: --steps must be >= 1 (really)"),
+    (SystemExit("--seeds must be >= 1"), "fricenv fake: error: --seeds must be >= 1"),
 ])
 def test_user_errors_from_anywhere_are_one_line(monkeypatch, capsys, exc, expected):
     def run(args):
