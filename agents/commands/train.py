@@ -10,8 +10,8 @@ Writes ``model.zip``, ``vecnormalize.pkl``, ``config.yml``, ``env_kwargs.yml``, 
 ``--steps`` is rounded up to whole rollouts (PPO: n_envs x n_steps env steps; SAC: n_envs), and a note on stderr
 says so when it is. ``--effects-randomization grid`` trains a braking policy on plants with effects: every
 episode draws each effect of the effect grid but the friction change (which the road mix already draws) over a
-range from the nominal plant through both grid sizes (brake lag 0-0.08 s, delay 0-0.06 s, gain 0.80-1.25, rolling
-radius 0.97-1.04 r, relaxation length 0-0.6 m, drag c0 0-150 N and c2 0-0.6 N s^2/m^2).
+range from the nominal plant through both grid sizes (brake lag 0.001-0.08 s, delay 0-0.06 s, gain 0.80-1.25, rolling
+radius 0.97-1.04 r, relaxation length 0.001-0.6 m, drag c0 0-150 N and c2 0-0.6 N s^2/m^2).
 """
 
 from __future__ import annotations

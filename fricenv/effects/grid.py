@@ -20,7 +20,8 @@ is the middle of the stop, ``v0 / (2 mu_max g)`` (the stop at the road's peak fr
 :func:`grid_cells` lists the nominal plant and every (effect, size); :func:`grid_randomization` gives the
 ``effects_randomization`` argument of the braking envs over the grid's ranges: each range spans the nominal value
 and both sizes, so a two-sided effect (brake gain, radius) is drawn from both sides of nominal and a one-sided one
-(a lag) from nominal to its high size.
+(a lag) from nominal to its high size (a lag's and a relaxation length's nominal end is 1 ms and 1 mm: they must
+be > 0).
 """
 
 from __future__ import annotations
@@ -60,13 +61,14 @@ EFFECT_GRID: dict[str, tuple[dict[str, float], dict[str, float]]] = {
 }
 # Parameters given as a factor of a scenario quantity: (effect, parameter) -> "r" (nominal radius) or "theta".
 RELATIVE_PARAMS: dict[tuple[str, str], str] = {("radius_error", "r_eff"): "r", ("mu_change", "theta_after"): "theta"}
-# The value of each grid parameter that is the nominal plant (relative parameters as factors).
+# The value of each grid parameter that is the nominal plant (relative parameters as factors). A lag and a relaxation
+# length must be > 0: their nominal end is 1 ms and 1 mm, no effect at the 10 ms sample of the braking env.
 NOMINAL_VALUES: dict[str, dict[str, float]] = {
-    "brake_lag": {"tau": 0.0},
+    "brake_lag": {"tau": 0.001},
     "brake_delay": {"delay": 0.0},
     "brake_gain": {"gain": 1.0},
     "radius_error": {"r_eff": 1.0},
-    "relaxation_length": {"sigma": 0.0},
+    "relaxation_length": {"sigma": 0.001},
     "drag": {"c0": 0.0, "c2": 0.0},
     "mu_change": {"theta_after": 1.0},
 }
