@@ -90,3 +90,23 @@ def test_cli_says_when_steps_round(tmp_path, capsys):
     assert code == 0
     assert "fricenv train: note: --steps 100 rounds up to 128 env steps" in err
     assert yaml.safe_load((tmp_path / "r" / "config.yml").read_text())["n_timesteps"] == 128
+
+
+@pytest.mark.slow
+def test_robust_training_switch_draws_the_grid_effects(tmp_path):
+    import json
+
+    from fricenv.cli import main
+    from fricenv.effects.grid import grid_randomization
+
+    hyper = tmp_path / "h.json"
+    hyper.write_text(json.dumps({"ppo": {k: list(v) if isinstance(v, tuple) else v for k, v in TINY.__dict__.items()}}))
+    run = tmp_path / "robust"
+    assert main(["-q", "train", "--out", str(run), "--steps", "64", "--hyperparams", str(hyper),
+                 "--effects-randomization", "grid", "--no-progress"]) == 0
+    config, kwargs, venv = _zoo_env(run)
+    expected = {e: {p: list(r) for p, r in ranges.items()} for e, ranges in grid_randomization().items()}
+    assert kwargs["effects_randomization"] == expected
+    plant = venv.envs[0].unwrapped.sim.plant
+    venv.reset()
+    assert {e.name for e in plant.effects[0]} == set(expected)  # the saved env draws the grid's effects too
