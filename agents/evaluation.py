@@ -352,6 +352,8 @@ def _training_jobs(out: Path, estimators: Sequence[str], baselines: Sequence[str
     """Row label with seed -> :func:`agents.training.train` arguments, one per (row, training seed)."""
     rows: dict[str, dict] = {f"{algo}-{est}": {"estimator": est, "algo": algo} for est in estimators}
     for name in baselines:
+        if name not in MEMORY_BASELINES:
+            raise ValueError(f"unknown memory baseline {name!r}; valid: {', '.join(MEMORY_BASELINES)}")
         rows[name] = {"estimator": "none", **MEMORY_BASELINES[name]}
     return {f"{name}#s{seed}": {"out": out / f"{name}-s{seed}", "env": "braking", "steps": steps, "seed": seed,
                                 "progress_bar": False, **kw}
