@@ -27,6 +27,8 @@ from collections.abc import Callable
 import gymnasium as gym
 import numpy as np
 
+from fricenv.errors import InvalidInputError
+
 __all__ = ["ACTION_MAPS", "LINEAR", "LOG_RANGE", "ActionMapError", "ActionMapWrapper", "check_action_map",
            "log_torque"]
 
@@ -34,7 +36,7 @@ LOG_RANGE = 100.0  # t_max over the torque one step above zero of the log map's 
 LINEAR = "linear"
 
 
-class ActionMapError(ValueError):
+class ActionMapError(InvalidInputError):
     """An unknown action map name."""
 
 
