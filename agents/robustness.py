@@ -1,7 +1,7 @@
 """The estimators under the effect grid: speed, slip and friction errors on stops of a plant with effects.
 
 One stop (:func:`simulate_stop`) is the gap tool's stand-in driven by its ``abs`` or ``open-loop`` driver
-(:func:`fricenv.gap.simulate.make_driver`) on a preset road, with one cell of the effect grid
+(:func:`fricenv.gap.quarter_car.simulate.make_driver`) on a preset road, with one cell of the effect grid
 (:mod:`fricenv.effects.grid`) switched on: the quarter car with effects (:class:`fricenv.effects.EffectSimulator`,
 :data:`SUBSTEPS` physics substeps per 10 ms sample), an initial speed uniform on 20-32 m/s, a free-rolling stretch
 of 0.3-0.6 s, wheel-speed noise of the paper's variance and accelerometer noise (the stand-in's), until the car is
@@ -15,7 +15,7 @@ the speed, of the slip (the true slip with the plant's own rolling radius) and o
 over wheel load); the worst speed error over the whole stop; the share of samples with each health value of
 :class:`estimators.base.Health`.
 
-:func:`study` maps the stops over a process pool or Ray (:func:`fricenv.gap.pool.map_tasks`) and returns one row per
+:func:`study` maps the stops over a process pool or Ray (:func:`fricenv.gap.core.pool.map_tasks`) and returns one row per
 stop and estimator; :func:`summarize` groups them per (estimator, cell) over drivers, roads and seeds.
 """
 
@@ -86,7 +86,7 @@ def simulate_stop(cell: GridCell, road: str, driver: str, seed: int, duration: f
     """
     from fricenv.effects.quarter_car import EffectSimulator, ModelBatch
     from fricenv.envs.effect_spec import resolve_effects
-    from fricenv.gap import simulate as gs
+    from fricenv.gap.quarter_car import simulate as gs
     from fricenv.plants import quarter_car as qc
     from fricenv.plants.tire import longitudinal_slip, get_road
 
@@ -214,7 +214,7 @@ def study(estimators: Sequence[str] = ESTIMATORS, cells: Sequence[GridCell] | No
     :return: rows with ``estimator``, ``cell``, ``effects``, ``road``, ``driver``, ``seed`` and the metrics.
     """
     from fricenv.envs.estimator_observation import check_estimator_name
-    from fricenv.gap.pool import default_jobs, map_tasks
+    from fricenv.gap.core.pool import default_jobs, map_tasks
     from fricenv.plants.tire import get_road
 
     for name in estimators:
