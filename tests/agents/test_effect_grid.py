@@ -104,3 +104,12 @@ def test_rows_name_their_plant_and_the_effect_acts(tmp_path):
     assert json.loads(written["json"].read_text())["matrix"][1]["cell"] == "custom"
     assert written["heatmap"].read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert np.isfinite([m["ratio_mean"] for m in matrix]).all()
+
+
+def test_compare_takes_the_grid_and_checks_its_rows_before_training(capsys, tmp_path):
+    from fricenv.cli import main
+
+    assert main(["compare", "--effect-grid", "--estimators", "kalman", "--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("fricenv compare: error: unknown estimator 'kalman'")
+    assert not any(tmp_path.iterdir())  # nothing trained
