@@ -24,6 +24,7 @@ from __future__ import annotations
 import argparse
 
 DEFAULT_POLICIES = ("rule-abs", "pipeline:ekf")
+RATIO_COLOUR_MAX = 2.0  # heatmap colour scale top: a policy that fails in one cell keeps the others readable
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -100,5 +101,7 @@ def _write_grid(rows, out: str, seeds: int) -> dict:
     print("lock events per plant cell")
     print(format_matrix(matrix, "policy", "locks", "{:.0f}"))
     return write_matrix(out, matrix, "policy", "ratio_mean",
-                        f"stopping-distance ratio under the effect grid (dry, wet at 20 m/s; {seeds} seeds)",
-                        "stopping distance / physical limit", extra={"rows": rows, "seeds": seeds})
+                        f"stopping-distance ratio under the effect grid (dry, wet at 20 m/s; {seeds} seeds; "
+                        f"colour clipped at {RATIO_COLOUR_MAX:g})",
+                        "stopping distance / physical limit", extra={"rows": rows, "seeds": seeds},
+                        vmax=RATIO_COLOUR_MAX)
