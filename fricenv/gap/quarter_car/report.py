@@ -57,8 +57,11 @@ def report_markdown(dg: Diagnosis, report: dict, images: Sequence[str] = (PLOT_T
               f"{w['data']['windows']} prediction windows of {w['data']['horizon_s']:.2f} s, "
               f"each held out once ({w['data']['folds']}-fold cross-fitting); speed: {w['data']['speed_source']}"),
              f"- certainty: {w['data']['certainty']}",
+             (f"- times from the log's first sample (its stamp in the log's own base: "
+              f"{w['time_base']['offset_s']!r} s)" if "time_base" in w else "- times as logged"),
              "- calibrated nominal road: " + ", ".join(f"{k}={v:.4g}" for k, v in w["nominal_road"].items()),
              f"- diagnosis time: {dg.seconds:.1f} s", "",
+             *(["## Warnings on the log", "", *[f"- {x}" for x in w["warnings"]], ""] if w.get("warnings") else []),
              "## Where the gap lies", "", "Worst time segments (nominal model):", ""]
     for s in w["segments"]:
         lines.append(f"- {s['t_start']:.2f}-{s['t_end']:.2f} s: gap {s['gap']:.2f}"
