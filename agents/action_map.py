@@ -4,7 +4,7 @@
 ``r F_z mu_max``: 1100 N m on dry, 902 on wet, 325 on snow, 110 on ice, i.e. 4.4 % of the action range on ice.
 With the linear map and PPO's Gaussian exploration (std 0.22 of the range), the noise on ice (280 N m) is 2.5 times
 the whole useful torque: half of the samples are clipped at zero torque and most of the others lock the wheel, and
-the policies learned either no braking (ratio 5.9) or lock-and-release on ice (issue 17 diagnosis).
+the policies learned either no braking (ratio 5.9) or lock-and-release on ice.
 
 :data:`ACTION_MAPS`:
 

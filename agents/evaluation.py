@@ -329,7 +329,7 @@ def _finished_run(run_dir: Path) -> dict | None:
     return json.loads(meta.read_text()) if meta.is_file() and model.is_file() else None
 
 
-# Memory baselines of the headline comparison (issue 17): no estimate, but memory of the raw ECU observations.
+# Memory baselines of the headline comparison: no estimate, but memory of the raw ECU observations.
 MEMORY_BASELINES: dict[str, dict[str, Any]] = {
     "ppo-stack4": {"algo": "ppo", "frame_stack": 4},  # PPO on the last 4 observations
     "recurrent-ppo": {"algo": "recurrent-ppo"},  # sb3-contrib's RecurrentPPO (LSTM)

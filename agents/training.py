@@ -77,7 +77,7 @@ VEC_KINDS = ("auto", "native", "dummy", "subproc")
 @dataclass(frozen=True)
 class PPOConfig:
     """PPO hyperparameters (the ABS task's are in ``agents/hyperparams/braking.json``; these field defaults are the
-    ones tuned on Braking-v0 with randomised roads, 8 envs, before issue 17).
+    ones first tuned on Braking-v0 with randomised roads, 8 envs).
 
     The reward is dense (braking efficiency per step) and the slip dynamics are fast (tens of ms), so a short
     horizon (gamma 0.95, i.e. ~0.2 s) is enough and learns faster than the usual 0.99; rewards are normalised by
@@ -344,7 +344,7 @@ def train(out: str | Path, env: str = "braking", estimator: str = "none", algo: 
     :param env_kwargs: extra env arguments.
     :param verbose: SB3 verbosity.
     :param frame_stack: k > 0: the policy sees the last k observations (SB3's ``VecFrameStack``), the memory
-        baseline of issue 17; 0: the observation alone.
+        baseline; 0: the observation alone.
     """
     import torch
     from stable_baselines3.common.callbacks import CheckpointCallback
