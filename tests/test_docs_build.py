@@ -7,7 +7,7 @@ analysis: nothing is imported). Skipped, with the reason, when MkDocs is not ins
 from __future__ import annotations
 
 import os
-import shutil
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -37,6 +37,25 @@ def test_the_docs_site_builds_strictly(tmp_path):
         assert (tmp_path / "site" / page).is_file(), page
     # the API reference is generated from the docstrings: the package page documents its submodules
     assert "fricenv.gap." in (tmp_path / "site" / "api" / "gap" / "index.html").read_text()
+    assert not readme_link_problems(tmp_path / "site")
+
+
+def readme_link_problems(site: Path) -> list[str]:
+    """README.md lives outside the site: each of its relative links must name a file that exists, and a link into a
+    docs page with an anchor must name a heading the built page has."""
+    problems = []
+    for target in re.findall(r"\]\(([^)\s]+)\)", (ROOT / "README.md").read_text()):
+        if re.match(r"[a-z]+://", target):
+            continue
+        path, _, anchor = target.partition("#")
+        if not (ROOT / path).exists():
+            problems.append(f"README links to {path}, which does not exist")
+        elif anchor and path.startswith("docs/") and path.endswith(".md"):
+            page = path[len("docs/"):-len(".md")]
+            html = site / ("index.html" if page == "index" else f"{page}/index.html")
+            if f'id="{anchor}"' not in html.read_text():
+                problems.append(f"README links to {target}: no such heading")
+    return problems
 
 
 def test_a_broken_link_fails_the_strict_build(tmp_path):
