@@ -302,8 +302,12 @@ def diagnose(log: QuarterCarLog, p: qc.QuarterCarParams = qc.PAPER_PARAMS,
         if whole is not None and s.chosen is None and drift_check:
             whole = _set_drifts(ctx, s, whole)
     effects = [] if whole is None else _order(split_params(whole), expected)
+    if s.periodic is not None and whole is not None:  # the line is the effect's own signature if the set removes it
+        s.periodic["remains_with_effects"] = periodic_line(whole, d) is not None
     not_testable = not_testable.shown({f.effect for f in s.significant} | {e["effect"] for e in effects})
     findings = _findings(nominal, s, d, cfg, not_testable, steps, expected)
+    findings.extra.update(time_base={"origin": "first_sample", "offset_s": float(log.t_offset)},
+                          warnings=list(log.warnings))
     verdict = effects[0]["effect"] if effects else s.verdict  # a discovery before an expected calibration
     return Diagnosis(verdict=verdict, gap_before=nominal.gap,
                      gap_after=nominal.gap if whole is None else whole.gap,
@@ -359,12 +363,14 @@ def _findings(nominal: CandidateFit, s: _Selection, d: Data, cfg: DiagnoseConfig
 
 
 def load_params(path) -> qc.QuarterCarParams:
-    """Vehicle parameters from a JSON file (keys of :class:`QuarterCarParams`; unknown keys rejected)."""
+    """Vehicle parameters from a JSON file (keys of :class:`QuarterCarParams`; unknown keys rejected). A ``car``
+    section (a car's mass and axle positions, docs/contracts.md section 2) is not a quarter-car key: it is passed
+    over here and read by the car's own loader."""
     from dataclasses import fields as dc_fields
 
     from fricenv.utils import read_json_object
 
-    raw = read_json_object(path, "vehicle parameters")
+    raw = {k: v for k, v in read_json_object(path, "vehicle parameters").items() if k != "car"}
     valid = [f.name for f in dc_fields(qc.QuarterCarParams)]
     unknown = sorted(set(raw) - set(valid))
     if unknown:
