@@ -10,8 +10,10 @@ code is then 1.
 
 Writes DIR/report.json (the schema of docs/contracts.md), DIR/report.md and PNG plots (atomically: temporary
 name, then rename) and prints a short summary. --params FILE.json overrides the nominal vehicle parameters (m, J,
-r, Fz, g); for --plant payload (log columns t, M, f_x, f_y, theta, X, Y) it gives the known calibration "S" (3x3
-row-major) and optionally m, I_G, rho_x, rho_y.
+r, Fz, g) and may hold a car section ({"car": {"mass": 790.0, "lf": 1.248, "lr": 1.7328}}); a car's session (a log
+with a throttle, yaw rate or several wheels) is diagnosed across its braking events (fricenv.gap.car); for --plant
+payload (log columns t, M, f_x, f_y, theta, X, Y) it gives the known calibration "S" (3x3 row-major) and
+optionally m, I_G, rho_x, rho_y.
 """
 
 from __future__ import annotations
