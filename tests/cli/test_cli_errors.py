@@ -1,4 +1,4 @@
-"""The CLI's one error path: every bad input of issue 16 gives exit code 2, one line on stderr, no traceback, and no
+"""The CLI's one error path: every bad input gives exit code 2, one line on stderr, no traceback, and no
 output file; paths are checked before the work starts; a bug keeps its traceback."""
 
 import errno
@@ -44,7 +44,7 @@ def _no_diagnosis(monkeypatch):
 
 
 def _bad_input_cases(tmp_path, log):
-    """(argv, text the one-line message must hold) for every bad-input case of issue 16, item 2."""
+    """(argv, text the one-line message must hold) for every bad-input case."""
     a_file = tmp_path / "a_file.txt"
     a_file.write_text("keep\n")
     bad_json = tmp_path / "bad.json"
