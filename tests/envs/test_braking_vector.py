@@ -1,4 +1,4 @@
-"""Native vector env, SB3 adapter and fast substep kernels of fricenv/Braking-v0 (issue 7).
+"""Native vector env, SB3 adapter and fast substep kernels of fricenv/Braking-v0.
 
 Equivalence is the point: the vector env must be N single envs (same seeds, same trajectories, across autoresets),
 and the fast kernels must be the reference ROS2 substep of ``quarter_car.step``.
