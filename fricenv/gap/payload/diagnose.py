@@ -1,4 +1,4 @@
-"""Sim-to-real gap diagnosis of a planar-payload log (issue 6, item 6): where the gap lies, which effect, how far.
+"""Sim-to-real gap diagnosis of a planar-payload log: where the gap lies, which effect, how far.
 
 The payload's dynamics are linear in the wrench, so the diagnosis compares accelerations rather than simulating:
 

@@ -1,4 +1,4 @@
-"""Validation of the payload gap diagnosis on withheld effects (issue 6, items 5 and 6).
+"""Validation of the payload gap diagnosis on withheld effects.
 
 Random payload logs: each payload library effect at a realistic size, logs with no effect, and logs with a
 physically real effect outside the library: viscous damping of the payload's motion (a payload sliding on a table or
