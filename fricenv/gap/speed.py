@@ -31,7 +31,7 @@ from fricenv.plants import quarter_car as qc
 from fricenv.plants.tire import magic_formula_and_dslip, slip_and_partials
 
 __all__ = ["affine_scan", "filtered_transient_slip", "reconstruct_speed", "reconstruct_speed_sequential",
-           "slip_lag_decay"]
+           "slip_lag_decay", "speed_update"]
 
 NEWTON_ITERS = 20  # Newton iterations on the trajectory before the sequential finish
 NEWTON_TOL = 1e-11  # largest accepted step residual [m/s] (transient slip: the same number, unitless)
@@ -45,6 +45,20 @@ def step_wheel_speed(omega: np.ndarray) -> np.ndarray:
     """The wheel speed over each sample step, the mean of its two samples (the last step keeps its sample)."""
     w = np.asarray(omega, dtype=float)
     return np.r_[0.5 * (w[:-1] + w[1:]), w[-1:]] if w.size > 1 else w.copy()
+
+
+def speed_update(v, mu, dmu_dv, c0, c2, Fz, m, dt, implicit):
+    """One linearly implicit step of the force balance with drag, ``m v' = -(F_z mu + c0 + c2 v^2)``, kept >= 0
+    (plain math: the compiled recursion is built from it).
+
+    :param v: speed [m/s]; :param mu: friction coefficient; :param dmu_dv: its slope in v [s/m] (0: no feedback).
+    :param c0: constant resistance [N]; :param c2: quadratic drag coefficient [N s^2/m^2].
+    :param Fz: tire load [N]; :param m: mass [kg]; :param dt: step [s].
+    :param implicit: weight of the step's end (:data:`IMPLICIT`).
+    """
+    f = -(Fz * mu + c0 + c2 * v * v) / m
+    dfdv = -(Fz * dmu_dv + 2.0 * c2 * v) / m
+    return np.maximum(v + dt * f / (1.0 - implicit * dt * np.minimum(dfdv, 0.0)), 0.0)
 
 
 def slip_lag_decay(v, dt_over_sigma):
@@ -103,9 +117,7 @@ class _SpeedModel:
             lt = lam
             mu, dmu = magic_formula_and_dslip(lam, *self.shape, self.theta[:, k])
             dmu_dv = dmu * dlam_dv
-        f = -(p.Fz * mu + self.c0 + self.c2 * v * v) / p.m
-        dfdv = -(p.Fz * dmu_dv + 2.0 * self.c2 * v) / p.m
-        return np.maximum(v + dt * f / (1.0 - IMPLICIT * dt * np.minimum(dfdv, 0.0)), 0.0), lt
+        return speed_update(v, mu, dmu_dv, self.c0, self.c2, p.Fz, p.m, dt, IMPLICIT), lt
 
 
 def _initial_speed(batch: ModelBatch, omega: np.ndarray, free_end: int) -> np.ndarray:

@@ -21,6 +21,7 @@ __all__ = ["sequential_speed"]
 _slip_partials = _compile(slip_and_partials)
 _mu_dslip = _compile(magic_formula_and_dslip)
 _lag_decay = _compile(speed.slip_lag_decay)
+_speed_update = _compile(speed.speed_update)
 
 
 @numba.njit(cache=True, error_model="numpy")
@@ -41,9 +42,7 @@ def _recursion(omega, r, c0, c2, B, C, E, theta, relax, dt_over_sigma, Fz, m, dt
                 lt = lam
                 mu, dmu = _mu_dslip(lam, B[i], C[i], E[i], theta[i, k])
                 dmu_dv = dmu * dlam_dv
-            f = -(Fz * mu + c0[i] + c2[i] * v * v) / m
-            dfdv = -(Fz * dmu_dv + 2.0 * c2[i] * v) / m
-            v = max(v + dt * f / (1.0 - implicit * dt * min(dfdv, 0.0)), 0.0)
+            v = _speed_update(v, mu, dmu_dv, c0[i], c2[i], Fz, m, dt, implicit)
             out[i, k + 1] = v
     return out
 
