@@ -72,6 +72,7 @@ def env_steps_per_s(env_id: str, steps: int, seed: int, **kwargs) -> float:
     env = gym.make(env_id, **kwargs)
     action = np.zeros(env.action_space.shape, dtype=env.action_space.dtype)
     env.reset(seed=seed)
+    env.step(action)  # first call outside the timing (lazy loads: the compiled substeps come from numba's cache)
     start = time.perf_counter()
     for _ in range(steps):
         _, _, terminated, truncated, _ = env.step(action)

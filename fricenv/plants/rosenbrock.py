@@ -1,23 +1,19 @@
 """The Rosenbrock (ROS2) substep of the quarter car, eq. (1): written once, in plain math.
 
 One L-stable two-stage Rosenbrock step (ROS2, Verwer et al. 1999, ``gamma = 1 + 1/sqrt(2)``) with the exact
-Jacobian, followed by the lock event (``omega >= 0``: a wheel that would turn backwards locks where omega crosses
-zero and slides at ``mu(1)`` for the rest of the substep) and ``v >= 0``. :func:`ros2_substep` is plain arithmetic
-over the ``np`` namespace with the Magic Formula and the slip of :mod:`fricenv.plants.tire`, so the same function
-runs on numpy arrays (:func:`fricenv.plants.quarter_car.step`, the batched reference) and compiled by numba on
-floats (:mod:`fricenv.plants.compiled`, the env's and the gap tool's fast paths).
+Jacobian ``A`` of eq. (1),
 
-The force ``F_x(v, omega)`` enters both equations of eq. (1) through the fixed column ``u = (-1/m, r/J)``, so
-``f(x) = u F_x + e`` with ``e = (0, -T_b/J)`` and the Jacobian ``A = u g^T`` has rank one (``g`` the gradient of
-``F_x``). With ``a = dF/dv`` and ``b = -(dF/domega)/r``, Sherman-Morrison gives
-``det(I - gamma h A) = 1 + gamma h (a/m + r^2 b/J)`` and, with ``HB = gamma h b r T_b / J``, the two stages in
-closed form:
+    (I - gamma h A) k1 = f(x)
+    (I - gamma h A) k2 = f(x + h k1) - 2 k1
+    x+ = x + h (3/2 k1 + 1/2 k2)
 
-    k1 = u F1s + e,  F1s = (F_x(x) + HB) / det
-    k2 = u (Z - HB) / det - e,  Z = F_x(x + h k1) - 2 F1s
-    x+ = x + h (3/2 k1 + 1/2 k2) = x + h (u Y + e),  Y = (3 F1s + (Z - HB) / det) / 2
-
-(tested against a dense 2x2 solve of the same stages and against scipy's Radau).
+(the 2x2 systems solved by Cramer's rule), followed by the lock event (``omega >= 0``: a wheel that would turn
+backwards locks where omega crosses zero and slides at ``mu(1)`` for the rest of the substep) and ``v >= 0``.
+:func:`ros2_substep` is plain arithmetic over the ``np`` namespace with the Magic Formula and the slip of
+:mod:`fricenv.plants.tire`, so the same function runs on numpy arrays (:func:`fricenv.plants.quarter_car.step`, the
+batched reference) and compiled by numba on floats (:mod:`fricenv.plants.compiled`, the env's and the gap tool's
+fast paths). It is tested against a dense solve of the same stages and, through ``quarter_car.step``, against
+scipy's Radau.
 """
 
 from __future__ import annotations
@@ -66,25 +62,26 @@ def ros2_substep(v, w, Tb, B, C, E, theta, mu1, h, r, m, J, Fz):
         caller redoes those substeps in finer parts).
     """
     hg = h * ROS2_GAMMA
-    # Point 1: force and its partials (eq. (2), (3)); a = dF/dv, b = -(dF/domega)/r.
+    # f(x) and the Jacobian from the tire force and its partials (eq. (1)-(3))
     lam, dlam_dv, dlam_dw = slip_and_partials(v, w, r)
     mu, dmu = magic_formula_and_dslip(lam, B, C, E, theta)
-    a = Fz * dmu * dlam_dv
-    b = -Fz * dmu * dlam_dw / r
-    inv_det = 1.0 / (1.0 + hg * (a / m + r * r * b / J))
-    HB = hg * r * b * Tb / J
-    F1s = (Fz * mu + HB) * inv_det
-    # Point 2: x + h k1, omega clipped at 0.
-    v2 = v - (h / m) * F1s
-    w2 = np.maximum(w + (h * r / J) * F1s - (h / J) * Tb, 0.0)
-    F2 = Fz * magic_formula(longitudinal_slip(v2, w2, r), B, C, E, theta)
-    Y2 = 3.0 * F1s + (F2 - 2.0 * F1s - HB) * inv_det
-    v_new = v - (0.5 * h / m) * Y2
-    w_new = w + (0.5 * h * r / J) * Y2 - (h / J) * Tb
+    Fx, dF_dv, dF_dw = Fz * mu, Fz * dmu * dlam_dv, Fz * dmu * dlam_dw
+    m11, m12 = 1.0 - hg * (-dF_dv / m), -hg * (-dF_dw / m)  # I - gamma h A
+    m21, m22 = -hg * (r * dF_dv / J), 1.0 - hg * (r * dF_dw / J)
+    det = m11 * m22 - m12 * m21
+    b1, b2 = -Fx / m, (r * Fx - Tb) / J
+    k1v, k1w = (m22 * b1 - m12 * b2) / det, (m11 * b2 - m21 * b1) / det
+    # f(x + h k1), omega clipped at 0
+    v2 = v + h * k1v
+    F2 = Fz * magic_formula(longitudinal_slip(v2, np.maximum(w + h * k1w, 0.0), r), B, C, E, theta)
+    b1, b2 = -F2 / m - 2.0 * k1v, (r * F2 - Tb) / J - 2.0 * k1w
+    k2v, k2w = (m22 * b1 - m12 * b2) / det, (m11 * b2 - m21 * b1) / det
+    v_new = v + h * (1.5 * k1v + 0.5 * k2v)
+    w_new = w + h * (1.5 * k1w + 0.5 * k2w)
     # Lock event: lock where omega crosses zero, slide at mu(1) for the rest of the substep.
     crossing = w_new < 0.0
     frac = np.where(crossing, w / np.maximum(w - w_new, LOCK_TINY), 1.0)
-    v_new = np.where(crossing, v + frac * (v_new - v) - (1.0 - frac) * (h * Fz * mu1 / m), v_new)
+    v_new = np.where(crossing, v + frac * (v_new - v) - (1.0 - frac) * h * Fz * mu1 / m, v_new)
     w_new = np.maximum(w_new, 0.0)
     v_new = np.maximum(v_new, 0.0)
     return v_new, w_new, braking_invariant_broken(v, w, v_new, w_new, Tb, r)
