@@ -19,6 +19,8 @@ from functools import cached_property
 import numpy as np
 from scipy.optimize import minimize_scalar
 
+from fricenv.errors import InvalidInputError
+
 __all__ = [
     "DRY",
     "ICE",
@@ -40,7 +42,7 @@ __all__ = [
 SLIP_SPEED_FLOOR = 0.1
 
 
-class UnknownRoadError(ValueError):
+class UnknownRoadError(InvalidInputError):
     """A road name that is not one of the presets."""
 
 
