@@ -57,7 +57,7 @@ from fricenv.effects.quarter_car import DEFAULT_SUBSTEPS, EFFECTS, effect_params
 from fricenv.envs import config as core
 from fricenv.envs.effect_spec import describe_effects, effects_from_report
 from fricenv.envs.factory import make_braking
-from fricenv.envs.scenario import V0_DEFAULT
+from fricenv.envs.scenario import V0_DEFAULT, limit_distance
 from fricenv.gap.quarter_car.simulate import STAND_IN_SUBSTEPS, V_END, NoiseSpec
 from fricenv.logs import QuarterCarLog
 from fricenv.plants.tire import MagicFormula, get_road
@@ -374,7 +374,7 @@ def _gap_figures(pol: GapPolicy, road: MagicFormula, effects: Sequence, verdict:
                  runs: dict[str, list[Episode] | None], seed_list: list[int], v0: float) -> dict[str, Any]:
     """The distances, ratios and prediction errors of the three simulators (the ``--json`` keys)."""
     c = pol.config()
-    limit = float(core.limit_distance(v0, c.v_stop, road.mu_max, road.mu_max, math.inf, c.params.g))
+    limit = float(limit_distance(v0, c.v_stop, road.mu_max, road.mu_max, math.inf, c.params.g))
     keys = ("nominal", "augmented", "real")
     dist = {k: _mean(runs[k]) if runs[k] is not None else None for k in keys}
     d_real = dist["real"]
