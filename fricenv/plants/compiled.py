@@ -81,8 +81,11 @@ def substep_refined(v, w, Tb, B, C, E, theta, mu1, h, r, m, J, Fz):
 def substep_cars(v, w, Tb, road, h, r, m, J, Fz, v_out, w_out):
     """:func:`substep_refined` of every car: ``road`` rows (B, C, E, theta, mu(1)), results into the out arrays."""
     for i in range(v.shape[0]):
-        v_out[i], w_out[i] = substep_refined(v[i], w[i], Tb[i], road[i, 0], road[i, 1], road[i, 2], road[i, 3],
-                                             road[i, 4], h, r, m, J, Fz)
+        B, C, E, theta, mu1 = road[i, 0], road[i, 1], road[i, 2], road[i, 3], road[i, 4]
+        v_new, w_new, broken = _ros2(v[i], w[i], Tb[i], B, C, E, theta, mu1, h, r, m, J, Fz)  # inlined: the common case
+        if broken and h > REFINE_MIN_STEP:  # rare: the refinement (recursive, not inlined)
+            v_new, w_new = substep_refined(v[i], w[i], Tb[i], B, C, E, theta, mu1, h, r, m, J, Fz)
+        v_out[i], w_out[i] = v_new, w_new
 
 
 def guard_cache(namespace: dict, extra_modules: tuple[str, ...] = ()) -> None:
