@@ -1,4 +1,4 @@
-"""Policy-level sim-to-real gap (issue 6, item 4): how far the simulator's prediction of a controller's stopping
+"""Policy-level sim-to-real gap: how far the simulator's prediction of a controller's stopping
 distance is off on the "real" plant, before and after the diagnosed effect is added to the simulator.
 
 For a controller (``rule-abs``, ``slip-pi``, ``oracle-slip``, ``locked``), an estimator pipeline
@@ -10,9 +10,9 @@ stopping distance, averaged over noise seeds (the same seeds in every simulator,
    ``fricenv gap simulate`` does); or, for a real log, nothing: only its diagnosis report is given;
 3. in the **augmented** (corrected) simulator: the nominal one plus the diagnosed effects with their fitted
    parameters. The typical
-   flow: the controller brakes the stand-in once more with a free-rolling start and that run is logged (DESIGN.md
-   log format); :func:`fricenv.gap.quarter_car.diagnose.diagnose` names the effect and fits it; or the verdict and parameters
-   come from a ``report.json``.
+   flow: the controller brakes the stand-in once more with a free-rolling start and that run is logged (the log
+   format of docs/contracts.md); :func:`fricenv.gap.quarter_car.diagnose.diagnose` names the effect and fits it; or
+   the verdict and parameters come from a ``report.json``.
 
 ``prediction_error_before = (d_nominal - d_real) / d_real`` and ``prediction_error_after = (d_augmented - d_real) /
 d_real`` (signed shares) say how far the simulator's prediction of the real stopping distance was off. Optionally
@@ -241,8 +241,8 @@ def stopping_distances(policy: GapPolicy, road: str | MagicFormula, effects: Seq
 def closed_loop_log(policy: GapPolicy, road: str | MagicFormula, effects: Sequence, seed: int, v0: float = V0,
                     free_roll: float = FREE_ROLL, substeps: int = STAND_IN_SUBSTEPS,
                     max_time: float = LOG_MAX_TIME, log_noise: NoiseSpec | None = None) -> QuarterCarLog:
-    """A DESIGN.md log of ``policy`` braking the stand-in: free roll, then the closed loop until the car is slower
-    than ``fricenv.gap.quarter_car.simulate.V_END`` (the stand-in's log end) or ``max_time`` has passed. Columns: the commanded
+    """A log (docs/contracts.md format) of ``policy`` braking the stand-in: free roll, then the closed loop until the
+    car is slower than ``fricenv.gap.quarter_car.simulate.V_END`` (the stand-in's log end) or ``max_time`` has passed. Columns: the commanded
     torque, the env's measured wheel speed, and the true speed and acceleration plus ``log_noise``."""
     road_mf = get_road(road) if isinstance(road, str) else road
     env = make_env(policy, road_mf, effects, v0, substeps)

@@ -1,4 +1,4 @@
-"""Log files of the sim-to-real gap tool (DESIGN.md, "Log file"): the one reader and writer.
+"""Log files of the sim-to-real gap tool (docs/contracts.md, section 1): the one reader and writer.
 
 CSV in SI units: optional leading ``#`` lines, one header row, then rows. Quarter car: required ``t`` [s],
 ``T_b`` [N m] (commanded torque), ``omega`` [rad/s]; optional ``v`` [m/s], ``a_x`` [m/s^2]. Payload: ``t``,
@@ -49,6 +49,8 @@ __all__ = [
 # The comment line that marks a brake torque computed from a line pressure with a nominal factor.
 TORQUE_FROM_PRESSURE = "torque_source: pressure"
 # Comment lines: the first sample's time in the original base, a drive torque as throttle, a check's warning.
+# a wheel channel converted from a rim speed, and the radius [m] it was converted with
+WHEEL_RADIUS = "wheel_radius:"
 T_OFFSET = "t_offset_s:"
 THROTTLE_UNIT = "throttle_unit:"
 WARNING = "warning:"
@@ -99,6 +101,8 @@ class QuarterCarLog:
     throttle_unit: str = field(default="%", compare=False)  # "%" or "N m"
     t_offset: float = field(default=0.0, compare=False)  # the first sample's time in the log's original base [s]
     warnings: tuple[str, ...] = field(default=(), compare=False)  # the checks' findings, "<channel>: ..."
+    # wheel channel -> the radius [m] the column map converted its rim speed with (a "wheel_radius:" line)
+    radii: dict[str, float] = field(default_factory=dict, compare=False)
 
     REQUIRED = ("t", "T_b", "omega")
     OPTIONAL = ("v", "a_x", "throttle", "yaw_rate", "steer", *WHEELS)
@@ -330,7 +334,7 @@ def read_log(path: str | os.PathLike, plant: str = "quarter-car",
     here: an error stops the reading, a warning is issued as a :class:`LogCheckWarning` and kept in ``log.warnings``
     (with those a written log carries as ``warning:`` comment lines).
 
-    :param path: CSV file in the DESIGN.md format, or any export that ``column_map`` describes.
+    :param path: CSV file in the docs/contracts.md format, or any export that ``column_map`` describes.
     :param plant: ``"quarter-car"`` or ``"payload"``.
     :param column_map: a column map (file or :class:`fricenv.logs.logmap.ColumnMap`; docs/contracts.md,
         "Column map").
@@ -373,14 +377,17 @@ def read_log(path: str | os.PathLike, plant: str = "quarter-car",
         notes["torque_from_pressure"] = TORQUE_FROM_PRESSURE in notes["comments"]
         notes["sensor_filters"] = _stated_filters(path, notes["comments"], cols)
         notes["throttle_unit"] = info.throttle_unit
+        notes["radii"] = {**old.get("radii", {}), **info.radii}
+        notes["comments"] += tuple(f"{WHEEL_RADIUS} {c} {r!r}" for c, r in notes["radii"].items())
         if info.throttle_unit != "%":
             notes["comments"] += (f"{THROTTLE_UNIT} {info.throttle_unit}",)
     return cls(**cols, **notes)
 
 
 def _carried(path: Path, comments: list[str]) -> tuple[dict, list[str]]:
-    """What a written log's comment lines carry (``t_offset``, ``throttle_unit``, ``warnings``) and the other
-    comment lines. The time offset and throttle unit lines are taken out (the reader writes them afresh)."""
+    """What a written log's comment lines carry (``t_offset``, ``throttle_unit``, ``radii``, ``warnings``) and the
+    other comment lines. The time offset, throttle unit and wheel radius lines are taken out (the reader writes them
+    afresh)."""
     found: dict = {"warnings": []}
     kept = []
     for line in comments:
@@ -389,6 +396,13 @@ def _carried(path: Path, comments: list[str]) -> tuple[dict, list[str]]:
                 found["t_offset"] = float(line[len(T_OFFSET):])
             except ValueError:
                 raise LogFormatError(f"{path}: comment line {line!r}: expected a time in seconds") from None
+        elif line.startswith(WHEEL_RADIUS):
+            try:
+                channel, radius = line[len(WHEEL_RADIUS):].split()
+                found.setdefault("radii", {})[channel] = float(radius)
+            except ValueError:
+                raise LogFormatError(f"{path}: comment line {line!r}: expected '{WHEEL_RADIUS} <channel> <radius m>'"
+                                     ) from None
         elif line.startswith(THROTTLE_UNIT):
             unit = line[len(THROTTLE_UNIT):].strip()
             if unit not in ("%", "N m"):
@@ -424,7 +438,7 @@ def _stated_filters(path: Path, comments: tuple[str, ...], cols: dict) -> dict[s
 
 
 def write_log(path: str | os.PathLike, log: QuarterCarLog | PayloadLog, comments: tuple[str, ...] = ()) -> None:
-    """Write a log atomically in the DESIGN.md format, every value at full precision (the shortest decimal that
+    """Write a log atomically in the docs/contracts.md format, every value at full precision (the shortest decimal that
     reads back to the same float); optional columns that are ``None`` are left out, a missing sample is written
     ``nan``, a torque from pressure is marked by the :data:`TORQUE_FROM_PRESSURE` line, a stated sensor filter by its
     ``sensor_filter:`` line, a time offset by its ``t_offset_s:`` line, a drive torque as throttle by
@@ -436,9 +450,10 @@ def write_log(path: str | os.PathLike, log: QuarterCarLog | PayloadLog, comments
     """
     names = [name for name in (*log.REQUIRED, *log.OPTIONAL) if getattr(log, name) is not None]
     table = np.column_stack([np.asarray(getattr(log, name), dtype=float) for name in names])
-    lines = [c for c in (comments or log.comments) if not c.startswith((T_OFFSET, THROTTLE_UNIT))]
+    lines = [c for c in (comments or log.comments) if not c.startswith((T_OFFSET, THROTTLE_UNIT, WHEEL_RADIUS))]
     if getattr(log, "t_offset", 0.0):
         lines.append(f"{T_OFFSET} {float(log.t_offset)!r}")
+    lines += [f"{WHEEL_RADIUS} {c} {r!r}" for c, r in getattr(log, "radii", {}).items()]
     if getattr(log, "throttle", None) is not None and log.throttle_unit != "%":
         lines.append(f"{THROTTLE_UNIT} {log.throttle_unit}")
     if getattr(log, "torque_from_pressure", False) and TORQUE_FROM_PRESSURE not in lines:

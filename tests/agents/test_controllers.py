@@ -1,4 +1,4 @@
-"""Classical ABS controllers against the physical limit and each other (issue 2, section 7)."""
+"""Classical ABS controllers against the physical limit and each other."""
 
 import numpy as np
 import pytest

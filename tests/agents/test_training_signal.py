@@ -1,4 +1,4 @@
-"""The training-side fixes of issue 17: the policy's log torque map, the lock-onset penalty, the small LSTM."""
+"""The training signal: the policy's log torque map, the lock-onset penalty, the small LSTM."""
 
 from __future__ import annotations
 

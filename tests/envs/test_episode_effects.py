@@ -1,4 +1,4 @@
-"""One episode over three plants, and the corrected simulator as an env (issue 14, items 1-2)."""
+"""One episode over three plants, and the corrected simulator as an env."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""The EKF/RLS estimator places the peak slip of every road preset, and follows friction jumps (issue 17, item 3).
+"""The EKF/RLS estimator places the peak slip of every road preset, and follows friction jumps.
 
 Logs: the quarter-car plant (:func:`fricenv.plants.quarter_car.step`, 1 ms substeps) braked from 25 m/s by a slip
 hysteresis excitation common to every road (torque up at ``UP`` times the road's peak torque per second until the

@@ -113,6 +113,8 @@ def test_a_cars_channels_through_a_map(tmp_path):
                  "omega_rr"):
         np.testing.assert_array_equal(getattr(back, name), getattr(log, name))
     assert back.throttle_unit == "N m"
+    radii = {"omega": 0.3, **{f"omega_{c}": 0.3 + 0.01 * i for i, c in enumerate(("fl", "fr", "rl", "rr"))}}
+    assert log.radii == radii and back.radii == radii  # the radii the map converted with, through a written log
     bare = QuarterCarLog(t=t, T_b=np.zeros(n), omega=v / R)
     assert all(getattr(bare, name) is None for name in ("throttle", "yaw_rate", "steer", "omega_fl", "omega_rr"))
 

@@ -1,7 +1,7 @@
 """The gap tool's "real" stand-in: a quarter car with chosen effects, a test driver and a log writer.
 
 The stand-in is :class:`fricenv.effects.quarter_car.EffectSimulator` (the same code as the diagnosis' augmented
-simulators). Logs follow DESIGN.md: ``t, T_b, omega[, v][, a_x]``; ``T_b`` is the commanded torque, before any
+simulators). Logs follow docs/contracts.md: ``t, T_b, omega[, v][, a_x]``; ``T_b`` is the commanded torque, before any
 actuator effect; every log starts with a short free-rolling stretch; the wheel speed carries white noise of the
 paper's variance (:data:`fricenv.plants.sui_johansen.OMEGA_NOISE_VAR`), ``v`` and ``a_x`` small white noise.
 
