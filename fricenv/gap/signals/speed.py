@@ -27,6 +27,7 @@ import numpy as np
 
 from fricenv.effects import registry
 from fricenv.effects.quarter_car import ModelBatch
+from fricenv.gap.signals.speed_step import IMPLICIT, slip_lag_decay, speed_update
 from fricenv.plants import quarter_car as qc
 from fricenv.plants.tire import magic_formula_and_dslip, slip_and_partials
 
@@ -38,33 +39,10 @@ NEWTON_TOL = 1e-11  # largest accepted step residual [m/s] (transient slip: the 
 FD_STEP = 1e-7  # finite-difference step of the step Jacobians [m/s], [-]
 
 
-IMPLICIT = 0.5  # weight of the step's end in the linearly implicit step (1/2: trapezoidal, second order) [-]
-
-
 def step_wheel_speed(omega: np.ndarray) -> np.ndarray:
     """The wheel speed over each sample step, the mean of its two samples (the last step keeps its sample)."""
     w = np.asarray(omega, dtype=float)
     return np.r_[0.5 * (w[:-1] + w[1:]), w[-1:]] if w.size > 1 else w.copy()
-
-
-def speed_update(v, mu, dmu_dv, c0, c2, Fz, m, dt, implicit):
-    """One linearly implicit step of the force balance with drag, ``m v' = -(F_z mu + c0 + c2 v^2)``, kept >= 0
-    (plain math: the compiled recursion is built from it).
-
-    :param v: speed [m/s]; :param mu: friction coefficient; :param dmu_dv: its slope in v [s/m] (0: no feedback).
-    :param c0: constant resistance [N]; :param c2: quadratic drag coefficient [N s^2/m^2].
-    :param Fz: tire load [N]; :param m: mass [kg]; :param dt: step [s].
-    :param implicit: weight of the step's end (:data:`IMPLICIT`).
-    """
-    f = -(Fz * mu + c0 + c2 * v * v) / m
-    dfdv = -(Fz * dmu_dv + 2.0 * c2 * v) / m
-    return np.maximum(v + dt * f / (1.0 - implicit * dt * np.minimum(dfdv, 0.0)), 0.0)
-
-
-def slip_lag_decay(v, dt_over_sigma):
-    """Factor by which the transient slip's lag behind the slip decays over one sample, ``exp(-v dt / sigma)``
-    (first-order relaxation, ``(sigma / v) lambda_t' = lambda - lambda_t``, with the speed held over the sample)."""
-    return np.exp(-np.maximum(v, 0.0) * dt_over_sigma)
 
 
 @dataclass(frozen=True)
