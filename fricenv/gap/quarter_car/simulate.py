@@ -29,7 +29,7 @@ from fricenv.effects.quarter_car import (
 from fricenv.logs import QuarterCarLog, write_log
 from fricenv.plants import quarter_car as qc
 from fricenv.plants import sui_johansen as sj
-from fricenv.plants.tire import MagicFormula
+from fricenv.plants.tire import MagicFormula, ecu_slip
 from fricenv.utils import as_generator
 
 __all__ = ["DRIVERS", "NoiseSpec", "make_driver", "simulate_log", "write_simulated_log"]
@@ -88,7 +88,7 @@ def _abs_driver(road: MagicFormula, p: qc.QuarterCarParams, v0: float, free_step
         s["v_ref"] = max(s["w"] * p.r, s["v_ref"] - decel * dt)
         if k < free_steps:
             return 0.0
-        slip_est = 1.0 - s["w"] * p.r / max(s["v_ref"], 0.1)
+        slip_est = ecu_slip(s["w"], s["v_ref"], p.r)
         if s["mode"] == "apply":
             rate = _ABS_RATE_UP if s["cycles"] == 0 else _ABS_RATE_UP_CYCLE * s["T_peak"] / 0.1
             s["T"] += rate * dt
