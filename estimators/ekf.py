@@ -20,10 +20,10 @@ import numpy as np
 from estimators.base import Estimate, Estimator, EstimatorConfigError, Health, check_dt
 from estimators.outliers import DEFAULT_GATE, GateParams, Verdict, check_gate, gate, nis
 from estimators.quarter_car_model import PARAM_NAMES, AugmentedModel
-from fricenv.plants.sui_johansen import OMEGA_NOISE_VAR
+from estimators.tuning import DEFAULT_EKF_TUNING, HORIZON, PAPER_TUNING, SLIP_PRIOR, V_PRIOR
 
-__all__ = ["DEFAULT_EKF_TUNING", "ExtendedKalmanFilter", "ParameterInformation", "QuarterCarEKF", "ekf_predict",
-           "ekf_update", "gate_wheel_speed", "innovation_covariance", "reinit_from_wheel_speed"]
+__all__ = ["DEFAULT_EKF_TUNING", "SLIP_PRIOR", "V_PRIOR", "ExtendedKalmanFilter", "ParameterInformation", "QuarterCarEKF",
+           "ekf_predict", "ekf_update", "gate_wheel_speed", "innovation_covariance", "reinit_from_wheel_speed"]
 
 
 def _sym(P: np.ndarray) -> np.ndarray:
@@ -106,16 +106,6 @@ class ExtendedKalmanFilter:
         return ekf_update(x, P, np.atleast_1d(y), np.atleast_1d(yp), np.atleast_2d(H), self.R)
 
 
-# Default tuning of the quarter-car EKF (standard deviations).
-DEFAULT_EKF_TUNING = {
-    # initial prior spread, per state
-    "P0_std": {"v": 1.0, "slip": 0.05, "theta": 0.4, "B": 3.0, "C": 0.5, "E": 3.0},
-    # process noise per 10 ms sample: model error on v and slip, random walk on the parameters
-    "Q_std": {"v": 0.01, "slip": 0.01, "theta": 0.002, "B": 0.02, "C": 0.005, "E": 0.02},
-    "R": OMEGA_NOISE_VAR,  # wheel-speed noise variance [(rad/s)^2], Section IV
-}
-V_PRIOR = 19.0  # a priori initial speed [m/s], Section IV
-SLIP_PRIOR = 0.0  # a priori initial slip [-]
 
 
 def reinit_from_wheel_speed(model: AugmentedModel, x: np.ndarray, P: np.ndarray, P0: np.ndarray,
@@ -241,8 +231,6 @@ class QuarterCarEKF(Estimator):
     def __init__(self, estimated: tuple[str, ...] = ("theta",), dt: float = 0.01, P0_std: dict | None = None,
                  Q_std: dict | None = None, R: float = DEFAULT_EKF_TUNING["R"],
                  model: AugmentedModel | None = None, outlier_gate: GateParams | None = DEFAULT_GATE):
-        from estimators.mhe import HORIZON, PAPER_TUNING
-
         dt = check_dt(dt)
         try:
             self.model = model or AugmentedModel(estimated=tuple(estimated), dt=dt)

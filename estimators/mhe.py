@@ -69,25 +69,23 @@ import casadi as ca
 import numpy as np
 
 from estimators.base import Estimate, Estimator, EstimatorConfigError, Health, check_dt
-from estimators.ekf import DEFAULT_EKF_TUNING, SLIP_PRIOR, V_PRIOR, ekf_predict, ekf_update, gate_wheel_speed
+from estimators.ekf import ekf_predict, ekf_update, gate_wheel_speed
 from estimators.outliers import DEFAULT_GATE, GateParams, Verdict, check_gate
 from estimators.quarter_car_model import PARAM_NAMES, AugmentedModel
+from estimators.tuning import (
+    DEFAULT_ARRIVAL,
+    DEFAULT_EKF_TUNING,
+    GATE_CHI2,
+    HORIZON,
+    PAPER_TUNING,
+    SLIP_PRIOR,
+    STATE_SCALES,
+    V_PRIOR,
+)
 from fricenv.plants.sui_johansen import OMEGA_NOISE_STD  # [rad/s], Section IV
 
-__all__ = ["DEFAULT_ARRIVAL", "PAPER_TUNING", "STATE_SCALES", "RegularizedMHE"]
+__all__ = ["DEFAULT_ARRIVAL", "GATE_CHI2", "HORIZON", "PAPER_TUNING", "STATE_SCALES", "RegularizedMHE"]
 
-HORIZON = 10  # N, Section IV
-# Paper tuning, Section IV.A (theta only) and IV.B (theta, B, C, E).
-PAPER_TUNING = {
-    "theta-only": {"alpha": 0.01, "beta": 1.0, "delta": 0.1},
-    "all": {"alpha": 0.01, "beta": 1.0, "delta": 0.8},
-}
-# State scales D of the "scaled" reading (per group, as the paper tunes delta per group): the spread of the prior
-# per window state; chosen on cases 1-4 (seeds 0-2) for the RMS of v and slip after 0.5 s.
-STATE_SCALES = {
-    "theta-only": {"v": 0.3, "slip": 0.01, "theta": 0.04, "B": 2.0, "C": 0.4, "E": 2.0},
-    "all": {"v": 0.3, "slip": 0.03, "theta": 0.03, "B": 1.0, "C": 0.2, "E": 1.0},
-}
 MAX_ITER = 4  # Gauss-Newton iterations per update
 MAX_ITER_EKF_ARRIVAL = 2  # the same with the EKF arrival cost (a nearly quadratic problem: 2 suffice, measured)
 LM_DAMPING0 = 1e-6  # initial Levenberg-Marquardt damping (relative to diag(J^T J))
@@ -95,14 +93,10 @@ LM_DAMPING_MAX = 1e6  # give up above this damping
 TOL_STEP = 1e-9  # stop when the relative cost decrease is below this
 SV_FLOOR = 1e-12  # relative singular value treated as exactly zero
 MAX_EVALS = 8  # model evaluations per update (bounds the worst-case time)
-GATE_CHI2 = 25.0  # EKF-consistency gate of the arrival="ekf" MHE: squared Mahalanobis distance (module docstring)
 PD_JITTER = 1e-12  # added to the arrival covariance before its Cholesky factor
 BOUND_TOL = 1e-9  # relative distance at which a bound counts as active
 WEIGHTINGS = ("literal", "scaled")
 ARRIVALS = ("paper", "ekf")
-# Default arrival cost per group (module docstring): the EKF arrival cost, with process noise in the window, for
-# both; the paper's prior terms and hard dynamics are arrival="paper", model_error=None.
-DEFAULT_ARRIVAL = {"theta-only": "ekf", "all": "ekf"}
 
 
 class RegularizedMHE(Estimator):

@@ -43,10 +43,10 @@ import numpy as np
 
 from estimators.base import EstimatorConfigError, Health
 from estimators.casadi_compiled import BatchCall, compiled, densified
-from estimators.ekf import SLIP_PRIOR, V_PRIOR
 from estimators.mhe import PD_JITTER, RegularizedMHE
 from estimators.mhe_solver import BatchedWindowSolver, sym
 from estimators.outliers import Verdict
+from estimators.tuning import SLIP_PRIOR, V_PRIOR
 from fricenv.plants.tire import magic_formula
 
 __all__ = ["BATCHED_MHE", "PARALLEL", "BatchedMHE", "mhe_builder"]

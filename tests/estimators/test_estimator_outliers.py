@@ -1,7 +1,7 @@
 """The outlier gate (estimators/outliers.py) and the quarter-car estimators under spikes, dropouts and a stuck sensor.
 
 The gate's constants (p_false 1e-5, 10 rejections before a re-initialisation, the EKF/RLS wheel-gate random walk)
-were chosen looking at seeds 0-2 only (``python -m estimators.outliers --seeds 0 1 2``); the target test runs on
+were chosen looking at seeds 0-2 only (``python -m validation.estimator_spikes --seeds 0 1 2``); the target test runs on
 seeds 7 and 8.
 """
 
@@ -13,18 +13,10 @@ from estimators.base import EstimatorConfigError, Health, run
 from estimators.ekf import QuarterCarEKF
 from estimators.ekf_rls import QuarterCarEkfRls
 from estimators.mhe import RegularizedMHE
-from estimators.outliers import (
-    DEFAULT_GATE,
-    STUDY_ESTIMATORS,
-    GateParams,
-    Verdict,
-    gate,
-    nis,
-    spike_indices,
-    study,
-)
+from estimators.outliers import DEFAULT_GATE, GateParams, Verdict, gate, nis
 from estimators.scenarios import ekf_rls_scenario, mhe_case
 from fricenv.plants.sui_johansen import OMEGA_NOISE_VAR
+from validation.estimator_spikes import STUDY_ESTIMATORS, spike_indices, study
 
 BAD = (Health.OUTLIER, Health.REINITIALISED)
 
