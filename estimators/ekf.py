@@ -19,6 +19,7 @@ import numpy as np
 
 from estimators.base import Estimate, Estimator, EstimatorConfigError, Health, check_dt
 from estimators.outliers import DEFAULT_GATE, GateParams, Verdict, check_gate, gate, nis
+from estimators.mismatch import WheelSpeedGuard
 from estimators.quarter_car_model import PARAM_NAMES, AugmentedModel
 from estimators.tuning import DEFAULT_EKF_TUNING, HORIZON, PAPER_TUNING, SLIP_PRIOR, V_PRIOR
 
@@ -252,6 +253,7 @@ class QuarterCarEKF(Estimator):
         )
         self.lower, self.upper = self.model.lower(), self.model.upper()
         self.outlier_gate = check_gate(outlier_gate)
+        self.guard = WheelSpeedGuard(self.model, self.outlier_gate, float(np.sqrt(R)))
         group = "theta-only" if len(self.model.estimated) <= 1 else "all"
         self.information = ParameterInformation(slice(2, self.model.nx), HORIZON, PAPER_TUNING[group]["delta"])
         self.reset()
@@ -260,7 +262,8 @@ class QuarterCarEKF(Estimator):
         """Start from the a priori state (Section IV) with covariance P0."""
         self.x = self.model.nominal_state(v, slip, params)
         self.P = self.P0.copy()
-        self._rejected = 0
+        self.guard.reset()
+        self._brake_torque = 0.0  # torque held since the last sample [N m]
         self.information.reset()
         return self._estimate(self.x, Health.OK)
 
@@ -272,8 +275,9 @@ class QuarterCarEKF(Estimator):
         if sample is None:
             return self._estimate(self.x, Health.INVALID_INPUT, {"reason": "NaN or wrong shape; sample skipped"})
         y, uu = sample
-        verdict, self._rejected, self.x, self.P = gate_wheel_speed(self.model, self.x, self.P, self.P0, self.filter.R,
-                                                                   y, self._rejected, self.outlier_gate)
+        verdict, self.x, self.P, inflation = self.guard.check(self.x, self.P, self.P0, self.filter.R, self.filter.Q,
+                                                              y, self._brake_torque)
+        self._brake_torque = float(uu[0])
         if verdict == Verdict.REJECT:
             x_post, P_post, innov = self.x, self.P, None
         else:
@@ -285,12 +289,14 @@ class QuarterCarEKF(Estimator):
             self.P = self.P0.copy()
             return self._estimate(self.x, Health.SOLVER_FAILED, {"reason": "non-finite EKF step"})
         self.information.add(self.P, None if innov is None else P_post)
-        if verdict == Verdict.ACCEPT:
+        if verdict in (Verdict.ACCEPT, Verdict.MISMATCH):
             health = Health.OK if self.information.excited(P_post) else Health.NOT_EXCITED
         else:
             health = Health.OUTLIER if verdict == Verdict.REJECT else Health.REINITIALISED
         self.x, self.P = np.clip(x_next, self.lower, self.upper), P_next
-        info = {"rejected_in_row": self._rejected} if innov is None else {"innovation": float(innov[0])}
+        info = {"rejected_in_row": self.guard.rejected} if innov is None else {"innovation": float(innov[0])}
+        if verdict == Verdict.MISMATCH:
+            info["mismatch"] = inflation
         return self._estimate(x_post, health, info)
 
     @property

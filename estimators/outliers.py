@@ -84,6 +84,7 @@ class Verdict(enum.IntEnum):
     ACCEPT = 0  # update with the sample
     REJECT = 1  # skip the update (Health.OUTLIER)
     REINIT = 2  # too many rejections in a row: re-initialise from the sample (Health.REINITIALISED)
+    MISMATCH = 3  # a persistent innovation: the model is off, update with raised process noise (estimators.mismatch)
 
 
 def nis(innovation, S) -> float:

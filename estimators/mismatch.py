@@ -1,0 +1,139 @@
+"""A spike or a model that is off: the quarter-car filters' wheel-speed gate with a mismatch rule and a reference
+speed.
+
+The outlier gate (:mod:`estimators.outliers`) rejects a wheel speed whose NIS fails the chi-square bound. A spike
+is one such sample; a plant whose brake lags, whose gain, radius or drag differ from the model's gives a run of
+them, all of one sign, each a wheel speed a road can produce. Rejecting that run sample after sample blinds the
+filter until the re-initialisation, which then took the speed from a wheel that may sit in an ABS slip dip. Rules:
+
+(M1) **Persistent innovation.** A failing sample that follows a failing sample with an innovation of the same sign,
+     in a run whose every sample implies a tire torque a road can produce (:func:`estimators.jump.jump_test`,
+     friction within ``JUMP_MU_MAX`` times the load), is not an outlier: the model is off. The filter raises its
+     process noise on (v, slip) for this sample just enough that the sample sits on the gate's bound,
+     ``H (P + c Q_vs) H^T + R = e^2 / bound``, and updates with it (``Verdict.MISMATCH``; the estimate's health
+     stays the filter's own, its info carries ``mismatch``, the factor c). An isolated spike passes no such test
+     (the sample after it agrees with the prediction); a spike of a tenth or ten times the speed, or a dropout to
+     zero at speed, implies a tire force many times the load and stays an outlier.
+(M2) **Reference speed.** As an ABS ECU builds its reference: the fastest plausible wheel, with bounded deceleration,
+     ``v_ref(k) = max(omega(k) r - margin, v_ref(k-1) - A_REF dt)`` over the samples the gate used (a rejected
+     sample is not plausible); while braking it is a lower bound of the car's speed that the wheel touches whenever
+     it rolls freely. A re-initialisation takes the speed from it, ``v = max(v_ref, omega r)`` (the filter's own
+     speed after a run of rejections is not to be trusted), and the slip that makes eq. (7) hold at that speed (clipped to
+     ``[0, REINIT_SLIP_MAX]``): never the speed of a wheel that may be slipping.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from estimators.jump import jump_test
+from estimators.outliers import GateParams, Verdict, gate, nis
+from estimators.tuning import A_REF, JUMP_MU_MAX, REF_MARGIN_STD, REINIT_SLIP_MAX, SLIP_PRIOR
+
+__all__ = ["WheelSpeedGuard"]
+
+
+@dataclass
+class _State:
+    rejected: int = 0  # failing samples in a row before this one
+    armed: bool = False  # every failing sample of the run implied a physical tire torque
+    sign: float = 0.0  # sign of the last failing sample's innovation
+    omega_ref: float = np.nan  # the speed the next implied torque is measured from [rad/s]
+    v_ref: float = np.nan  # reference speed [m/s]
+
+
+class WheelSpeedGuard:
+    """The gate of the EKF and of the MHE's arrival filter on one wheel speed, with rules (M1) and (M2).
+
+    :param model: the filter's augmented quarter-car model (r, J, F_z, dt).
+    :param params: the outlier gate; None trusts every sample (no gate, no rule).
+    :param noise_std: wheel-speed noise standard deviation [rad/s].
+    """
+
+    def __init__(self, model, params: GateParams | None, noise_std: float):
+        self.model = model
+        self.params = params
+        self.noise_std = float(noise_std)
+        p = model.p
+        self.b_bound = JUMP_MU_MAX * p.Fz * p.r / p.J
+        self.reset()
+
+    def reset(self) -> None:
+        self.s = _State()
+
+    @property
+    def rejected(self) -> int:
+        """Failing samples in a row so far."""
+        return self.s.rejected
+
+    def _reference(self, omega: float) -> float:
+        """(M2) after a sample the filter used: the fastest plausible wheel, bounded deceleration."""
+        r, dt = self.model.p.r, self.model.dt
+        wheel = omega * r - REF_MARGIN_STD * self.noise_std * r
+        prev = self.s.v_ref - A_REF * dt if np.isfinite(self.s.v_ref) else -np.inf
+        self.s.v_ref = max(wheel, prev)
+        return self.s.v_ref
+
+    def reinit(self, x: np.ndarray, P: np.ndarray, P0: np.ndarray, omega: float) -> tuple[np.ndarray, np.ndarray]:
+        """(M2): re-initialise (v, slip) from the reference speed and the wheel speed (before a reference: the
+        filter's speed).
+
+        The (v, slip) covariance goes back to its initial block of ``P0``; their correlations with the parameters
+        are dropped.
+        """
+        r = self.model.p.r
+        wheel = max(float(omega) * r, 0.0)
+        v_ref = self.s.v_ref - A_REF * self.model.dt if np.isfinite(self.s.v_ref) else float(x[0])
+        v = max(v_ref, wheel)
+        slip = 1.0 - wheel / v if v > 0 else SLIP_PRIOR
+        x = x.copy()
+        x[0], x[1] = v, float(np.clip(slip, 0.0, REINIT_SLIP_MAX))
+        P = P.copy()
+        P[:2, :] = 0.0
+        P[:, :2] = 0.0
+        P[:2, :2] = P0[:2, :2]
+        return x, P
+
+    def check(self, x: np.ndarray, P: np.ndarray, P0: np.ndarray, R: np.ndarray, Q: np.ndarray, y: np.ndarray,
+              brake_torque: float):
+        """Gate wheel speed ``y`` against the prior (x, P).
+
+        :param x: prior state; :param P: its covariance; :param P0: the initial covariance.
+        :param R: measurement noise (1, 1); :param Q: the filter's process noise (its (v, slip) block is raised).
+        :param y: the wheel speed (1,) [rad/s].
+        :param brake_torque: brake torque held since the last sample (brake-positive) [N m].
+        :return: (verdict, x, P, inflation c): ``REINIT`` re-initialised x, P; ``MISMATCH`` the raised P.
+        """
+        if self.params is None:
+            return Verdict.ACCEPT, x, P, 0.0
+        omega = float(y[0])
+        H = np.atleast_2d(self.model.h_jacobian(x))
+        S = float((H @ (P @ H.T) + R)[0, 0])  # as estimators.ekf.innovation_covariance
+        e = omega - float(self.model.h(x))
+        s = self.s
+        value = nis(e, S)
+        verdict, rejected = gate(value, s.rejected, self.params)
+        inflation = 0.0
+        if verdict != Verdict.ACCEPT:
+            ref = s.omega_ref if np.isfinite(s.omega_ref) else omega
+            p = self.model.p
+            jump, armed, _ = jump_test(s.rejected, s.armed, s.sign, ref, omega, -float(brake_torque), e,
+                                       self.model.dt, p.J, self.b_bound)
+            if jump:  # (M1): the model is off, not the sample
+                Hq = H[0, :2]
+                inflation = (e * e / self.params.bound - S) / max(float(Hq @ Q[:2, :2] @ Hq), 1e-300)
+                P = P.copy()
+                P[:2, :2] += max(inflation, 0.0) * Q[:2, :2]
+                verdict, rejected = Verdict.MISMATCH, s.rejected  # a run of mismatches never re-initialises
+            s.armed, s.sign, s.omega_ref = armed, float(np.sign(e)), omega
+        if verdict == Verdict.REINIT:
+            x, P = self.reinit(x, P, P0, omega)
+        if verdict != Verdict.REJECT:
+            self._reference(omega)
+            s.omega_ref = omega
+        if verdict in (Verdict.ACCEPT, Verdict.REINIT):
+            s.armed, s.sign = False, 0.0
+        s.rejected = rejected
+        return verdict, x, P, inflation
