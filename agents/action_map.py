@@ -28,12 +28,14 @@ from collections.abc import Callable
 import numpy as np
 from stable_baselines3.common.vec_env import VecEnvWrapper
 
+from fricenv.errors import InvalidInputError
+
 __all__ = ["ACTION_MAPS", "LOG_RANGE", "ActionMapError", "ActionMapVecEnv", "check_action_map", "log_torque"]
 
 LOG_RANGE = 100.0  # t_max over the torque one step above zero of the log map's scale [-]
 
 
-class ActionMapError(ValueError):
+class ActionMapError(InvalidInputError):
     """An unknown action map name."""
 
 

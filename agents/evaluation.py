@@ -16,7 +16,7 @@ Policies are named by a spec string, parsed by :func:`agents.policy_spec.parse_p
 directory; see that module for the table).
 
 Jobs (one per policy, scenario and seed) run in ``workers`` local processes, or as Ray tasks with ``ray="auto"`` or
-a cluster address (:func:`fricenv.gap.pool.map_tasks`, the one parallel map of the project): the same jobs give the
+a cluster address (:func:`fricenv.gap.core.pool.map_tasks`, the one parallel map of the project): the same jobs give the
 same rows on either.
 """
 
@@ -34,7 +34,7 @@ import numpy as np
 
 from agents.policy_spec import PIPELINE_PREFIX, PolicySpec, PolicySpecError, parse_policy_spec
 from fricenv import progress as progress_events
-from fricenv.gap.pool import default_jobs, map_tasks
+from fricenv.gap.core.pool import default_jobs, map_tasks
 from fricenv.utils import atomic_write, write_json
 
 __all__ = [

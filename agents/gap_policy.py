@@ -11,7 +11,7 @@ stopping distance, averaged over noise seeds (the same seeds in every simulator,
 3. in the **augmented** (corrected) simulator: the nominal one plus the diagnosed effects with their fitted
    parameters. The typical
    flow: the controller brakes the stand-in once more with a free-rolling start and that run is logged (DESIGN.md
-   log format); :func:`fricenv.gap.diagnose.diagnose` names the effect and fits it; or the verdict and parameters
+   log format); :func:`fricenv.gap.quarter_car.diagnose.diagnose` names the effect and fits it; or the verdict and parameters
    come from a ``report.json``.
 
 ``prediction_error_before = (d_nominal - d_real) / d_real`` and ``prediction_error_after = (d_augmented - d_real) /
@@ -57,7 +57,7 @@ from fricenv.effects.quarter_car import DEFAULT_SUBSTEPS, EFFECTS, effect_params
 from fricenv.envs import braking_core as core
 from fricenv.envs.effect_spec import describe_effects, effects_from_report
 from fricenv.envs.factory import make_braking
-from fricenv.gap.simulate import STAND_IN_SUBSTEPS, V_END, NoiseSpec
+from fricenv.gap.quarter_car.simulate import STAND_IN_SUBSTEPS, V_END, NoiseSpec
 from fricenv.logs import QuarterCarLog
 from fricenv.plants.tire import MagicFormula, get_road
 
@@ -241,7 +241,7 @@ def closed_loop_log(policy: GapPolicy, road: str | MagicFormula, effects: Sequen
                     free_roll: float = FREE_ROLL, substeps: int = STAND_IN_SUBSTEPS,
                     max_time: float = LOG_MAX_TIME, log_noise: NoiseSpec | None = None) -> QuarterCarLog:
     """A DESIGN.md log of ``policy`` braking the stand-in: free roll, then the closed loop until the car is slower
-    than ``fricenv.gap.simulate.V_END`` (the stand-in's log end) or ``max_time`` has passed. Columns: the commanded
+    than ``fricenv.gap.quarter_car.simulate.V_END`` (the stand-in's log end) or ``max_time`` has passed. Columns: the commanded
     torque, the env's measured wheel speed, and the true speed and acceleration plus ``log_noise``."""
     road_mf = get_road(road) if isinstance(road, str) else road
     env = make_env(policy, road_mf, effects, v0, substeps)
@@ -351,7 +351,7 @@ def policy_gap(policy: str | GapPolicy, road: str = "dry", effects: Sequence = (
 def _diagnose_stand_in(pol: GapPolicy, road: MagicFormula, effects: Sequence, seed: int, kw: dict, log_path,
                        report_dir, jobs: int | None, say: Callable[[str], None]) -> tuple[str, list, dict]:
     """Diagnose the stand-in's closed-loop log: (verdict, the corrected simulator's effects, diagnosis figures)."""
-    from fricenv.gap.diagnose import DiagnoseConfig, diagnose
+    from fricenv.gap.quarter_car.diagnose import DiagnoseConfig, diagnose
 
     log = closed_loop_log(pol, road, effects, seed, **kw)
     if log_path is not None:
@@ -361,7 +361,7 @@ def _diagnose_stand_in(pol: GapPolicy, road: MagicFormula, effects: Sequence, se
     say(f"diagnosing the stand-in's closed-loop log ({len(log)} samples)")
     dg = diagnose(log, pol.config().params, DiagnoseConfig(jobs=jobs))
     if report_dir is not None:
-        from fricenv.gap.report import write_report
+        from fricenv.gap.quarter_car.report import write_report
 
         write_report(dg, report_dir)
     aug_effects = [make_effect(dg.verdict, **dg.params)] if dg.verdict in EFFECTS else []

@@ -28,6 +28,7 @@ from agents.controllers import CONTROLLERS
 from agents.pipeline import PIPELINE_NAME
 from agents.training import META_FILE
 from fricenv.envs.estimator_observation import ESTIMATOR_NAMES, NO_ESTIMATOR
+from fricenv.errors import InvalidInputError
 
 __all__ = [
     "ORACLE_CONTROLLERS",
@@ -46,7 +47,7 @@ PIPELINE_ESTIMATORS = tuple(n for n in ESTIMATOR_NAMES if n != NO_ESTIMATOR)
 PolicyKind = Literal["controller", "pipeline", "trained"]
 
 
-class PolicySpecError(ValueError):
+class PolicySpecError(InvalidInputError):
     """A policy spec that is neither a controller, an estimator pipeline nor a braking training run directory."""
 
 

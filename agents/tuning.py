@@ -48,7 +48,7 @@ import numpy as np
 from agents.evaluation import CHANGE_DISTANCE, Scenario, run_controller
 from agents.training import DEFAULT_CONFIGS, SEED_STRIDE, PPOConfig, SACConfig
 from fricenv.errors import InvalidInputError
-from fricenv.gap.pool import map_tasks
+from fricenv.gap.core.pool import map_tasks
 from fricenv.utils import write_json
 
 __all__ = [

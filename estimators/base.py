@@ -19,10 +19,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from fricenv.errors import InvalidInputError
+
 __all__ = ["Estimate", "Estimator", "EstimatorConfigError", "Health", "check_dt", "run"]
 
 
-class EstimatorConfigError(ValueError):
+class EstimatorConfigError(InvalidInputError):
     """An estimator was configured with invalid options (raised at construction, never inside ``update``)."""
 
 

@@ -44,6 +44,7 @@ from estimators.ekf import QuarterCarEKF
 from estimators.ekf_rls import PAPER_CORRECTION_GAIN, PAPER_MAP, QuarterCarEkfRls, TwoAxleEkfRls
 from estimators.mhe import RegularizedMHE
 from estimators.quarter_car_model import PARAM_NAMES, AugmentedModel
+from fricenv.errors import InvalidInputError
 from fricenv.plants import sui_johansen as sj
 from fricenv.plants.quarter_car import PAPER_PARAMS, QuarterCarParams
 from fricenv.plants.tire import DRY, MagicFormula
@@ -67,7 +68,7 @@ QUARTER_CAR_VALUES = MappingProxyType({"v": "v", "slip": "slip", "mu": "mu", "th
 EKF_RLS_VALUES = MappingProxyType({"v": "v", "slip": "slip", "mu": "mu_utilized", "theta": "mu"})
 
 
-class UnknownEstimatorError(ValueError):
+class UnknownEstimatorError(InvalidInputError):
     """An estimator name that is not in the registry."""
 
 

@@ -283,7 +283,7 @@ def ratios(figures: dict[str, Any]) -> dict[str, Any]:
 
 def _gap_log(seed: int, all_channels: bool):
     from fricenv.effects.quarter_car import make_effect
-    from fricenv.gap.simulate import simulate_log
+    from fricenv.gap.quarter_car.simulate import simulate_log
     from fricenv.plants.tire import get_road
 
     log, _ = simulate_log([make_effect(GAP_EFFECT[0], **GAP_EFFECT[1])], get_road(GAP_ROAD), "abs", seed=seed,
@@ -294,7 +294,7 @@ def _gap_log(seed: int, all_channels: bool):
 def _speed_reconstruction_ms(log) -> tuple[float, float]:
     """ms per call of the whole-trajectory speed reconstruction and of its sample-by-sample reference."""
     from fricenv.effects.quarter_car import ModelBatch
-    from fricenv.gap.speed import reconstruct_speed, reconstruct_speed_sequential
+    from fricenv.gap.signals.speed import reconstruct_speed, reconstruct_speed_sequential
     from fricenv.plants import quarter_car as qc
     from fricenv.plants.tire import get_road
 
@@ -316,7 +316,7 @@ def _diagnose_seconds(log, compiled: bool) -> tuple[float, float]:
     """Wall seconds and CPU seconds of one diagnosis (its worker processes end with it, so their CPU is counted)."""
     import warnings
 
-    from fricenv.gap.diagnose import DiagnoseConfig, diagnose
+    from fricenv.gap.quarter_car.diagnose import DiagnoseConfig, diagnose
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)

@@ -5,19 +5,17 @@ whose message is one line that says what to do; each also subclasses the builtin
 ``TypeError`` or ``OSError``), so ``except ValueError`` in existing callers keeps working. ``fricenv.cli.main``
 catches them once: one line on stderr, exit code 2. Anything else is a bug and keeps its traceback.
 
-Domain errors that predate this module (``UnknownRoadError`` in fricenv/plants/tire.py and the others in
-:data:`DOMAIN_ERRORS`) are ``ValueError`` subclasses; :func:`is_user_error` counts them as user errors too.
+The domain errors of the library (``UnknownRoadError``, ``UnknownEffectError``, ``EstimatorConfigError``, ...) are
+:class:`InvalidInputError` subclasses, so they belong to the family and stay ``ValueError`` for their callers.
 """
 
 from __future__ import annotations
 
 import errno
-import sys
 from collections.abc import Iterator
 from contextlib import contextmanager
 
 __all__ = [
-    "DOMAIN_ERRORS",
     "FricenvError",
     "InputFileError",
     "InvalidInputError",
@@ -49,14 +47,6 @@ class OutputPathError(FricenvError, OSError):
     """An output path cannot be written (a file where a directory is needed, no permission, read-only)."""
 
 
-# Domain errors defined before this module, as "module:Class". They are ValueErrors about the user's input.
-# Checked only when their module is already imported (an error of a class never imported cannot occur).
-DOMAIN_ERRORS: tuple[str, ...] = (
-    "fricenv.plants.tire:UnknownRoadError",
-    "estimators.base:EstimatorConfigError",
-    "agents.gap_policy:UnknownPolicyError",
-)
-
 # OSErrors about the user's files or machine, not about fricenv's code: reported in one line wherever they occur.
 _USER_ERRNOS = frozenset({
     errno.ENOENT, errno.EACCES, errno.EPERM, errno.EISDIR, errno.ENOTDIR, errno.EEXIST, errno.EROFS,
@@ -64,24 +54,13 @@ _USER_ERRNOS = frozenset({
 })
 
 
-def _domain_classes() -> tuple[type, ...]:
-    classes = []
-    for spec in DOMAIN_ERRORS:
-        module_name, cls_name = spec.split(":")
-        module = sys.modules.get(module_name)
-        cls = getattr(module, cls_name, None) if module is not None else None
-        if isinstance(cls, type):
-            classes.append(cls)
-    return tuple(classes)
-
-
 def is_user_error(exc: BaseException) -> bool:
     """True if ``exc`` is about the user's input or files (shown in one line), False if it is a bug.
 
-    User errors: the :class:`FricenvError` family, the :data:`DOMAIN_ERRORS`, and OSErrors on a named file with an
+    User errors: the :class:`FricenvError` family and OSErrors on a named file with an
     errno of the user's making (missing file, no permission, disk full, ...).
     """
-    if isinstance(exc, (FricenvError, *_domain_classes())):
+    if isinstance(exc, FricenvError):
         return True
     return isinstance(exc, OSError) and exc.filename is not None and exc.errno in _USER_ERRNOS
 

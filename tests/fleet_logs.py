@@ -1,6 +1,6 @@
 """Write a fleet of blind 5 s quarter-car logs for the fleet measurement of the README (issue 18).
 
-``python -m tests.fleet_logs N SEED DIR`` writes ``DIR/log000.csv`` ... : ``fricenv.gap.validate``'s cases over its
+``python -m tests.fleet_logs N SEED DIR`` writes ``DIR/log000.csv`` ... : ``fricenv.gap.quarter_car.validate``'s cases over its
 categories in turn (every library effect, ``none`` and out-of-library), through ``write_simulated_log`` without
 provenance comments, and the truth to ``DIR_truth.json``; then ``fricenv gap diagnose DIR --out OUT --jobs 2``.
 """
@@ -13,8 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
-from fricenv.gap.simulate import write_simulated_log
-from fricenv.gap.validate import DURATION, categories, draw_case
+from fricenv.gap.quarter_car.simulate import write_simulated_log
+from fricenv.gap.quarter_car.validate import DURATION, categories, draw_case
 
 
 def write_fleet(n: int, seed: int, out: Path) -> dict[str, dict]:

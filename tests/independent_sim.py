@@ -323,7 +323,7 @@ def _named_effects(dg) -> list[str]:
 
 def diagnose_case(case: IndependentCase) -> dict:
     """Write the case's log to a temporary directory and diagnose it blind; returns a result row."""
-    from fricenv.gap.diagnose import DiagnoseConfig, diagnose_file
+    from fricenv.gap.quarter_car.diagnose import DiagnoseConfig, diagnose_file
 
     expected = EXPECTED.get(case.category, case.category)
     t0 = time.perf_counter()
@@ -363,7 +363,7 @@ def _selection_figures(out: dict, case: IndependentCase, dg) -> None:
     confounded (``confounded``: each with those it is confounded with), and on a log with several effects whether
     all are named (``all_named``), all named or listed as not testable (``named_or_untestable``), each named true
     effect's parameter error."""
-    from fricenv.gap.validate import main_error
+    from fricenv.gap.quarter_car.validate import main_error
 
     true = {e.name: dict(e.params) for e in case.effects}
     out["extra_named"] = [e for e in out["named"][1:] if e not in true]
@@ -386,8 +386,8 @@ def right_or_untestable(row: dict) -> bool:
 def _effect_figures(out: dict, case: IndependentCase, dg) -> None:
     """Gap ratio, detectability (on a log with several effects, also which of them the data show: ``shown``) and
     (if right) parameter error of an effect log's result row."""
-    from fricenv.gap.diagnose import DiagnoseConfig
-    from fricenv.gap.validate import main_error, true_model_oracle
+    from fricenv.gap.quarter_car.diagnose import DiagnoseConfig
+    from fricenv.gap.quarter_car.validate import main_error, true_model_oracle
 
     truth = out["truth"]
     out["ratio"] = out["gap_after"] / out["gap_before"] if out["gap_before"] > 0 else float("nan")
@@ -443,9 +443,9 @@ def _real_settings(rng: np.random.Generator) -> dict:
 
 def measure(n: int, seed: int, jobs: int = 1, real: bool = False, combos: bool = False,
             columns: tuple | None = None, artifacts: dict | None = None) -> dict:
-    """Draw ``n`` independent logs, diagnose each blind, and summarise (fricenv.gap.validate's summary format;
+    """Draw ``n`` independent logs, diagnose each blind, and summarise (fricenv.gap.quarter_car.validate's summary format;
     with ``combos`` also the share of logs whose every effect is named)."""
-    from fricenv.gap.validate import summarize
+    from fricenv.gap.quarter_car.validate import summarize
 
     if n < 1:
         raise ValueError(f"n must be >= 1, got {n}")
@@ -491,7 +491,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                  for k, v in setting.items()}
     if artifacts and not args.real:
         ap.error(f"--{', --'.join(ARTIFACT_OPTIONS)} need --real")
-    from fricenv.gap.validate import format_summary
+    from fricenv.gap.quarter_car.validate import format_summary
     from fricenv.utils import write_json
     from tests import independent_sim as mod  # noqa: PLW0406 -- by its import name, so that the worker processes can unpickle
 

@@ -106,7 +106,7 @@ def write_odd_log(path: str, kind: str, rng: np.random.Generator, rate_hz: float
 
 def diagnose_odd(path: str) -> str:
     """The verdict, ``"rejected: <message>"`` for a ``ValueError`` naming the file, else ``"crash: <error>"``."""
-    from fricenv.gap.diagnose import DiagnoseConfig, diagnose_file
+    from fricenv.gap.quarter_car.diagnose import DiagnoseConfig, diagnose_file
 
     try:
         with warnings.catch_warnings():

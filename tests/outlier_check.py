@@ -2,7 +2,7 @@
 
 A real-like export (:mod:`tests.real_artifacts`) writes isolated outliers into the wheel speed and records where;
 the diagnosis reads the export through its map, resamples it onto its grid and, preparing it, sets aside what its
-sensor step (:func:`fricenv.gap.sensors.condition_channel`) flags. An outlier counts as found when a flag lies within one grid
+sensor step (:func:`fricenv.gap.signals.sensors.condition_channel`) flags. An outlier counts as found when a flag lies within one grid
 sample of its time stamp; a flag with no outlier there is false. Clean logs (no outliers written) give false flags
 only. The check stops at the log's preparation: nothing is fitted.
 
@@ -29,11 +29,11 @@ MATCH_SAMPLES = 1  # a flag this many grid samples from an outlier's time stamp 
 
 
 def _omega_flags(path: str) -> tuple[np.ndarray, float]:
-    """The grid indices the diagnosis' log preparation (:func:`fricenv.gap.windows.prepare`) sets aside in a
+    """The grid indices the diagnosis' log preparation (:func:`fricenv.gap.quarter_car.windows.prepare`) sets aside in a
     contract log's wheel speed (logged there, missing from its measurements), and the grid step [s]."""
-    from fricenv.gap.config import DEFAULT_CONFIG
-    from fricenv.gap.diagnose import read_log
-    from fricenv.gap.windows import prepare
+    from fricenv.gap.quarter_car.config import DEFAULT_CONFIG
+    from fricenv.gap.quarter_car.diagnose import read_log
+    from fricenv.gap.quarter_car.windows import prepare
     from fricenv.plants.quarter_car import PAPER_PARAMS
 
     log = read_log(path)

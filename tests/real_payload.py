@@ -1,6 +1,6 @@
 """Real-like payload logs for measuring the payload gap diagnosis (issue 15, item 6 and the payload target).
 
-The cases are those of ``fricenv gap validate --plant payload`` (:mod:`fricenv.gap.payload_validate`: each library
+The cases are those of ``fricenv gap validate --plant payload`` (:mod:`fricenv.gap.payload.validate`: each library
 effect, none, and viscous damping outside the library), simulated at 1 ms and then exported through
 :func:`tests.real_artifacts.real_like_payload`: the force-moment sensor low-passed and sampled at the logger rate, a
 30 Hz camera whose pose is held between frames, tracking glitches of 5 mm, jittered epoch-millisecond stamps with the
@@ -30,7 +30,7 @@ LOGGER_RATES = (100.0, 200.0)  # F/T logger rates drawn [Hz]
 
 def real_payload_row(case, rate_hz: float) -> dict:
     """Simulate one payload validation case, export it real-like at ``rate_hz`` and diagnose it blind."""
-    from fricenv.gap.payload_validate import score_payload_case, simulate_payload_case
+    from fricenv.gap.payload.validate import score_payload_case, simulate_payload_case
     from fricenv.logs import read_log
 
     case = dataclasses.replace(case, dt=SIM_DT)
@@ -53,7 +53,7 @@ def _task(args: tuple) -> dict:
 
 def measure_payload(n: int, seed: int, jobs: int = 1) -> dict:
     """Draw ``n`` payload validation cases, export each real-like, diagnose blind; the payload summary."""
-    from fricenv.gap.payload_validate import draw_payload_cases, summarize_payload
+    from fricenv.gap.payload.validate import draw_payload_cases, summarize_payload
 
     cases = draw_payload_cases(n, seed)
     rates = np.random.default_rng([seed, 15]).uniform(*LOGGER_RATES, n)
@@ -69,7 +69,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = ap.parse_args(argv)
     if args.n < 1 or args.jobs < 1:
         ap.error("--n and --jobs must be >= 1")
-    from fricenv.gap.payload_validate import format_payload_summary
+    from fricenv.gap.payload.validate import format_payload_summary
     from fricenv.utils import write_json
     from tests import real_payload as mod  # noqa: PLW0406 -- by its import name, so that worker processes can unpickle
 

@@ -1,7 +1,7 @@
 """Does a report say true things about a blind log? Its power analysis (issue 15 item 4) and its sensor flags (item 2).
 
 For every analysed effect the report gives the smallest deviation from "off" that its test detects half the time
-(``where["detectable"]``, :mod:`fricenv.gap.detectability`). On a blind log with one library effect the true size is
+(``where["detectable"]``, :mod:`fricenv.gap.quarter_car.detectability`). On a blind log with one library effect the true size is
 known, so the report can be held to it: effects larger than the reported size should mostly be found, smaller ones
 mostly not. :func:`size_ratio` is the true size over the reported one, :func:`power_summary` the share found on
 either side of 1 and the verdicts that are right or ``none`` on an effect the report sized out of reach.
@@ -39,7 +39,7 @@ def size_ratio(effect: str, truth: dict, dg) -> float | None:
     :param dg: the diagnosis (its ``where["detectable"]`` and the log's vehicle parameters ``data.p``).
     """
     from fricenv.effects import registry  # the tool, imported only where a diagnosis is checked
-    from fricenv.gap.params import ROAD_NAMES
+    from fricenv.gap.quarter_car.params import ROAD_NAMES
 
     sizes = dg.where.get("detectable", {}).get(effect)
     if not sizes:
@@ -152,10 +152,12 @@ def shown_effects(effects: dict[str, dict], road: dict, dg, cfg) -> dict[str, bo
     :param dg: the log's diagnosis (its prepared data).
     :param cfg: the diagnosis settings (folds, fit settings, ``sig_z``).
     """
-    from fricenv.gap.candidates import fit_candidate  # the tool, imported only where a diagnosis is checked
-    from fricenv.gap.params import ROAD_NAMES
-    from fricenv.gap.stats import cross_fitted, fold_data, paired_z
-    from fricenv.gap.validate import true_model_fit
+    from fricenv.gap.quarter_car.candidates import (
+        fit_candidate,  # the tool, imported only where a diagnosis is checked
+    )
+    from fricenv.gap.quarter_car.params import ROAD_NAMES
+    from fricenv.gap.quarter_car.stats import cross_fitted, fold_data, paired_z
+    from fricenv.gap.quarter_car.validate import true_model_fit
 
     d, names = dg.data, list(effects)
     road_x = np.array([road[k] for k in ROAD_NAMES], dtype=float)
@@ -195,15 +197,15 @@ def truth_shown(sim: dict, dg, cfg) -> bool:
     simulator's own states and deceleration, ``omega_true``, ``v_true``, ``a_x_true``, on the log's samples) beat the
     calibrated nominal model by the diagnosis' paired test? Its residual is the measurement noise alone, and it fits
     no state per window, so the nominal model's per-window fits are counted against that model
-    (:func:`fricenv.gap.stats.paired_z`). If the truth itself does not pass, the data cannot show the effect, and
+    (:func:`fricenv.gap.quarter_car.stats.paired_z`). If the truth itself does not pass, the data cannot show the effect, and
     `none` is all that a tool can say. A clean log only: its rows are the simulator's samples.
 
     :param sim: :func:`tests.independent_sim.simulate_case` of the log's case.
     :param dg: the log's diagnosis (its prepared data and nominal model).
     :param cfg: the diagnosis settings (``sig_z``).
     """
-    from fricenv.gap.stats import CandidateFit, paired_z, window_counts, window_mse
-    from fricenv.gap.windows import trajectory_residuals
+    from fricenv.gap.quarter_car.stats import CandidateFit, paired_z, window_counts, window_mse
+    from fricenv.gap.quarter_car.windows import trajectory_residuals
 
     d = dg.data
     if d.n != len(sim["t"]):

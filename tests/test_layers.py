@@ -63,8 +63,8 @@ def test_cli_contract_covers_every_library_module():
     ("fricenv/plants/tire.py", "import agents.pipeline", "core-layers", "fricenv.plants.tire -> agents.pipeline"),
     ("fricenv/plants/payload.py", "from fricenv.logs import PayloadLog", "core-layers",
      "fricenv.plants.payload -> fricenv.logs"),
-    ("fricenv/effects/quarter_car.py", "import fricenv.gap.simulate", "gap-layers",
-     "fricenv.effects.quarter_car -> fricenv.gap.simulate"),
+    ("fricenv/effects/quarter_car.py", "import fricenv.gap.quarter_car.simulate", "gap-layers",
+     "fricenv.effects.quarter_car -> fricenv.gap.quarter_car.simulate"),
     ("fricenv/envs/braking.py", "import fricenv.cli", "cli-on-top", "fricenv.envs.braking -> fricenv.cli"),
 ])
 def test_wrong_way_import_breaks_a_contract(tmp_path, module, line, contract, chain):

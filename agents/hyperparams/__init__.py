@@ -12,12 +12,14 @@ import json
 from pathlib import Path
 from typing import Any
 
+from fricenv.errors import InvalidInputError
+
 __all__ = ["BRAKING_FILE", "HyperparamsError", "load_hyperparams"]
 
 BRAKING_FILE = Path(__file__).with_name("braking.json")
 
 
-class HyperparamsError(ValueError):
+class HyperparamsError(InvalidInputError):
     """A hyperparameter file that cannot be read into the config dataclasses."""
 
 

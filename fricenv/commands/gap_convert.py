@@ -13,7 +13,9 @@ from __future__ import annotations
 import argparse
 import os
 
-PLANTS = ("quarter-car", "payload")
+from fricenv.gap.plants import GAP_PLANTS
+
+PLANTS = tuple(GAP_PLANTS)
 PATH_OPTIONS = {"map": "input file", "out": "output file"}
 
 

@@ -4,7 +4,7 @@ Example: fricenv gap diagnose log.csv --plant quarter-car --out report_dir
 
 A fleet: fricenv gap diagnose logs/ --out fleet_dir (a folder: its *.csv logs; or a quoted glob pattern such as
 'logs/**/*.csv') diagnoses every log into fleet_dir/<log stem>/ and writes fleet_dir/fleet.json, fleet.md and plots
-(fricenv.gap.fleet). A re-run skips the logs already reported (--force redoes them); --jobs sets the parallel logs;
+(fricenv.gap.fleet.run). A re-run skips the logs already reported (--force redoes them); --jobs sets the parallel logs;
 --ray auto (or a Ray cluster address) runs them on Ray. A log that fails is a row with its error, and the exit
 code is then 1.
 
@@ -20,9 +20,10 @@ import argparse
 from collections import Counter
 
 from fricenv.errors import InvalidInputError
+from fricenv.gap.plants import GAP_PLANTS
 from fricenv.utils import read_json_object
 
-PLANTS = ("quarter-car", "payload")
+PLANTS = tuple(GAP_PLANTS)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -91,21 +92,18 @@ def _candidates(args: argparse.Namespace, valid: tuple[str, ...]) -> tuple[str, 
 
 def run(args: argparse.Namespace) -> int:
     """Read, diagnose, report (a fleet: every log of a folder or glob pattern, and the fleet summary)."""
-    from fricenv.gap.fleet import is_fleet_source
+    from fricenv.gap.fleet.run import is_fleet_source
 
     if is_fleet_source(args.source):
         return _run_fleet(args)
     _single_log(args)
     check_options(args)
-    if args.plant == "payload":
-        return _run_payload(args)
-    from fricenv.gap.diagnose import DiagnoseConfig, diagnose_file
-    from fricenv.gap.report import summary_line, write_report
+    from fricenv.gap.plants import get_plant
 
-    names = _candidates(args, DiagnoseConfig().candidates)
-    cfg = DiagnoseConfig(jobs=args.jobs) if names is None else DiagnoseConfig(jobs=args.jobs, candidates=names)
-    dg = diagnose_file(_mapped_log(args), args.plant, args.params, cfg)  # reports its phases through fricenv.progress
-    return _report(args, dg, write_report(dg, args.out, args.plant, plots=not args.no_plots), summary_line(dg))
+    plant = get_plant(args.plant)
+    names = _candidates(args, plant.make_config(None, None).candidates)
+    dg = plant.diagnose_file(_mapped_log(args), args.params, plant.make_config(names, args.jobs))
+    return _report(args, dg, plant.write_report(dg, args.out, not args.no_plots), plant.summary_line(dg))
 
 
 def _report(args: argparse.Namespace, dg, report: dict, summary: str) -> int:
@@ -119,18 +117,6 @@ def _report(args: argparse.Namespace, dg, report: dict, summary: str) -> int:
     print(f"best candidates (held-out gap): {top}")
     print(f"report: {args.out}/report.json, report.md ({dg.seconds:.1f} s)")
     return 0
-
-
-def _run_payload(args: argparse.Namespace) -> int:
-    """``--plant payload``: the payload diagnosis (fricenv.gap.payload_diagnose); --jobs is not used (its fits are
-    linear least squares and 1-D searches, about a second in total)."""
-    from fricenv.gap.payload_diagnose import PayloadDiagnoseConfig, diagnose_payload_file, summary_line
-    from fricenv.gap.payload_report import write_payload_report
-
-    names = _candidates(args, PayloadDiagnoseConfig().candidates)
-    cfg = PayloadDiagnoseConfig() if names is None else PayloadDiagnoseConfig(candidates=names)
-    dg = diagnose_payload_file(_mapped_log(args), args.params, cfg)
-    return _report(args, dg, write_payload_report(dg, args.out, plots=not args.no_plots), summary_line(dg))
 
 
 def _single_log(args: argparse.Namespace) -> None:
@@ -147,20 +133,18 @@ def _single_log(args: argparse.Namespace) -> None:
 
 def _run_fleet(args: argparse.Namespace) -> int:
     """A folder or glob pattern: every log diagnosed into OUT/<stem>/, then OUT/fleet.json, fleet.md and plots."""
-    from fricenv.gap.fleet import FleetSettings, run_fleet
+    from fricenv.gap.fleet.run import FleetSettings, run_fleet
 
     check_options(args)
     if args.json:
         raise InvalidInputError("--json applies to a single log; a fleet's rows are in OUT/fleet.json")
     if args.ray is not None and args.jobs is not None:
         raise InvalidInputError("--jobs sets local processes; with --ray the cluster's CPUs set the parallelism")
-    if args.plant == "payload":
-        from fricenv.gap.payload_diagnose import PayloadDiagnoseConfig as Config
-    else:
-        from fricenv.gap.diagnose import DiagnoseConfig as Config
-    names = _candidates(args, Config().candidates)
-    settings = FleetSettings(plant=args.plant, params_file=args.params,
-                             config=Config() if names is None else Config(candidates=names),
+    from fricenv.gap.plants import get_plant
+
+    plant = get_plant(args.plant)
+    names = _candidates(args, plant.make_config(None, None).candidates)
+    settings = FleetSettings(plant=args.plant, params_file=args.params, config=plant.make_config(names, None),
                              plots=not args.no_plots, force=args.force, jobs=args.jobs, ray=args.ray)
     s = run_fleet(args.source, args.out, settings)
     counts = Counter(r["verdict"] for r in s["rows"])

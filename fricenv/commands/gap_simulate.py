@@ -171,12 +171,15 @@ def run_payload(args: argparse.Namespace) -> int:
 
 def check_options(args: argparse.Namespace) -> None:
     """Reject option values the simulation cannot use, before it starts (both plants)."""
-    from fricenv.gap.simulate import DRIVERS
 
     if not (math.isfinite(args.duration) and args.duration > 0):
         raise InvalidInputError(f"--duration must be a number > 0 [s], got {args.duration}")
-    if args.plant != "quarter-car":
-        return
+
+
+def _check_quarter_car(args: argparse.Namespace) -> None:
+    """The quarter car's own options: a known driver, a plausible initial speed, no payload option."""
+    from fricenv.gap.quarter_car.simulate import DRIVERS
+
     if args.driver not in DRIVERS:
         raise InvalidInputError(f"unknown driver {args.driver!r}; valid drivers: {', '.join(DRIVERS)}")
     if args.v0 is not None and not (math.isfinite(args.v0) and 0 < args.v0 <= MAX_V0):
@@ -184,16 +187,21 @@ def check_options(args: argparse.Namespace) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Simulate and write the log."""
+    """Simulate and write the log of the plant ``--plant``."""
+    runner = RUNNERS.get(args.plant)
+    if runner is None:
+        raise InvalidInputError(f"unknown plant {args.plant!r}; valid plants: {', '.join(RUNNERS)}")
     check_options(args)
-    if args.plant == "payload":
-        return run_payload(args)
-    if args.plant != "quarter-car":
-        raise InvalidInputError(f"unknown plant {args.plant!r}; valid plants: quarter-car, payload")
+    return runner(args)
+
+
+def run_quarter_car(args: argparse.Namespace) -> int:
+    """``--plant quarter-car``: the real stand-in with the chosen effects and driver."""
+    _check_quarter_car(args)
     if args.dt is not None or args.wrench != "paper":
         raise InvalidInputError("--dt and --wrench apply to --plant payload only")
     from fricenv.effects.quarter_car import effect_params
-    from fricenv.gap.simulate import write_simulated_log
+    from fricenv.gap.quarter_car.simulate import write_simulated_log
     from fricenv.plants.tire import get_road
     from fricenv.utils import write_json
 
@@ -211,3 +219,6 @@ def run(args: argparse.Namespace) -> int:
                                "seed": args.seed, "v0": truth["v0"],
                                "effects": [{"effect": e.name, "params": effect_params(e)} for e in effects]})
     return 0
+
+
+RUNNERS = {"quarter-car": run_quarter_car, "payload": run_payload}

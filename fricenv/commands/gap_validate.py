@@ -6,7 +6,7 @@ Example: fricenv gap validate --n 50 --seed 1 --jobs 2 --json validate.json
 Draws N logs from the real stand-in (each library effect at realistic sizes, no effect, and a physically real effect
 outside the library: brake fade or pitch load transfer) on random roads and drivers, diagnoses each without telling
 the tool, and prints the confusion matrix, the share of right verdicts, the median gap_after/gap_before on effect
-logs and the parameter errors. --plant payload does the same for payload logs (fricenv.gap.payload_validate).
+logs and the parameter errors. --plant payload does the same for payload logs (fricenv.gap.payload.validate).
 """
 
 from __future__ import annotations
@@ -14,8 +14,9 @@ from __future__ import annotations
 import argparse
 
 from fricenv.errors import InvalidInputError
+from fricenv.gap.plants import GAP_PLANTS
 
-PLANTS = ("quarter-car", "payload")
+PLANTS = tuple(GAP_PLANTS)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -36,7 +37,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run the validation and print the figures."""
-    from fricenv.gap.validate import format_summary, validate
     from fricenv.utils import write_json
 
     if args.n < 1:
@@ -47,20 +47,10 @@ def run(args: argparse.Namespace) -> int:
         raise InvalidInputError(f"--required-only-share must be in [0, 1], got {args.required_only_share}")
     if args.plant not in PLANTS:
         raise InvalidInputError(f"unknown plant {args.plant!r}; valid plants: {', '.join(PLANTS)}")
-    if args.plant == "payload":
-        if args.ray is not None:
-            raise InvalidInputError("--ray applies to --plant quarter-car (the payload validation runs in one process)")
-        from fricenv.gap.payload_validate import format_payload_summary, validate_payload
+    from fricenv.gap.plants import get_plant
 
-        summary = validate_payload(args.n, args.seed)
-        print(format_payload_summary(summary))
-        print(f"wall time {summary['wall_seconds']:.0f} s")
-        if args.json:
-            write_json(args.json, summary)
-        return 0
-    summary = validate(args.n, args.seed, jobs=args.jobs, drop_optional_share=args.required_only_share,
-                       ray=args.ray)
-    print(format_summary(summary))
+    summary, text = get_plant(args.plant).validate(args.n, args.seed, args.jobs, args.ray, args.required_only_share)
+    print(text)
     print(f"wall time {summary['wall_seconds']:.0f} s")
     if args.json:
         write_json(args.json, summary)

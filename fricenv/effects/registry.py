@@ -25,6 +25,8 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
+from fricenv.errors import InvalidInputError
+
 __all__ = [
     "REGISTRY",
     "Excitation",
@@ -39,7 +41,7 @@ __all__ = [
 ]
 
 
-class UnknownEffectError(ValueError):
+class UnknownEffectError(InvalidInputError):
     """An effect name that is not registered."""
 
 

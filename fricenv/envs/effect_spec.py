@@ -29,6 +29,7 @@ from typing import Any
 import numpy as np
 
 from fricenv.effects.quarter_car import EFFECT_PARAMS, EFFECTS, effect_params, make_effect
+from fricenv.errors import InvalidInputError
 
 __all__ = [
     "NO_EFFECT_VERDICTS",
@@ -44,7 +45,7 @@ __all__ = [
 NO_EFFECT_VERDICTS = ("none", "unexplained")
 
 
-class EffectSpecError(ValueError):
+class EffectSpecError(InvalidInputError):
     """An unknown effect or parameter name, or a malformed ``effects``/``effects_randomization`` argument."""
 
 

@@ -1,8 +1,17 @@
-"""Sim-to-real gap tool (issue 6): real stand-in and log writer (:mod:`~fricenv.gap.simulate`), diagnosis
-(:mod:`~fricenv.gap.diagnose`, orchestrating :mod:`~fricenv.gap.windows` (data and windowed simulation),
-:mod:`~fricenv.gap.params` (named parameter vectors), :mod:`~fricenv.gap.fitting`, :mod:`~fricenv.gap.changepoint`,
-:mod:`~fricenv.gap.candidates`, :mod:`~fricenv.gap.stats` (tests and cross-fitting), :mod:`~fricenv.gap.drift`,
-:mod:`~fricenv.gap.verdict`, :mod:`~fricenv.gap.localise`, :mod:`~fricenv.gap.pool`), reports and plots
-(:mod:`~fricenv.gap.report`) and validation on withheld effects (:mod:`~fricenv.gap.validate`); the payload's
-diagnosis (:mod:`~fricenv.gap.payload_diagnose`, :mod:`~fricenv.gap.payload_data`) shares the statistics and the
-verdict rule. The policy-level API is :func:`fricenv.effects.quarter_car.simulate_with_effects`."""
+"""Sim-to-real gap tool: where a model's predictions leave a log, which unmodelled effect explains it, how far the gap
+shrinks once that effect is added.
+
+- :mod:`fricenv.gap.core`: what every plant shares: noise levels (:mod:`~fricenv.gap.core.noise`), the verdict rule
+  (:mod:`~fricenv.gap.core.verdict`), the report files (:mod:`~fricenv.gap.core.report`) and the one parallel map
+  (:mod:`~fricenv.gap.core.pool`).
+- :mod:`fricenv.gap.signals`: signal conditioning of a logged channel: missing, held, quantised, filtered and outlier
+  samples (:mod:`~fricenv.gap.signals.sensors`), filters the user states (:mod:`~fricenv.gap.signals.stated_filter`),
+  and the vehicle speed reconstructed from the wheel (:mod:`~fricenv.gap.signals.speed`).
+- :mod:`fricenv.gap.quarter_car` and :mod:`fricenv.gap.payload`: one subpackage per plant: its data, fits, candidates,
+  verdict, report, real stand-in and validation.
+- :mod:`fricenv.gap.plants`: the plant registry through which the commands and the fleet reach a plant.
+- :mod:`fricenv.gap.fleet`: many logs at once, on local processes or Ray, and the fleet summary.
+
+Dependencies point one way: ``fleet`` and ``plants`` -> the plant subpackages -> ``signals`` -> ``core``
+(an import-linter contract).
+"""

@@ -26,6 +26,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from fricenv.errors import InvalidInputError
+
 __all__ = [
     "MAX_FILL",
     "MAX_HOLD_S",
@@ -47,7 +49,7 @@ MIN_CHANGES = 3  # a channel with fewer value changes is constant by nature: not
 MAX_HOLD_S = 1.0  # a run of equal values longer than this is a genuine reading, not a held sample [s]
 
 
-class StepError(ValueError):
+class StepError(InvalidInputError):
     """A time step the grid cannot take; ``row`` is the index of the row that ends it."""
 
     def __init__(self, row: int, message: str):

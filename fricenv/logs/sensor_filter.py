@@ -7,7 +7,7 @@ filter, the column map can say so: ``"a_x": {"column": "ax", "unit": "g", "filte
     # sensor_filter: a_x butterworth order=2 cutoff_hz=5
 
 and :func:`fricenv.logs.read_log` reads it into ``QuarterCarLog.sensor_filters``. The diagnosis then undoes that
-filter instead of reading one from the channel's noise (:mod:`fricenv.gap.sensors`), whose roll-off gives the
+filter instead of reading one from the channel's noise (:mod:`fricenv.gap.signals.sensors`), whose roll-off gives the
 filter's order and lag only roughly.
 """
 

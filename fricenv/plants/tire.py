@@ -16,6 +16,8 @@ from functools import cached_property
 import numpy as np
 from scipy.optimize import minimize_scalar
 
+from fricenv.errors import InvalidInputError
+
 __all__ = [
     "DRY",
     "ICE",
@@ -36,7 +38,7 @@ __all__ = [
 SLIP_SPEED_FLOOR = 0.1
 
 
-class UnknownRoadError(ValueError):
+class UnknownRoadError(InvalidInputError):
     """A road name that is not one of the presets."""
 
 

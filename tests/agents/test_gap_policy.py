@@ -19,7 +19,7 @@ from agents.gap_policy import (
 )
 from fricenv.effects.quarter_car import make_effect
 from fricenv.envs.braking import BrakingEnv
-from fricenv.gap.simulate import STAND_IN_SUBSTEPS
+from fricenv.gap.quarter_car.simulate import STAND_IN_SUBSTEPS
 from fricenv.logs import read_log
 
 SEEDS = [0, 1, 2]

@@ -35,7 +35,7 @@ def _files(root) -> set:
 
 def _no_diagnosis(monkeypatch):
     """Make any diagnosis fail loudly: a test passing with it proves the error came before the long work."""
-    from fricenv.gap import diagnose
+    from fricenv.gap.quarter_car import diagnose
 
     def started(*args, **kwargs):
         raise AssertionError("the diagnosis started before the bad input was reported")

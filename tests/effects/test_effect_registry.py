@@ -83,11 +83,11 @@ def test_registry_rejects_a_taken_name_a_clashing_parameter_and_a_plugin_without
 def test_the_toy_effect_is_drawn_and_fitted_by_the_gap_tool(toy):
     """A log with a dragging brake: the validation draw makes the effect, and a candidate fit through the gap
     tool's windows and least squares recovers T_res within 15 %."""
-    from fricenv.gap.candidates import fit_candidate
-    from fricenv.gap.diagnose import DiagnoseConfig, fit_nominal, fold_data
-    from fricenv.gap.simulate import simulate_log
-    from fricenv.gap.validate import _random_effect
-    from fricenv.gap.windows import prepare
+    from fricenv.gap.quarter_car.candidates import fit_candidate
+    from fricenv.gap.quarter_car.diagnose import DiagnoseConfig, fit_nominal, fold_data
+    from fricenv.gap.quarter_car.simulate import simulate_log
+    from fricenv.gap.quarter_car.validate import _random_effect
+    from fricenv.gap.quarter_car.windows import prepare
     from fricenv.plants.quarter_car import PAPER_PARAMS
 
     effect = _random_effect("brake_drag", WET, np.random.default_rng(3), PAPER_PARAMS)
@@ -114,8 +114,8 @@ class ThetaStep:
 def test_a_plugin_theta_hook_enters_the_speed_reconstruction():
     """The speed reconstruction applies a plug-in's theta hook: a step of theta gives exactly the speed of the
     built-in mu_change with the same switch (the reconstruction switches theta per sample)."""
-    from fricenv.gap.simulate import simulate_log
-    from fricenv.gap.speed import reconstruct_speed
+    from fricenv.gap.quarter_car.simulate import simulate_log
+    from fricenv.gap.signals.speed import reconstruct_speed
 
     entry = QuarterCarEffect(ThetaStep, (Param("t_sw", "s", (0.0, 10.0), np.inf, field=None),
                                          Param("th_sw", "-", (0.03, 1.6), 1.0, field=None)), "-",

@@ -160,9 +160,9 @@ def test_compiled_actuator_run_equals_the_simulator(effects):
 
 def test_a_plugin_with_hooks_is_not_compiled_and_the_windows_fall_back_to_numpy():
     """A hooked plug-in: supported() is False and window_residuals gives the numpy path's residuals exactly."""
-    from fricenv.gap.diagnose import DiagnoseConfig
-    from fricenv.gap.simulate import simulate_log
-    from fricenv.gap.windows import prepare, window_residuals
+    from fricenv.gap.quarter_car.diagnose import DiagnoseConfig
+    from fricenv.gap.quarter_car.simulate import simulate_log
+    from fricenv.gap.quarter_car.windows import prepare, window_residuals
     from tests.effects.test_effect_registry import TOY
 
     assert kernels.supported(_batch(["brake_lag"], 4, seed=1))
@@ -182,9 +182,9 @@ def test_a_plugin_with_hooks_is_not_compiled_and_the_windows_fall_back_to_numpy(
 def test_window_residuals_of_the_compiled_and_numpy_paths_agree():
     """The whole residual function (nuisance Gauss-Newton included) on a logged stop with every channel."""
     from fricenv.effects.quarter_car import make_effect
-    from fricenv.gap.diagnose import DiagnoseConfig
-    from fricenv.gap.simulate import simulate_log
-    from fricenv.gap.windows import prepare, window_residuals
+    from fricenv.gap.quarter_car.diagnose import DiagnoseConfig
+    from fricenv.gap.quarter_car.simulate import simulate_log
+    from fricenv.gap.quarter_car.windows import prepare, window_residuals
 
     log, _ = simulate_log([make_effect("brake_delay", delay=0.03)], WET, "abs", seed=2, duration=2.0)
     d = prepare(log, P, DiagnoseConfig(jobs=1))

@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from fricenv.cli import main
-from fricenv.gap.diagnose import DiagnoseConfig
+from fricenv.gap.quarter_car.diagnose import DiagnoseConfig
 
 # One candidate, one start, few iterations, no joint fit or drift test: about a second of CPU per 1.5 s log.
 FAST = DiagnoseConfig(candidates=("brake_gain",), max_nfev=5, fit_starts=1, joint=False, drift_check=False)

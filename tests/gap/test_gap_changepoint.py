@@ -1,4 +1,4 @@
-"""The change-point search of the ``mu_change`` fit (fricenv.gap.changepoint)."""
+"""The change-point search of the ``mu_change`` fit (fricenv.gap.quarter_car.changepoint)."""
 
 from __future__ import annotations
 
@@ -6,8 +6,8 @@ import warnings
 
 import numpy as np
 
-from fricenv.gap.changepoint import _local_minima
-from fricenv.gap.diagnose import DiagnoseConfig, diagnose_file
+from fricenv.gap.quarter_car.changepoint import _local_minima
+from fricenv.gap.quarter_car.diagnose import DiagnoseConfig, diagnose_file
 from tests import independent_sim as ind
 
 

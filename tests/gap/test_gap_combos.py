@@ -10,12 +10,12 @@ import numpy as np
 import pytest
 
 from fricenv.effects.quarter_car import make_effect
-from fricenv.gap import selection
-from fricenv.gap.config import DiagnoseConfig
-from fricenv.gap.diagnose import diagnose, diagnose_file
-from fricenv.gap.params import ROAD_NAMES
-from fricenv.gap.simulate import simulate_log
-from fricenv.gap.stats import CandidateFit, window_mse
+from fricenv.gap.quarter_car import selection
+from fricenv.gap.quarter_car.config import DiagnoseConfig
+from fricenv.gap.quarter_car.diagnose import diagnose, diagnose_file
+from fricenv.gap.quarter_car.params import ROAD_NAMES
+from fricenv.gap.quarter_car.simulate import simulate_log
+from fricenv.gap.quarter_car.stats import CandidateFit, window_mse
 from fricenv.plants.tire import DRY, MagicFormula
 from tests import independent_sim as ind
 

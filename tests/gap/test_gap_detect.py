@@ -1,5 +1,5 @@
-"""Issue 15 item 4: what size an effect needs to show above a log's noise (:mod:`fricenv.gap.detectability`), and
-the payload F/T filter's lag read from its noise (:func:`fricenv.gap.sensors.filter_lag`)."""
+"""Issue 15 item 4: what size an effect needs to show above a log's noise (:mod:`fricenv.gap.quarter_car.detectability`), and
+the payload F/T filter's lag read from its noise (:func:`fricenv.gap.signals.sensors.filter_lag`)."""
 
 from __future__ import annotations
 
@@ -11,14 +11,14 @@ import pytest
 from scipy import signal
 
 from fricenv.effects.quarter_car import make_effect
-from fricenv.gap.config import DiagnoseConfig
-from fricenv.gap.detectability import LUCK_Z, _scale, plausible_probes
-from fricenv.gap.excitation import NotTestable, excitation, untestable
-from fricenv.gap.fitting import fit_nominal, refine_noise, score
-from fricenv.gap.sensors import filter_lag
-from fricenv.gap.simulate import NoiseSpec, simulate_log
-from fricenv.gap.stats import fold_data
-from fricenv.gap.windows import prepare
+from fricenv.gap.quarter_car.config import DiagnoseConfig
+from fricenv.gap.quarter_car.detectability import LUCK_Z, _scale, plausible_probes
+from fricenv.gap.quarter_car.excitation import NotTestable, excitation, untestable
+from fricenv.gap.quarter_car.fitting import fit_nominal, refine_noise, score
+from fricenv.gap.quarter_car.simulate import NoiseSpec, simulate_log
+from fricenv.gap.quarter_car.stats import fold_data
+from fricenv.gap.quarter_car.windows import prepare
+from fricenv.gap.signals.sensors import filter_lag
 from fricenv.logs import QuarterCarLog
 from fricenv.plants import quarter_car as qc
 from fricenv.plants.tire import ROADS
@@ -138,7 +138,7 @@ def test_filter_lag_of_white_noise_is_none():
 
 
 def test_report_markdown_says_what_the_log_cannot_tell():
-    from fricenv.gap.report import _testability_lines
+    from fricenv.gap.quarter_car.report import _testability_lines
 
     w = {"not_testable": {"brake_lag": "below noise: needs |tau| >= 0.2"},
          "detectable": {"brake_lag": {"tau": 0.2}, "brake_gain": {"gain": 0.05}}}
@@ -149,7 +149,7 @@ def test_report_markdown_says_what_the_log_cannot_tell():
 
 
 def test_report_markdown_names_confounded_effects():
-    from fricenv.gap.report import _testability_lines
+    from fricenv.gap.quarter_car.report import _testability_lines
 
     w = {"forward_selection": [{"effect": "drag", "z_over_set": 1.2, "added": False, "confounded_with": ["brake_gain"]},
                                {"effect": "brake_lag", "z_over_set": 0.3, "added": False}]}
@@ -162,7 +162,7 @@ def test_a_brake_gain_the_power_analysis_under_rates_is_still_fitted_and_named(t
     gain 0.77): the power analysis, linearised at the nominal road, rates a brake gain below noise (it acts through
     the wheel's lock-ups). It was not fitted, and the verdict was `none`; fitted all the same, it is significant and
     the verdict, with a caveat instead of a not-testable entry."""
-    from fricenv.gap.diagnose import diagnose_file
+    from fricenv.gap.quarter_car.diagnose import diagnose_file
     from tests import independent_sim as ind
 
     case = ind.draw_cases(60, 3000, real=True)[20]

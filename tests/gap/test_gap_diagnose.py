@@ -13,10 +13,16 @@ import numpy as np
 import pytest
 
 from fricenv.effects.quarter_car import EFFECTS, make_effect
-from fricenv.gap import report as report_mod
-from fricenv.gap.diagnose import DiagnoseConfig, diagnose, diagnose_file, estimate_noise, load_params
-from fricenv.gap.report import CANDIDATE_KEYS, REPORT_KEYS, write_report
-from fricenv.gap.simulate import simulate_log, write_simulated_log
+from fricenv.gap.quarter_car import report as report_mod
+from fricenv.gap.quarter_car.diagnose import (
+    DiagnoseConfig,
+    diagnose,
+    diagnose_file,
+    estimate_noise,
+    load_params,
+)
+from fricenv.gap.quarter_car.report import CANDIDATE_KEYS, REPORT_KEYS, write_report
+from fricenv.gap.quarter_car.simulate import simulate_log, write_simulated_log
 from fricenv.logs import LogFormatError, read_log, write_log
 from fricenv.plants.tire import DRY, SNOW, WET, MagicFormula
 
@@ -351,7 +357,7 @@ def test_snow_nominal_open_loop_is_none():
 
 
 def _fit_from_residuals(resid):
-    from fricenv.gap.diagnose import CandidateFit
+    from fricenv.gap.quarter_car.diagnose import CandidateFit
 
     wm = np.mean(resid**2, axis=-1)
     return CandidateFit(effect="x", names=(), x=np.zeros(0), train_mse=0.0, test_mse=float(np.mean(wm)),
@@ -361,7 +367,7 @@ def _fit_from_residuals(resid):
 def test_paired_z_is_the_gain_over_its_noise_spread():
     from types import SimpleNamespace
 
-    from fricenv.gap.diagnose import paired_z
+    from fricenv.gap.quarter_car.diagnose import paired_z
 
     rng = np.random.default_rng(0)
     d = SimpleNamespace(horizon=10, channels=["omega"])
@@ -380,8 +386,8 @@ def test_paired_z_one_window_decides_neither_way():
     loss outweighed the other 50 windows' gain."""
     from types import SimpleNamespace
 
-    from fricenv.gap.diagnose import CandidateFit, DiagnoseConfig, paired_z
-    from fricenv.gap.stats import soft_cap
+    from fricenv.gap.quarter_car.diagnose import CandidateFit, DiagnoseConfig, paired_z
+    from fricenv.gap.quarter_car.stats import soft_cap
 
     def fit(resid):  # window errors soft-capped as the diagnosis' are (window_mse)
         wm = soft_cap(np.mean(resid**2, axis=-1))
@@ -406,7 +412,7 @@ def test_paired_z_discounts_a_nuisance_state_fitted_on_each_window():
     without the discount reads as z = sqrt(W) / 2 on pure noise."""
     from types import SimpleNamespace
 
-    from fricenv.gap.diagnose import paired_z
+    from fricenv.gap.quarter_car.diagnose import paired_z
 
     rng = np.random.default_rng(1)
     d = SimpleNamespace(horizon=10, channels=["omega"])
@@ -421,7 +427,7 @@ def test_paired_z_discounts_a_nuisance_state_fitted_on_each_window():
 
 
 def test_robust_gap_leaves_out_the_worst_windows_only():
-    from fricenv.gap.diagnose import TRIM_SHARE, gap_of, robust_gap
+    from fricenv.gap.quarter_car.diagnose import TRIM_SHARE, gap_of, robust_gap
 
     wm = np.ones(100)
     wm[: int(TRIM_SHARE * 100)] = 25.0  # lock-up windows no model predicts
@@ -437,7 +443,7 @@ def test_a_gap_only_in_the_lock_up_windows_is_not_real():
     """A nominal model within the noise on all windows but the few lock-ups it cannot time (held-out gap above
     gap_none, robust gap 0) fits within the noise: ``none``, not ``unexplained``; a gap spread over the windows is
     real, and so is any gap a significant candidate closes."""
-    from fricenv.gap.diagnose import TRIM_SHARE, gap_is_real
+    from fricenv.gap.quarter_car.diagnose import TRIM_SHARE, gap_is_real
 
     lock_ups = np.ones(100)
     lock_ups[: int(TRIM_SHARE * 100)] = 40.0
@@ -457,7 +463,7 @@ def test_a_gap_only_in_the_lock_up_windows_is_not_real():
 def test_least_squares_starts_come_from_distinct_roads():
     """The second run starts from the best start of another road shape, not from the same road with another
     effect value (that run would stay in the first one's basin); failed starts (non-finite loss) are never used."""
-    from fricenv.gap.diagnose import distinct_starts
+    from fricenv.gap.quarter_car.diagnose import distinct_starts
 
     nominal, dry = [19.2, 2.25, 0.99, 0.95], [10.38, 1.65, 0.657, 1.0]
     starts = np.array([nominal + [0.045], nominal + [0.025], dry + [0.045], dry + [0.025], [4.0, 2.0, 1.0, 0.1, 0.01]])
@@ -470,7 +476,7 @@ def test_least_squares_starts_come_from_distinct_roads():
 
 def _fit_with(effect, values, folds=None):
     from fricenv.effects.quarter_car import EFFECT_PARAMS
-    from fricenv.gap.diagnose import CandidateFit
+    from fricenv.gap.quarter_car.diagnose import CandidateFit
 
     names = ("B", "C", "E", "theta") + tuple(EFFECT_PARAMS[effect])
     road = list(WET.as_array())
@@ -492,14 +498,14 @@ def _fit_with(effect, values, folds=None):
     ("mu_change", {"t_change": 1.5, "theta_after": 0.0545}, []),  # a change to ice is well inside the range
 ])
 def test_a_parameter_at_the_far_bound_of_its_range_is_flagged(effect, values, edge):
-    from fricenv.gap.diagnose import at_range_edge
+    from fricenv.gap.quarter_car.diagnose import at_range_edge
     from fricenv.plants.quarter_car import PAPER_PARAMS
 
     assert at_range_edge(_fit_with(effect, values), PAPER_PARAMS) == edge
 
 
 def test_a_range_edge_in_one_fold_is_enough():
-    from fricenv.gap.diagnose import at_range_edge
+    from fricenv.gap.quarter_car.diagnose import at_range_edge
     from fricenv.plants.quarter_car import PAPER_PARAMS
 
     fit = _fit_with("relaxation_length", {"sigma": 1.6}, folds=[{"sigma": 0.2}, {"sigma": 3.0}])
@@ -507,7 +513,7 @@ def test_a_range_edge_in_one_fold_is_enough():
 
 
 def test_mu_change_starts_lie_at_distinct_places_and_find_the_change(diagnosed):
-    from fricenv.gap.diagnose import change_point_starts, fold_data, param_names
+    from fricenv.gap.quarter_car.diagnose import change_point_starts, fold_data, param_names
 
     _, dg = diagnosed("mu_change")
     fold = fold_data(dg.data, 0)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import warnings
 
-from fricenv.gap.diagnose import DiagnoseConfig, diagnose_file
+from fricenv.gap.quarter_car.diagnose import DiagnoseConfig, diagnose_file
 from tests import independent_sim as ind
 
 

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from fricenv.effects import registry
-from fricenv.gap.config import DiagnoseConfig
-from fricenv.gap.excitation import MIN_EVENT_CHANGE, torque_events
+from fricenv.gap.quarter_car.config import DiagnoseConfig
+from fricenv.gap.quarter_car.excitation import MIN_EVENT_CHANGE, torque_events
 
 DT = 0.01
 
@@ -49,7 +49,7 @@ def test_a_2s_abs_log_with_brake_lag_is_testable_and_diagnosed_brake_lag(tmp_pat
     """A 2 s ABS log from ``fricenv gap simulate`` has one slow first apply and then ABS cycles: the old rule (runs of
     fast change in any direction) saw a single event and left brake_lag untested, verdict unexplained."""
     from fricenv.cli import main
-    from fricenv.gap.diagnose import diagnose
+    from fricenv.gap.quarter_car.diagnose import diagnose
     from fricenv.logs import read_log
 
     path = tmp_path / "abs.csv"
@@ -69,8 +69,8 @@ def test_a_friction_change_below_the_peak_is_found_and_its_caveat_reported():
     a tuning log): the rule that asked for slip near the peak left the change untested, verdict none. The change
     shows in the slip the same torque needs, so it is tested, named, and the report says it was below the peak."""
     from fricenv.effects.quarter_car import make_effect
-    from fricenv.gap.diagnose import diagnose
-    from fricenv.gap.simulate import simulate_log
+    from fricenv.gap.quarter_car.diagnose import diagnose
+    from fricenv.gap.quarter_car.simulate import simulate_log
     from fricenv.plants.tire import MagicFormula
 
     road = MagicFormula(B=3.871, C=2.0, E=1.0, theta=0.10755, name="ice~")

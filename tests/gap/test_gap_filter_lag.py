@@ -1,5 +1,5 @@
 """Issue 15 item 2: a low-passed ``v`` / ``a_x`` (an IMU driver's filter) read from the log itself and realigned by
-the filter's lag (:func:`fricenv.gap.sensors.shared_lag`, :func:`fricenv.gap.windows.prepare`), and an unfiltered
+the filter's lag (:func:`fricenv.gap.signals.sensors.shared_lag`, :func:`fricenv.gap.quarter_car.windows.prepare`), and an unfiltered
 log left as it was."""
 
 from __future__ import annotations
@@ -8,8 +8,9 @@ import numpy as np
 import pytest
 from scipy.signal import butter, group_delay, sosfilt, sosfilt_zi, sosfreqz
 
-from fricenv.gap.config import DiagnoseConfig
-from fricenv.gap.sensors import (
+from fricenv.gap.quarter_car.config import DiagnoseConfig
+from fricenv.gap.quarter_car.windows import prepare
+from fricenv.gap.signals.sensors import (
     LAG_TOP,
     _rolloff,
     advanced,
@@ -18,7 +19,6 @@ from fricenv.gap.sensors import (
     lag_against,
     shared_lag,
 )
-from fricenv.gap.windows import prepare
 from fricenv.logs import QuarterCarLog
 from fricenv.plants import quarter_car as qc
 
@@ -165,9 +165,9 @@ def _true_set_z(case, tmp) -> float:
     nominal model, by the diagnosis' own significance statistic."""
     from fricenv.commands.gap_convert import convert
     from fricenv.effects import registry
-    from fricenv.gap.fitting import fit_nominal, refine_noise, score
-    from fricenv.gap.params import ROAD_NAMES, param_names
-    from fricenv.gap.stats import cross_fitted, fold_data, paired_z
+    from fricenv.gap.quarter_car.fitting import fit_nominal, refine_noise, score
+    from fricenv.gap.quarter_car.params import ROAD_NAMES, param_names
+    from fricenv.gap.quarter_car.stats import cross_fitted, fold_data, paired_z
     from fricenv.logs import read_log
     from tests.independent_sim import write_real_log
 
@@ -191,7 +191,7 @@ def test_true_two_effect_set_is_significant_on_a_filtered_log_only_once_realigne
     """A real-like export (IMU filter 5 Hz on v and a_x, 50 Hz) with a brake gain and drag: the true set started at
     the truth passes the significance rule once the channels are realigned, and did not without (tuning log of
     issue 15, tests.independent_sim --real --combos seed 1801, log 5)."""
-    from fricenv.gap import windows
+    from fricenv.gap.quarter_car import windows
     from tests.independent_sim import draw_cases
 
     case = draw_cases(8, 1801, real=True, combos=True)[5]
@@ -238,7 +238,7 @@ def test_deconvolution_restores_a_filtered_deceleration_better_than_a_shift(rate
     logger's rate: undoing the filter (:func:`deconvolved`, the filter :func:`filter_of_lag` derives from its
     delay alone) leaves at most half the error of advancing the channel by that delay, which keeps the smoothing
     that a model would otherwise read as a brake lag."""
-    from fricenv.gap.sensors import deconvolved, filter_of_lag
+    from fricenv.gap.signals.sensors import deconvolved, filter_of_lag
 
     t = np.arange(800) / 100.0
     u = np.clip((t - 1) / 0.15, 0, 1) * -6 + np.clip((t - 3) / 0.15, 0, 1) * 6 + \

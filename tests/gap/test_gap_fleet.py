@@ -14,7 +14,7 @@ import pytest
 
 from fricenv.cli import main
 from fricenv.errors import InputFileError, InvalidInputError
-from fricenv.gap.fleet import (
+from fricenv.gap.fleet.run import (
     FLEET_JSON,
     ROW_KEYS,
     FleetSettings,
@@ -23,7 +23,7 @@ from fricenv.gap.fleet import (
     is_fleet_source,
     run_fleet,
 )
-from fricenv.gap.fleet_report import PLOT_GAPS, PLOT_PARAMS, PLOT_VERDICTS
+from fricenv.gap.fleet.summary import PLOT_GAPS, PLOT_PARAMS, PLOT_VERDICTS
 from tests.gap.fleet_helpers import FAST, GAIN, simulate_fleet
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -89,7 +89,7 @@ def test_fleet_rows_errors_resume_and_force(fleet_dir, tmp_path):
 
 KILLABLE = """
 import sys
-from fricenv.gap.fleet import FleetSettings, run_fleet
+from fricenv.gap.fleet.run import FleetSettings, run_fleet
 from tests.gap.fleet_helpers import FAST
 run_fleet(sys.argv[1], sys.argv[2], FleetSettings(config=FAST, jobs=1, plots=False))
 """
@@ -135,5 +135,5 @@ def test_cli_fleet_options(fleet_dir, tmp_path, capsys):
 
 
 def test_import_fricenv_does_not_import_ray():
-    code = "import sys, fricenv, fricenv.gap.pool, fricenv.gap.fleet; sys.exit('ray' in sys.modules)"
+    code = "import sys, fricenv, fricenv.gap.core.pool, fricenv.gap.fleet.run; sys.exit('ray' in sys.modules)"
     assert subprocess.run([sys.executable, "-c", code], cwd=ROOT, check=False).returncode == 0

@@ -12,13 +12,13 @@ import numpy as np
 import pytest
 
 from fricenv.effects.quarter_car import make_effect
-from fricenv.gap import windows
-from fricenv.gap.config import DiagnoseConfig
-from fricenv.gap.fitting import fit
-from fricenv.gap.params import fd_steps, param_names
-from fricenv.gap.simulate import simulate_log
-from fricenv.gap.stats import fold_data
-from fricenv.gap.windows import prepare, window_jacobian, window_residuals
+from fricenv.gap.quarter_car import windows
+from fricenv.gap.quarter_car.config import DiagnoseConfig
+from fricenv.gap.quarter_car.fitting import fit
+from fricenv.gap.quarter_car.params import fd_steps, param_names
+from fricenv.gap.quarter_car.simulate import simulate_log
+from fricenv.gap.quarter_car.stats import fold_data
+from fricenv.gap.quarter_car.windows import prepare, window_jacobian, window_residuals
 from fricenv.plants import quarter_car as qc
 from fricenv.plants.tire import get_road
 
@@ -95,7 +95,7 @@ def test_an_unknown_jacobian_is_rejected_with_the_valid_names():
 def test_the_least_squares_stop_saves_evaluations_without_moving_the_fit(monkeypatch):
     """``fit_xtol = 1e-5`` against scipy's 1e-8: the same fitted lag to 0.5 %, in fewer residual evaluations (the
     evaluations past the optimum only shrank the trust region)."""
-    from fricenv.gap import fitting
+    from fricenv.gap.quarter_car import fitting
 
     nfev = {}
     original = fitting.least_squares

@@ -8,13 +8,13 @@ import numpy as np
 import pytest
 
 from fricenv.effects.quarter_car import make_effect
-from fricenv.gap import candidates
-from fricenv.gap.config import DiagnoseConfig
-from fricenv.gap.fitting import fit_nominal, refine_noise, score
-from fricenv.gap.params import param_names
-from fricenv.gap.simulate import simulate_log
-from fricenv.gap.verdict import significant
-from fricenv.gap.windows import prepare
+from fricenv.gap.quarter_car import candidates
+from fricenv.gap.quarter_car.config import DiagnoseConfig
+from fricenv.gap.quarter_car.fitting import fit_nominal, refine_noise, score
+from fricenv.gap.quarter_car.params import param_names
+from fricenv.gap.quarter_car.simulate import simulate_log
+from fricenv.gap.quarter_car.verdict import significant
+from fricenv.gap.quarter_car.windows import prepare
 from fricenv.plants import quarter_car as qc
 from fricenv.plants.tire import ROADS
 
@@ -71,8 +71,8 @@ def test_the_oracle_applies_the_same_rule():
     nothing over itself, so it is not detectable (it would be by the paired test against the nominal model alone)."""
     from types import SimpleNamespace
 
-    from fricenv.gap.diagnose import diagnose
-    from fricenv.gap.validate import true_model_oracle
+    from fricenv.gap.quarter_car.diagnose import diagnose
+    from fricenv.gap.quarter_car.validate import true_model_oracle
 
     road = dict(zip("BCE", DRY[:3]), theta=DRY[3])
     log, _ = simulate_log([make_effect("brake_gain", gain=0.8)], ROADS["dry"], driver="open-loop", seed=11)

@@ -12,15 +12,15 @@ import pytest
 
 from fricenv import cli
 from fricenv.effects.payload import PAYLOAD_EFFECTS, make_payload_effect, simulate_payload_with_effects
-from fricenv.gap.diagnose import estimate_noise
-from fricenv.gap.payload_diagnose import (
+from fricenv.gap.payload.diagnose import (
     PayloadDiagnoseConfig,
     diagnose_payload,
     diagnose_payload_file,
     load_payload_params,
 )
-from fricenv.gap.payload_report import write_payload_report
-from fricenv.gap.report import CANDIDATE_KEYS, REPORT_KEYS
+from fricenv.gap.payload.report import write_payload_report
+from fricenv.gap.quarter_car.diagnose import estimate_noise
+from fricenv.gap.quarter_car.report import CANDIDATE_KEYS, REPORT_KEYS
 from fricenv.logs import LogFormatError, read_log, write_log
 from fricenv.plants import payload as pl
 
@@ -240,7 +240,7 @@ def test_cli_simulate_calibration_error_takes_nine_values(tmp_path, capsys):
 
 # ------------------------------------------------------------------------------------------------- withheld effects
 def test_out_of_library_damping_gives_unexplained_not_a_wrong_name():
-    from fricenv.gap.payload_validate import OUT, PayloadCase, run_payload_case
+    from fricenv.gap.payload.validate import OUT, PayloadCase, run_payload_case
 
     case = PayloadCase(OUT, (), (0.6, 0.1), "paper", DT, 5)
     r = run_payload_case(case)
@@ -276,7 +276,7 @@ def test_two_effects_at_once_larger_is_the_verdict_and_joint_fit_recovers_both()
 
 
 def test_payload_validate_small_run_gets_every_category_right():
-    from fricenv.gap.payload_validate import PAYLOAD_CATEGORIES, validate_payload
+    from fricenv.gap.payload.validate import PAYLOAD_CATEGORIES, validate_payload
 
     s = validate_payload(len(PAYLOAD_CATEGORIES), seed=3, show_progress=False)
     assert s["accuracy"] == 1.0, [(r["category"], r["verdict"]) for r in s["logs"]]

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from scipy.signal import butter, lfilter
 
-from fricenv.gap.sensors import band_noise, condition_channel, frame_times, looks_filtered
+from fricenv.gap.signals.sensors import band_noise, condition_channel, frame_times, looks_filtered
 
 RNG = np.random.default_rng(15)
 
@@ -71,8 +71,8 @@ def test_a_low_passed_force_channel_is_flagged_and_its_white_equivalent_noise_re
 def test_a_held_pose_with_filtered_sensor_and_glitches_is_diagnosed_none(tmp_path):
     """A log with no effect, exported real-like (held 30 Hz pose, 20 Hz F/T filter, two 5 mm glitches, jitter and
     dropped rows): it used to come out ``unexplained`` with a gap of 3 or more."""
-    from fricenv.gap.payload_diagnose import diagnose_payload
-    from fricenv.gap.payload_validate import PayloadCase, simulate_payload_case
+    from fricenv.gap.payload.diagnose import diagnose_payload
+    from fricenv.gap.payload.validate import PayloadCase, simulate_payload_case
     from fricenv.logs import read_log
     from tests.real_artifacts import PayloadArtifacts, real_like_payload, write_export
 
@@ -91,8 +91,8 @@ def test_a_held_pose_with_filtered_sensor_and_glitches_is_diagnosed_none(tmp_pat
 
 
 def _real_like_diagnosis(tmp_path, case):
-    from fricenv.gap.payload_diagnose import diagnose_payload
-    from fricenv.gap.payload_validate import simulate_payload_case
+    from fricenv.gap.payload.diagnose import diagnose_payload
+    from fricenv.gap.payload.validate import simulate_payload_case
     from fricenv.logs import read_log
     from tests.real_artifacts import PayloadArtifacts, real_like_payload, write_export
 
@@ -109,7 +109,7 @@ def test_a_vision_delay_behind_a_filtered_sensor_is_the_cameras_own(tmp_path, de
     delay: fitted as one net shift, the delay came out about 11 ms short (a 20 ms delay 55 % off). With the lag read
     from the sensor's noise, the delay is the camera's own within 15 %."""
     from fricenv.effects.payload import make_payload_effect
-    from fricenv.gap.payload_validate import PayloadCase
+    from fricenv.gap.payload.validate import PayloadCase
 
     case = PayloadCase("vision_delay", (make_payload_effect("vision_delay", delay=delay),), None, "paper", 1e-3, 4243)
     dg = _real_like_diagnosis(tmp_path, case)

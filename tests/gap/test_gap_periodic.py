@@ -1,4 +1,4 @@
-"""A periodic line in the nominal model's wheel-speed residual (fricenv/gap/periodic.py)."""
+"""A periodic line in the nominal model's wheel-speed residual (fricenv/gap/quarter_car/periodic.py)."""
 
 from __future__ import annotations
 
@@ -7,8 +7,8 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from fricenv.gap.periodic import LINE_RATIO, periodic_line
-from fricenv.gap.stats import CandidateFit
+from fricenv.gap.quarter_car.periodic import LINE_RATIO, periodic_line
+from fricenv.gap.quarter_car.stats import CandidateFit
 
 FS, H, WINDOWS = 100.0, 10, 50
 
@@ -60,7 +60,7 @@ def test_a_load_oscillation_under_the_gap_threshold_reads_unexplained():
     verdict was `none`."""
     import tempfile
 
-    from fricenv.gap.diagnose import DiagnoseConfig, diagnose_file
+    from fricenv.gap.quarter_car.diagnose import DiagnoseConfig, diagnose_file
     from tests import independent_sim as ind
 
     case = ind.draw_cases(40, 3000, columns=())[12]

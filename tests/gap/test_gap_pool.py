@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 from fricenv import progress
-from fricenv.gap.pool import map_tasks
+from fricenv.gap.core.pool import map_tasks
 
 
 class RecordingSink:

@@ -12,13 +12,13 @@ from scipy.signal import butter, lfilter
 
 from fricenv.effects import registry
 from fricenv.effects.registry import Excitation
-from fricenv.gap.config import DiagnoseConfig
-from fricenv.gap.excitation import untestable
-from fricenv.gap.report import REPORT_KEYS, report_dict
-from fricenv.gap.selection import split_params
-from fricenv.gap.sensors import condition_channel, correlation_time, fill_missing, quantisation_step
-from fricenv.gap.stats import WINDOW_MSE_CAP, CandidateFit, soft_cap, window_mse
-from fricenv.gap.windows import LogTooShortError, horizon_samples, prepare
+from fricenv.gap.quarter_car.config import DiagnoseConfig
+from fricenv.gap.quarter_car.excitation import untestable
+from fricenv.gap.quarter_car.report import REPORT_KEYS, report_dict
+from fricenv.gap.quarter_car.selection import split_params
+from fricenv.gap.quarter_car.stats import WINDOW_MSE_CAP, CandidateFit, soft_cap, window_mse
+from fricenv.gap.quarter_car.windows import LogTooShortError, horizon_samples, prepare
+from fricenv.gap.signals.sensors import condition_channel, correlation_time, fill_missing, quantisation_step
 from fricenv.logs import QuarterCarLog
 from fricenv.plants import quarter_car as qc
 
@@ -208,7 +208,7 @@ def replace_verdict(dg, verdict):
 def _stub_selection(monkeypatch, gains: dict):
     """Stub the joint fits: a set's held-out error is 2 minus the gains of its effects; z over the set before is
     100 times the error drop."""
-    from fricenv.gap import selection
+    from fricenv.gap.quarter_car import selection
 
     def fake_extend(current, extra, folds, d, cfg, jobs, nominal, known):
         out = []
@@ -249,8 +249,8 @@ def test_forward_selection_stops_at_three_and_tries_expected_first(monkeypatch):
 
 def test_a_short_25hz_log_gives_a_result_with_what_it_cannot_test():
     """The 1.4 s, 35-row segment of issue 15 used to crash ("argmin of an empty sequence")."""
-    from fricenv.gap.diagnose import diagnose
-    from fricenv.gap.simulate import simulate_log
+    from fricenv.gap.quarter_car.diagnose import diagnose
+    from fricenv.gap.quarter_car.simulate import simulate_log
     from fricenv.plants.tire import ROADS
 
     log, _ = simulate_log([], ROADS["dry_asphalt"] if "dry_asphalt" in ROADS else next(iter(ROADS.values())),
@@ -265,7 +265,7 @@ def test_a_short_25hz_log_gives_a_result_with_what_it_cannot_test():
 
 
 def test_summary_line_names_the_other_effects_and_the_untestable_ones():
-    from fricenv.gap.report import summary_line
+    from fricenv.gap.quarter_car.report import summary_line
 
     dg = SimpleNamespace(verdict="drag", params={"c0": 200.0}, gap_before=3.0, gap_after=0.2,
                          where={"not_testable": {"mu_change": "too short"}}, whole=object(),
@@ -287,7 +287,7 @@ def test_paired_z_cannot_pass_two_models_that_predict_alike():
     the residual's own direction (a start-state fit a hair further along). Gain and spread both vanish, and their
     ratio was ``||r||``, a z of 20. Held at one noise variance of prediction difference, the test gives |z| < 1,
     and a model that removes a real error of half a noise std still passes by far."""
-    from fricenv.gap.stats import paired_z
+    from fricenv.gap.quarter_car.stats import paired_z
 
     rng = np.random.default_rng(3)
     e = rng.normal(0.0, 1.0, (40, 10))
@@ -298,7 +298,7 @@ def test_paired_z_cannot_pass_two_models_that_predict_alike():
 
 
 def test_robust_rms_reads_the_noise_under_errors_in_a_few_windows():
-    from fricenv.gap.fitting import robust_rms
+    from fricenv.gap.quarter_car.fitting import robust_rms
 
     rng = np.random.default_rng(8)
     r = rng.normal(0.0, 0.7, (200, 8))
@@ -313,7 +313,7 @@ def test_a_torque_from_pressure_is_held_at_the_step_mean_of_the_sampled_signal()
     """A brake pressure logged at 25 Hz samples a continuous signal: over each step the simulator holds the mean of
     the line between the step's two samples, within 4 % of the amplitude of the true mean over the step (the held
     sample is off by a third of the amplitude: half a step, 20 ms, of timing). A commanded torque stays held."""
-    from fricenv.gap.windows import applied_torque
+    from fricenv.gap.quarter_car.windows import applied_torque
 
     dt, n = 0.04, 60
     t = np.arange(n) * dt
@@ -331,7 +331,7 @@ def test_a_torque_from_pressure_is_held_at_the_step_mean_of_the_sampled_signal()
 
 
 def test_a_discovery_is_named_before_an_expected_calibration():
-    from fricenv.gap.diagnose import _order
+    from fricenv.gap.quarter_car.diagnose import _order
 
     effects = [{"effect": "brake_gain", "params": {"gain": 0.8}}, {"effect": "brake_lag", "params": {"tau": 0.05}}]
     expected = {"brake_gain": "a nominal pressure-to-torque factor"}

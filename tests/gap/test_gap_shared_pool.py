@@ -1,4 +1,4 @@
-"""The shared local pool of the gap tool (:func:`fricenv.gap.pool.shared_pool`): every map inside the block runs in
+"""The shared local pool of the gap tool (:func:`fricenv.gap.core.pool.shared_pool`): every map inside the block runs in
 the same worker processes, results stay in task order, and an interrupt still ends the workers."""
 
 import os
@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from fricenv.gap.pool import map_tasks, shared_pool, start_tasks
+from fricenv.gap.core.pool import map_tasks, shared_pool, start_tasks
 
 from .test_gap_pool import _alive, ctrl_c_raises  # noqa: F401  (a fixture)
 

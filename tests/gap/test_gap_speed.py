@@ -1,12 +1,12 @@
-"""Speed reconstruction for logs without ``v`` (fricenv.gap.speed): the whole-trajectory Newton solve against the
+"""Speed reconstruction for logs without ``v`` (fricenv.gap.signals.speed): the whole-trajectory Newton solve against the
 sample-by-sample recursion, the prefix scan against a loop, and the reconstructed speed against the true one."""
 
 import numpy as np
 import pytest
 
 from fricenv.effects.quarter_car import ModelBatch, make_effect
-from fricenv.gap import speed
-from fricenv.gap.simulate import simulate_log
+from fricenv.gap.quarter_car.simulate import simulate_log
+from fricenv.gap.signals import speed
 from fricenv.plants import quarter_car as qc
 from fricenv.plants.tire import DRY, ICE, WET
 

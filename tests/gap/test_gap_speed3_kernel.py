@@ -1,5 +1,5 @@
-"""The compiled nuisance fit (fricenv.gap.windows_kernel) against the numpy Gauss-Newton loop of
-fricenv.gap.windows around the same compiled simulator: the same replicas, steps, clips, bounds, summation order
+"""The compiled nuisance fit (fricenv.gap.quarter_car.windows_kernel) against the numpy Gauss-Newton loop of
+fricenv.gap.quarter_car.windows around the same compiled simulator: the same replicas, steps, clips, bounds, summation order
 and LAPACK solve, so the residuals are equal bit for bit (a last-bit difference can grow through a least-squares run
 into a different optimum, so nothing less would keep the diagnosis' results); and the sums, the solve and the move
 rule on their own."""
@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 
 from fricenv.effects.quarter_car import make_effect
-from fricenv.gap import windows, windows_kernel
-from fricenv.gap.config import DiagnoseConfig
-from fricenv.gap.simulate import simulate_log
-from fricenv.gap.windows import prepare, window_residuals
+from fricenv.gap.quarter_car import windows, windows_kernel
+from fricenv.gap.quarter_car.config import DiagnoseConfig
+from fricenv.gap.quarter_car.simulate import simulate_log
+from fricenv.gap.quarter_car.windows import prepare, window_residuals
 from fricenv.plants import quarter_car as qc
 from fricenv.plants.tire import DRY, WET
 
@@ -108,7 +108,7 @@ def _residuals(effects, names, x, d):
 def test_threads_and_worker_processes_do_not_change_the_residuals():
     """Kernel threads in the main process and in forked pool workers (Data.threads = jobs): the pairs are
     independent, so the residuals equal the single-threaded ones bit for bit."""
-    from fricenv.gap.pool import map_tasks, shared_pool
+    from fricenv.gap.core.pool import map_tasks, shared_pool
 
     effects, names, x = CASES[2]
     d = _data(True, seed=6)

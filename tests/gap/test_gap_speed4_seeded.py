@@ -1,4 +1,4 @@
-"""A least-squares run takes the residuals at its start from the start search of :func:`fricenv.gap.fitting.fit`
+"""A least-squares run takes the residuals at its start from the start search of :func:`fricenv.gap.quarter_car.fitting.fit`
 instead of simulating them again (issue 18, fourth pass). Allowed only because a row of a batched
 ``window_residuals`` call equals the same parameter set evaluated alone, bit for bit (the windows are simulated
 element by element): the run's path, and so the fitted parameters, stay exactly those of an unseeded run."""
@@ -7,13 +7,13 @@ import numpy as np
 import pytest
 
 from fricenv.effects.quarter_car import make_effect
-from fricenv.gap import fitting
-from fricenv.gap.config import DiagnoseConfig
-from fricenv.gap.fitting import bounds, effect_start_matrix, least_squares_run
-from fricenv.gap.params import param_names
-from fricenv.gap.simulate import simulate_log
-from fricenv.gap.stats import fold_data
-from fricenv.gap.windows import prepare, window_residuals
+from fricenv.gap.quarter_car import fitting
+from fricenv.gap.quarter_car.config import DiagnoseConfig
+from fricenv.gap.quarter_car.fitting import bounds, effect_start_matrix, least_squares_run
+from fricenv.gap.quarter_car.params import param_names
+from fricenv.gap.quarter_car.simulate import simulate_log
+from fricenv.gap.quarter_car.stats import fold_data
+from fricenv.gap.quarter_car.windows import prepare, window_residuals
 from fricenv.plants import quarter_car as qc
 from fricenv.plants.tire import DRY, WET
 

@@ -7,7 +7,7 @@ import json
 import pytest
 
 from fricenv import bench_targets
-from fricenv.gap.diagnose import DiagnoseConfig
+from fricenv.gap.quarter_car.diagnose import DiagnoseConfig
 
 
 def test_bench_gap_reports_both_paths_and_their_ratio(monkeypatch, tmp_path):
@@ -33,8 +33,8 @@ def test_bench_gap_reports_both_paths_and_their_ratio(monkeypatch, tmp_path):
 
 
 def test_the_numpy_path_is_a_config_switch_that_reaches_the_windows():
-    from fricenv.gap.simulate import simulate_log
-    from fricenv.gap.windows import prepare
+    from fricenv.gap.quarter_car.simulate import simulate_log
+    from fricenv.gap.quarter_car.windows import prepare
     from fricenv.plants.quarter_car import PAPER_PARAMS
     from fricenv.plants.tire import WET
 
@@ -58,6 +58,6 @@ def test_the_cpu_seconds_count_the_worker_processes(monkeypatch):
         proc.join()
         assert cfg.jobs == bench_targets.GAP_JOBS
 
-    monkeypatch.setattr("fricenv.gap.diagnose.diagnose", diagnose_in_a_child)
+    monkeypatch.setattr("fricenv.gap.quarter_car.diagnose.diagnose", diagnose_in_a_child)
     cpu = bench_targets._diagnose_seconds(None, True)[1]
     assert cpu >= 0.3  # the child's 0.3 s, though this process only waited

@@ -1,10 +1,10 @@
-"""The compiled speed recursion (fricenv.gap.speed_kernel) against the numpy sample-by-sample reference and the
+"""The compiled speed recursion (fricenv.gap.signals.speed_kernel) against the numpy sample-by-sample reference and the
 numpy Newton solve, over road shapes, relaxation, rolling radius, drag and a friction change."""
 
 import numpy as np
 import pytest
 
-from fricenv.gap import speed
+from fricenv.gap.signals import speed
 from fricenv.plants import quarter_car as qc
 from fricenv.plants.tire import DRY, ICE, WET
 

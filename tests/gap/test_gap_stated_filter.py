@@ -1,5 +1,5 @@
 """Issue 15 item 2: a sensor filter the column map states (a data sheet's IMU filter) is undone as stated
-(:mod:`fricenv.gap.stated_filter`), instead of the filter the diagnosis would read from the noise roll-off."""
+(:mod:`fricenv.gap.signals.stated_filter`), instead of the filter the diagnosis would read from the noise roll-off."""
 
 from __future__ import annotations
 
@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 from scipy.signal import butter, sosfilt, sosfilt_zi
 
-from fricenv.gap.config import DiagnoseConfig
-from fricenv.gap.sensors import condition_channel, deconvolved, group_delay
-from fricenv.gap.windows import LAG_USE_HZ, NOISE_FLOOR, prepare
+from fricenv.gap.quarter_car.config import DiagnoseConfig
+from fricenv.gap.quarter_car.windows import LAG_USE_HZ, NOISE_FLOOR, prepare
+from fricenv.gap.signals.sensors import condition_channel, deconvolved, group_delay
 from fricenv.logs import QuarterCarLog
 from fricenv.logs.sensor_filter import SensorFilter
 from fricenv.plants import quarter_car as qc

@@ -4,7 +4,14 @@ import numpy as np
 import pytest
 
 from fricenv.effects.quarter_car import EFFECTS
-from fricenv.gap.validate import CATEGORIES, draw_case, format_summary, run_case, summarize, validate
+from fricenv.gap.quarter_car.validate import (
+    CATEGORIES,
+    draw_case,
+    format_summary,
+    run_case,
+    summarize,
+    validate,
+)
 
 
 def test_categories_cover_every_library_effect_none_and_out_of_library():

@@ -1,10 +1,10 @@
-"""The verdict rule shared by both plants (fricenv.gap.verdict.decide_verdict)."""
+"""The verdict rule shared by both plants (fricenv.gap.quarter_car.verdict.decide_verdict)."""
 
 from __future__ import annotations
 
 from types import SimpleNamespace
 
-from fricenv.gap.verdict import decide_verdict
+from fricenv.gap.core.verdict import decide_verdict
 
 
 def _fit(effect: str, closes: bool):

@@ -17,7 +17,7 @@ def test_an_odd_log_gets_a_verdict_or_an_error_naming_its_file(tmp_path, kind):
 
 
 def test_diagnose_odd_calls_anything_but_a_clear_rejection_a_crash(tmp_path, monkeypatch):
-    import fricenv.gap.diagnose as dg
+    import fricenv.gap.quarter_car.diagnose as dg
 
     path = str(tmp_path / "x.csv")
 

@@ -9,8 +9,8 @@ from pathlib import Path
 import pytest
 
 from fricenv import progress
-from fricenv.gap.fleet import FLEET_JSON, FleetSettings, run_fleet
-from fricenv.gap.pool import map_tasks
+from fricenv.gap.core.pool import map_tasks
+from fricenv.gap.fleet.run import FLEET_JSON, FleetSettings, run_fleet
 from tests.gap.fleet_helpers import FAST, simulate_fleet
 from tests.gap.test_gap_pool import RecordingSink, _square_after
 
@@ -66,7 +66,7 @@ def test_fleet_rows_identical_on_ray_and_in_the_process_pool(tmp_path, local_ray
 
 
 KILLABLE = """
-from fricenv.gap.pool import map_tasks
+from fricenv.gap.core.pool import map_tasks
 from tests.gap.test_gap_pool import _square_after
 map_tasks(_square_after, [(2, 120.0)] * 2, 1, "sleep", ray="auto")
 """

@@ -93,9 +93,9 @@ def test_the_oracle_of_several_effects_shows_a_large_one_and_not_a_negligible_on
     import warnings
 
     from fricenv.effects.quarter_car import make_effect
-    from fricenv.gap.config import DiagnoseConfig
-    from fricenv.gap.diagnose import diagnose
-    from fricenv.gap.simulate import simulate_log
+    from fricenv.gap.quarter_car.config import DiagnoseConfig
+    from fricenv.gap.quarter_car.diagnose import diagnose
+    from fricenv.gap.quarter_car.simulate import simulate_log
     from fricenv.plants.tire import MagicFormula
     from tests.report_check import shown_effects
 
@@ -127,7 +127,7 @@ def test_the_noise_free_truth_shows_a_strong_brake_fade_and_not_a_nominal_log(tm
     import dataclasses
     import warnings
 
-    from fricenv.gap.diagnose import DiagnoseConfig, diagnose_file
+    from fricenv.gap.quarter_car.diagnose import DiagnoseConfig, diagnose_file
     from tests import independent_sim as ind
     from tests.report_check import truth_shown
 

@@ -1,0 +1,1 @@
+"""The planar payload's gap diagnosis: prepared data, accelerations compared, verdict, report and validation."""

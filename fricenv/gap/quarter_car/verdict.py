@@ -1,0 +1,72 @@
+"""The verdict rule: which candidates are significant, which explain the gap, whether the gap is real, and the
+verdict shared by every plant's diagnosis (DESIGN.md: none / an effect / unexplained)."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from fricenv.effects.quarter_car import ModelBatch
+from fricenv.gap.quarter_car.config import DiagnoseConfig
+from fricenv.gap.quarter_car.params import ROAD_NAMES, effect_param, road_of
+from fricenv.gap.quarter_car.stats import CandidateFit, robust_gap
+from fricenv.plants import quarter_car as qc
+
+__all__ = ["RANGE_EDGE", "at_range_edge", "explains", "gap_is_real", "significant"]
+
+# A fitted effect parameter within this share of its range (the registry's bounds) from a bound sits at the bound [-]
+RANGE_EDGE = 1e-3
+
+
+def significant(f: CandidateFit, nominal: CandidateFit, cfg: DiagnoseConfig) -> bool:
+    """A held-out improvement well beyond what the measurement noise could make (:func:`paired_z`), over the
+    nominal model and over the candidate's own road with its effects switched off (``z_without``, the nested
+    test of :func:`fricenv.gap.quarter_car.candidates.test_against`); the robust :func:`improvement_z` and the paired t
+    statistic are reported, not required."""
+    nested = f.z_without is None or f.z_without > cfg.sig_z
+    return f.z_paired > cfg.sig_z and nested and f.adjusted_mse < nominal.adjusted_mse
+
+
+
+def at_range_edge(f: CandidateFit, p: qc.QuarterCarParams) -> list[str]:
+    """Effect parameters of ``f`` that sit at a bound of their physical range (the registry's bounds) in any fold's fit.
+
+    The bound on the side where the effect switches off (a lag of 1 ms, no drag) does not count: there the effect
+    is simply absent. A parameter pressed against the far bound (a 3 m relaxation length) means the effect is being
+    stretched to imitate something it is not, so such a candidate cannot be the verdict.
+    """
+    off = ModelBatch.nominal(road_of(f.x), 1, p)
+    out = []
+    for i, name in enumerate(f.names):
+        if name in ROAD_NAMES:
+            continue
+        lo, hi = effect_param(name).bounds
+        if not (np.isfinite(lo) and np.isfinite(hi)):
+            continue
+        tol = RANGE_EDGE * (hi - lo)
+        off_value = float(off.param(name)[0])
+        edges = [b for b, off_side in ((lo, off_value <= lo + tol), (hi, off_value >= hi - tol)) if not off_side]
+        if any(abs(x[i] - b) <= tol for x in (f.x_folds or (f.x,)) for b in edges):
+            out.append(name)
+    return out
+
+
+def gap_is_real(nominal: CandidateFit, significant: Sequence[CandidateFit], cfg: DiagnoseConfig,
+                periodic: bool = False) -> bool:
+    """Whether the nominal model misses by more than the noise.
+
+    True when its held-out gap is above ``gap_none`` beyond the few lock-up windows that no model times (the trim
+    of :func:`robust_gap`, the same that judges the candidates), when a candidate beats it significantly on data
+    it was not fitted to (then the nominal model cannot be within the noise either), or when its residual holds a
+    ``periodic`` line that noise cannot make (:func:`fricenv.gap.quarter_car.periodic.periodic_line`).
+    """
+    misses = nominal.gap > cfg.gap_none and robust_gap(nominal) > cfg.gap_within_noise
+    return misses or bool(significant) or periodic
+
+
+
+def explains(f: CandidateFit, nominal: CandidateFit, cfg: DiagnoseConfig) -> bool:
+    """Whether ``f`` closes a clear share of the gap on held-out data: its robust gap is at most
+    ``ratio_explained`` of the nominal one, or within the noise (``gap_within_noise``)."""
+    return robust_gap(f) <= cfg.ratio_explained * robust_gap(nominal) or robust_gap(f) <= cfg.gap_within_noise
