@@ -1,7 +1,7 @@
 """The quarter-car estimators on plants with the effect grid's effects: do they keep the speed?
 
 For each estimator (registry name), driver (``abs``, ``open-loop``), road and seed, the gap tool's stand-in
-(:func:`fricenv.gap.simulate.simulate_log`) writes a stop on the nominal plant and one per effect of
+(:func:`fricenv.gap.quarter_car.simulate.simulate_log`) writes a stop on the nominal plant and one per effect of
 :data:`fricenv.effects.grid.EFFECT_GRID` at the chosen size (``mu_change`` switches at the nominal stop's mid
 time); the estimator runs on the logged wheel speed and commanded torque (and ``a_x`` if it reads it). Figures per
 run: rms and largest speed error after ``SETTLE_TIME``, and the share of samples flagged ``OUTLIER`` or
@@ -28,7 +28,7 @@ import numpy as np
 from estimators.base import Health, run
 from estimators.registry import make_estimator
 from fricenv.effects.grid import EFFECT_GRID, GRID_SIZES, grid_effect
-from fricenv.gap.simulate import DRIVERS, simulate_log
+from fricenv.gap.quarter_car.simulate import DRIVERS, simulate_log
 from fricenv.plants.quarter_car import PAPER_PARAMS
 from fricenv.plants.tire import ROADS
 

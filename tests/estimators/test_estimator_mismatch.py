@@ -10,7 +10,7 @@ import pytest
 from estimators.base import Health, run
 from estimators.registry import make_estimator
 from fricenv.effects.quarter_car import make_effect
-from fricenv.gap.simulate import simulate_log
+from fricenv.gap.quarter_car.simulate import simulate_log
 from fricenv.plants.quarter_car import PAPER_PARAMS
 from fricenv.plants.tire import ROADS
 
