@@ -52,7 +52,7 @@ from fricenv.plants.tire import magic_formula
 __all__ = ["BATCHED_MHE", "PARALLEL", "BatchedMHE", "mhe_builder"]
 
 PARALLEL = ("serial", "thread")  # Function.map modes offered
-MAX_THREADS = 2  # CasADi threads of the thread map (the machine budget of issue 17)
+MAX_THREADS = 2  # CasADi threads of the thread map (the machine budget: 2 cores)
 
 
 class BatchedMHE:
