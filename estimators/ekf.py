@@ -270,30 +270,48 @@ class QuarterCarEKF(Estimator):
     def _estimate(self, x: np.ndarray, health: Health, info: dict | None = None) -> Estimate:
         return Estimate(self.model.values(x), health, info or {})
 
+    def correct(self, y: np.ndarray) -> tuple[Verdict, np.ndarray, np.ndarray, np.ndarray | None, float]:
+        """Gate wheel speed ``y`` on the prior (x, P) (:class:`estimators.mismatch.WheelSpeedGuard`) and update.
+
+        :return: (verdict, posterior mean (not yet clipped to the bounds), posterior covariance, innovation or None
+            for a rejected sample, the process-noise factor of a mismatch); the prior (x, P) is re-initialised on
+            ``REINIT`` and raised on ``MISMATCH``.
+        """
+        verdict, self.x, self.P, inflation = self.guard.check(self.x, self.P, self.P0, self.filter.R, self.filter.Q,
+                                                              y, self._brake_torque)
+        if verdict == Verdict.REJECT:
+            return verdict, self.x, self.P, None, inflation
+        x_post, P_post, innov = self.filter.update(self.x, self.P, y)
+        return verdict, x_post, P_post, innov, inflation
+
+    def propagate(self, x_post: np.ndarray, P_post: np.ndarray, brake_torque: float) -> bool:
+        """Time update from the posterior (clipped to the bounds) under the torque held to the next sample.
+
+        :return: False when the step is not finite: the prior is kept and its covariance restarts at P0.
+        """
+        self._brake_torque = float(brake_torque)
+        x_next, P_next = self.filter.predict(np.clip(x_post, self.lower, self.upper), P_post, self._brake_torque)
+        if not (np.all(np.isfinite(x_next)) and np.all(np.isfinite(P_next))):
+            self.P = self.P0.copy()
+            return False
+        self.x, self.P = np.clip(x_next, self.lower, self.upper), P_next
+        return True
+
     def update(self, measurement, u) -> Estimate:
         sample = self._validated_sample(measurement, u)
         if sample is None:
             return self._estimate(self.x, Health.INVALID_INPUT, {"reason": "NaN or wrong shape; sample skipped"})
         y, uu = sample
-        verdict, self.x, self.P, inflation = self.guard.check(self.x, self.P, self.P0, self.filter.R, self.filter.Q,
-                                                              y, self._brake_torque)
-        self._brake_torque = float(uu[0])
-        if verdict == Verdict.REJECT:
-            x_post, P_post, innov = self.x, self.P, None
-        else:
-            x_post, P_post, innov = self.filter.update(self.x, self.P, y)
-            x_post = np.clip(x_post, self.lower, self.upper)
-        x_next, P_next = self.filter.predict(x_post, P_post, float(uu[0]))
-        if not (np.all(np.isfinite(x_next)) and np.all(np.isfinite(P_next))):
-            # keep the last good state; restart the covariance
-            self.P = self.P0.copy()
+        verdict, x_post, P_post, innov, inflation = self.correct(y)
+        P_prior = self.P
+        x_post = np.clip(x_post, self.lower, self.upper)
+        if not self.propagate(x_post, P_post, float(uu[0])):  # keep the last good state
             return self._estimate(self.x, Health.SOLVER_FAILED, {"reason": "non-finite EKF step"})
-        self.information.add(self.P, None if innov is None else P_post)
+        self.information.add(P_prior, None if innov is None else P_post)
         if verdict in (Verdict.ACCEPT, Verdict.MISMATCH):
             health = Health.OK if self.information.excited(P_post) else Health.NOT_EXCITED
         else:
             health = Health.OUTLIER if verdict == Verdict.REJECT else Health.REINITIALISED
-        self.x, self.P = np.clip(x_next, self.lower, self.upper), P_next
         info = {"rejected_in_row": self.guard.rejected} if innov is None else {"innovation": float(innov[0])}
         if verdict == Verdict.MISMATCH:
             info["mismatch"] = inflation

@@ -50,10 +50,13 @@ Measured (``fricenv paper mhe --seeds 5``; seeds 3-7 to check): v within 0.6 % o
 in every case; arrival means from the MHE's own estimates were worse (they count the window's data twice). The
 paper's MHE is ``arrival="paper", model_error=None``; ``model_error=(std_v, std_slip)`` sets the process noise.
 
-Outliers (:mod:`estimators.outliers`): every wheel speed is gated on the alongside EKF's innovation (that EKF
-runs for every arrival option). A rejected sample stays in the window with zero weight (its row removed before the
-SVD) and the EKF skips it (``Health.OUTLIER``); the ``max_rejections + 1``-th in a row restarts the EKF from it
-(:func:`estimators.ekf.gate_wheel_speed`) and the window after it (``Health.REINITIALISED``).
+Outliers (:mod:`estimators.outliers`): the alongside EKF is the quarter-car EKF itself
+(:class:`estimators.ekf.QuarterCarEKF`, attribute ``arrival_filter``, with this MHE's noise); it runs for every
+arrival option and gates every wheel speed on its innovation. A rejected sample stays in the window with zero
+weight (its row removed before the SVD) and the EKF skips it (``Health.OUTLIER``); the ``max_rejections + 1``-th
+in a row restarts the EKF from the reference speed (:mod:`estimators.mismatch`) and the window after it
+(``Health.REINITIALISED``). A persistent innovation (a model error, :mod:`estimators.mismatch`) is no outlier: the
+EKF updates with it under raised process noise, and the window keeps it with its full weight.
 
 Solver: a few projected Levenberg-Marquardt iterations on a compiled CasADi SX function (window outputs, states,
 Jacobians; weights applied in numpy), warm-started from the a priori solution, bounds by an active set plus
@@ -69,7 +72,7 @@ import casadi as ca
 import numpy as np
 
 from estimators.base import Estimate, Estimator, EstimatorConfigError, Health, check_dt
-from estimators.ekf import ekf_predict, ekf_update, gate_wheel_speed
+from estimators.ekf import QuarterCarEKF
 from estimators.outliers import DEFAULT_GATE, GateParams, Verdict, check_gate
 from estimators.quarter_car_model import PARAM_NAMES, AugmentedModel
 from estimators.tuning import (
@@ -198,10 +201,10 @@ class RegularizedMHE(Estimator):
         names = self.model.names
         self.D = np.array([scales[n] for n in names]) if weighting == "scaled" else np.ones(len(names))
         self.lower, self.upper = self.model.lower(), self.model.upper()
-        ekf_p0 = DEFAULT_EKF_TUNING["P0_std"]
-        self._Q = np.diag([ekf_q[n] ** 2 for n in names])
-        self._P0 = np.diag([ekf_p0[n] ** 2 for n in names])
-        self._R = np.array([[self.noise_std**2]])
+        # the arrival-cost filter and outlier gate: the quarter-car EKF itself, with this MHE's noise
+        self.arrival_filter = QuarterCarEKF(self.model.estimated, dt, R=self.noise_std**2, model=self.model,
+                                            outlier_gate=self.outlier_gate)
+        self._Q, self._P0, self._R = self.arrival_filter.filter.Q, self.arrival_filter.P0, self.arrival_filter.filter.R
         self._build()
         self.reset()
 
@@ -273,10 +276,9 @@ class RegularizedMHE(Estimator):
         self._n_fail = 0
         self._X_prev: np.ndarray | None = None
         self._w_prev: np.ndarray | None = None
-        self._ekf_x, self._ekf_P = self.x_prior0.copy(), self._P0.copy()
+        self.arrival_filter.reset(v, slip, params)
         self._arr_hist: deque = deque(maxlen=self.N + 1)
         self._used: list[bool] = []  # per window sample: False if the gate rejected it
-        self._rejected = 0  # consecutive rejections (estimators.outliers)
         return self._estimate(self.x_prior0, Health.OK)
 
     def _estimate(self, x: np.ndarray, health: Health, info: dict | None = None) -> Estimate:
@@ -290,28 +292,24 @@ class RegularizedMHE(Estimator):
         verdict = self._take(y, float(uu[0]))
         est = self._window_estimate(float(uu[0]))
         self._ekf_predict(float(uu[0]))
-        if verdict == Verdict.ACCEPT:
+        if verdict in (Verdict.ACCEPT, Verdict.MISMATCH):  # a model error is no outlier (estimators.mismatch)
             return est
         health = Health.OUTLIER if verdict == Verdict.REJECT else Health.REINITIALISED
         return Estimate(est.values, health, {**est.info, "window_health": est.health})
 
     def _take(self, y: np.ndarray, u: float) -> Verdict:
-        """Gate the sample on the alongside EKF's innovation, update that EKF and the window buffers."""
-        verdict, self._rejected, self._ekf_x, self._ekf_P = gate_wheel_speed(
-            self.model, self._ekf_x, self._ekf_P, self._P0, self._R, y, self._rejected, self.outlier_gate)
-        if verdict == Verdict.REINIT:  # the alongside EKF restarted from the sample: so does the window
+        """Gate the sample and update the arrival filter (the EKF's correction), append it to the window buffers."""
+        f = self.arrival_filter
+        verdict, x_post, P_post, _, _ = f.correct(y)
+        if verdict == Verdict.REINIT:  # the arrival filter restarted from the sample: so does the window
             self._y, self._u, self._used = [], [], []
             self._arr_hist.clear()
-            self.x_prior0, self._X_prev = self._ekf_x.copy(), None
+            self.x_prior0, self._X_prev = f.x.copy(), None
         self._y.append(float(y[0]))
         self._u.append(u)
         self._used.append(verdict != Verdict.REJECT)  # a rejected sample stays in the window with no weight
-        self._arr_hist.append((self._ekf_x, self._ekf_P))  # prior of x(t) given y(..t-1)
-        if verdict == Verdict.REJECT:
-            self._ekf_post = (self._ekf_x, self._ekf_P)
-        else:
-            hx, H = np.array([self.model.h(self._ekf_x)]), self.model.h_jacobian(self._ekf_x)
-            self._ekf_post = ekf_update(self._ekf_x, self._ekf_P, y, hx, H, self._R)[:2]
+        self._arr_hist.append((f.x, f.P))  # prior of x(t) given y(..t-1)
+        self._ekf_post = (x_post, P_post)
         return verdict
 
     def _window_estimate(self, u: float) -> Estimate:
@@ -371,14 +369,8 @@ class RegularizedMHE(Estimator):
         return self._estimate(self._last, health, info)
 
     def _ekf_predict(self, u: float) -> None:
-        """The alongside EKF's time update from x(t|t) to the prior of x(t+1) (arrival cost and outlier gate)."""
-        x_post, P_post = self._ekf_post
-        x_post = np.clip(x_post, self.lower, self.upper)
-        xn, F = self.model.f_and_jacobian(x_post, u)
-        if np.all(np.isfinite(xn)) and np.all(np.isfinite(F)):
-            self._ekf_x, self._ekf_P = ekf_predict(np.clip(xn, self.lower, self.upper), F, P_post, self._Q)
-        else:
-            self._ekf_x, self._ekf_P = self._ekf_x, self._P0.copy()
+        """The arrival filter's time update from x(t|t) to the prior of x(t+1)."""
+        self.arrival_filter.propagate(*self._ekf_post, u)
 
     # ------------------------------------------------------------------ weights and solver
     def _masked_weights(self, Phi: np.ndarray, used: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:

@@ -15,11 +15,11 @@ filter until the re-initialisation, which then took the speed from a wheel that 
      (the sample after it agrees with the prediction); a spike of a tenth or ten times the speed, or a dropout to
      zero at speed, implies a tire force many times the load and stays an outlier.
 (M2) **Reference speed.** As an ABS ECU builds its reference: the fastest plausible wheel, with bounded deceleration,
-     ``v_ref(k) = max(omega(k) r - margin, v_ref(k-1) - A_REF dt)`` over the samples the gate used (a rejected
-     sample is not plausible); while braking it is a lower bound of the car's speed that the wheel touches whenever
-     it rolls freely. A re-initialisation takes the speed from it, ``v = max(v_ref, omega r)`` (the filter's own
-     speed after a run of rejections is not to be trusted), and the slip that makes eq. (7) hold at that speed (clipped to
-     ``[0, REINIT_SLIP_MAX]``): never the speed of a wheel that may be slipping.
+     ``v_ref(k) = max(omega(k) r - margin, v_ref(k-1) - A_REF dt)``, the wheel term only for a sample the gate
+     used (a rejected sample is not plausible); while braking it is a lower bound of the car's speed that the wheel
+     touches whenever it rolls freely. A re-initialisation takes the speed from it, ``v = max(v_ref, omega r)``
+     (the filter's own speed after a run of rejections is not to be trusted), and the slip that makes eq. (7) hold
+     at that speed (a locked wheel or a dropout to zero: slip 1): never the speed of a wheel that may be slipping.
 """
 
 from __future__ import annotations
@@ -30,7 +30,7 @@ import numpy as np
 
 from estimators.jump import jump_test
 from estimators.outliers import GateParams, Verdict, gate, nis
-from estimators.tuning import A_REF, JUMP_MU_MAX, REF_MARGIN_STD, REINIT_SLIP_MAX, SLIP_PRIOR
+from estimators.tuning import A_REF, JUMP_MU_MAX, REF_MARGIN_STD, SLIP_PRIOR
 
 __all__ = ["WheelSpeedGuard"]
 
@@ -68,13 +68,13 @@ class WheelSpeedGuard:
         """Failing samples in a row so far."""
         return self.s.rejected
 
-    def _reference(self, omega: float) -> float:
-        """(M2) after a sample the filter used: the fastest plausible wheel, bounded deceleration."""
+    def _reference(self, omega: float | None) -> None:
+        """(M2) once per sample: fall at the bounded deceleration, rise to a wheel speed the filter used
+        (``omega`` None for a rejected sample)."""
         r, dt = self.model.p.r, self.model.dt
-        wheel = omega * r - REF_MARGIN_STD * self.noise_std * r
-        prev = self.s.v_ref - A_REF * dt if np.isfinite(self.s.v_ref) else -np.inf
-        self.s.v_ref = max(wheel, prev)
-        return self.s.v_ref
+        fallen = self.s.v_ref - A_REF * dt if np.isfinite(self.s.v_ref) else -np.inf
+        wheel = -np.inf if omega is None else omega * r - REF_MARGIN_STD * self.noise_std * r
+        self.s.v_ref = max(fallen, wheel)
 
     def reinit(self, x: np.ndarray, P: np.ndarray, P0: np.ndarray, omega: float) -> tuple[np.ndarray, np.ndarray]:
         """(M2): re-initialise (v, slip) from the reference speed and the wheel speed (before a reference: the
@@ -85,11 +85,10 @@ class WheelSpeedGuard:
         """
         r = self.model.p.r
         wheel = max(float(omega) * r, 0.0)
-        v_ref = self.s.v_ref - A_REF * self.model.dt if np.isfinite(self.s.v_ref) else float(x[0])
-        v = max(v_ref, wheel)
+        v = max(self.s.v_ref if np.isfinite(self.s.v_ref) else float(x[0]), wheel)
         slip = 1.0 - wheel / v if v > 0 else SLIP_PRIOR
         x = x.copy()
-        x[0], x[1] = v, float(np.clip(slip, 0.0, REINIT_SLIP_MAX))
+        x[0], x[1] = v, float(np.clip(slip, 0.0, 1.0))
         P = P.copy()
         P[:2, :] = 0.0
         P[:, :2] = 0.0
@@ -128,10 +127,10 @@ class WheelSpeedGuard:
                 P[:2, :2] += max(inflation, 0.0) * Q[:2, :2]
                 verdict, rejected = Verdict.MISMATCH, s.rejected  # a run of mismatches never re-initialises
             s.armed, s.sign, s.omega_ref = armed, float(np.sign(e)), omega
+        self._reference(None if verdict == Verdict.REJECT else omega)
         if verdict == Verdict.REINIT:
             x, P = self.reinit(x, P, P0, omega)
         if verdict != Verdict.REJECT:
-            self._reference(omega)
             s.omega_ref = omega
         if verdict in (Verdict.ACCEPT, Verdict.REINIT):
             s.armed, s.sign = False, 0.0

@@ -51,4 +51,3 @@ MAX_REJECTIONS = 10  # default number of samples in a row that may be rejected b
 JUMP_MU_MAX = 1.5  # largest friction coefficient a road may show in a run of failing samples (the presets peak at 1) [-]
 A_REF = 12.0  # deceleration bound of the reference speed, about 1.2 g (the presets peak at 1.0) [m/s^2]
 REF_MARGIN_STD = 2.0  # the reference follows the wheel speed less this many noise std's [-]
-REINIT_SLIP_MAX = 0.3  # largest slip a re-initialisation sets (beyond every preset's peak) [-]

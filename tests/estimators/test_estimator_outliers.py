@@ -109,17 +109,21 @@ def test_dropout_up_to_max_rejections_marked_exactly(make, length):
     assert abs(out["v"][-1] - pc.v[-1]) < 3 * rms_clean  # final estimate within the clean run's band
 
 
-def test_long_dropout_reinitialises_and_recovers():
-    """25 zeros (> 10): 10 rejected, the 11th re-initialises (the filter then follows the zeros), and the true
-    signal is re-acquired by a second re-initialisation 10 samples after it returns."""
+def test_long_dropout_reinitialises_from_the_reference_and_recovers():
+    """25 zeros (> 10): 10 rejected, the 11th re-initialises from the reference speed (estimators.mismatch: the
+    speed stays within 1.5 m/s of the truth, a wheel at zero is taken as locked), and the true signal returning is
+    re-acquired within max_rejections samples."""
     pc = mhe_case(1, seed=6)
     omega = pc.log.omega.copy()
     omega[60:85] = 0.0
     out, _ = _run(QuarterCarEKF(), pc, omega)
     _, rms_clean = _run(QuarterCarEKF(), pc, pc.log.omega)
     h = out["health"]
-    assert list(np.flatnonzero(h == Health.REINITIALISED)) == [70, 95]
-    assert list(np.flatnonzero(h == Health.OUTLIER)) == list(range(60, 70)) + list(range(85, 95))
+    assert list(np.flatnonzero(h == Health.REINITIALISED)) == [70]
+    flagged = np.flatnonzero(h == Health.OUTLIER)
+    assert list(flagged[:10]) == list(range(60, 70))
+    assert np.all((flagged[10:] >= 85) & (flagged[10:] < 85 + DEFAULT_GATE.max_rejections))
+    assert np.max(np.abs(out["v"][60:110] - pc.v[60:110])) <= 1.5
     assert abs(out["v"][-1] - pc.v[-1]) < 3 * rms_clean
 
 
