@@ -232,11 +232,12 @@ class BatchedMHE:
         self.w_prev[ok] = sol.z[good, nx:]
         self.last[ok] = sol.X[good, -1]
         health[ok] = np.where(sol.rank[good] == nx, int(Health.OK), int(Health.NOT_EXCITED))
-        if t.gate:
-            d = self.last - self.post_x
-            Pj = self.post_P + PD_JITTER * np.eye(nx)
+        if t.gate and ok.any():  # the EKF-consistency gate, on the solved windows only (as the single MHE)
+            k = np.flatnonzero(ok)
+            d = self.last[k] - self.post_x[k]
+            Pj = self.post_P[k] + PD_JITTER * np.eye(nx)
             d2 = (d[:, None, :] @ np.linalg.solve(Pj, d[:, :, None]))[:, 0, 0]
-            gated = ok & (d2 > t.gate)
+            gated = k[d2 > t.gate]
             self.last[gated] = np.clip(self.post_x[gated], t.lower, t.upper)
             self.has_prev[gated] = False
         for i in rows[sol.failed]:

@@ -1,4 +1,4 @@
-"""The batched MHE equals N single regularized MHEs (issue 17, item 1), on plant-generated logs."""
+"""The batched MHE equals N single regularized MHEs, on plant-generated logs."""
 
 import numpy as np
 import pytest
