@@ -18,8 +18,8 @@ from collections.abc import Callable
 import numpy as np
 
 from estimators.base import Estimate, Estimator, EstimatorConfigError, Health, check_dt
-from estimators.outliers import DEFAULT_GATE, GateParams, Verdict, check_gate, gate, nis
 from estimators.mismatch import WheelSpeedGuard
+from estimators.outliers import DEFAULT_GATE, GateParams, Verdict, check_gate, gate, nis
 from estimators.quarter_car_model import PARAM_NAMES, AugmentedModel
 from estimators.tuning import DEFAULT_EKF_TUNING, HORIZON, PAPER_TUNING, SLIP_PRIOR, V_PRIOR
 

@@ -73,11 +73,11 @@ import numpy as np
 
 from estimators.base import Estimate, Estimator, EstimatorConfigError, Health, check_dt
 from estimators.ekf import QuarterCarEKF
-from estimators.outliers import DEFAULT_GATE, GateParams, Verdict, check_gate
-from estimators.quarter_car_model import PARAM_NAMES, AugmentedModel
+from estimators.mhe_config import MHEConfig
+from estimators.outliers import Verdict
+from estimators.quarter_car_model import AugmentedModel
 from estimators.tuning import (
     DEFAULT_ARRIVAL,
-    DEFAULT_EKF_TUNING,
     GATE_CHI2,
     HORIZON,
     PAPER_TUNING,
@@ -85,12 +85,9 @@ from estimators.tuning import (
     STATE_SCALES,
     V_PRIOR,
 )
-from fricenv.plants.sui_johansen import OMEGA_NOISE_STD  # [rad/s], Section IV
 
 __all__ = ["DEFAULT_ARRIVAL", "GATE_CHI2", "HORIZON", "PAPER_TUNING", "STATE_SCALES", "RegularizedMHE"]
 
-MAX_ITER = 4  # Gauss-Newton iterations per update
-MAX_ITER_EKF_ARRIVAL = 2  # the same with the EKF arrival cost (a nearly quadratic problem: 2 suffice, measured)
 LM_DAMPING0 = 1e-6  # initial Levenberg-Marquardt damping (relative to diag(J^T J))
 LM_DAMPING_MAX = 1e6  # give up above this damping
 TOL_STEP = 1e-9  # stop when the relative cost decrease is below this
@@ -98,8 +95,6 @@ SV_FLOOR = 1e-12  # relative singular value treated as exactly zero
 MAX_EVALS = 8  # model evaluations per update (bounds the worst-case time)
 PD_JITTER = 1e-12  # added to the arrival covariance before its Cholesky factor
 BOUND_TOL = 1e-9  # relative distance at which a bound counts as active
-WEIGHTINGS = ("literal", "scaled")
-ARRIVALS = ("paper", "ekf")
 
 
 class RegularizedMHE(Estimator):
@@ -111,95 +106,41 @@ class RegularizedMHE(Estimator):
 
     :param estimated: parameters augmented to the state (subset of theta, B, C, E).
     :param dt: sample time [s].
-    :param horizon: N.
-    :param alpha: alpha of eq. (15)-(16).
-    :param beta: beta_i (one value for all i).
-    :param delta: SVD threshold delta; default 0.1 for theta alone, 0.8 otherwise (the paper's).
-    :param weighting: ``"scaled"`` or ``"literal"`` (see the module docstring).
-    :param arrival: ``"paper"`` (the prior terms beta_i ||(x_i - xbar_i)/D||^2 of (12a)) or ``"ekf"`` (arrival
-        cost from an EKF run alongside: ||x(t-N) - xbar||^2 in P^-1, beyond the paper); default per group,
-        :data:`DEFAULT_ARRIVAL` ("ekf"; "paper" for the literal weighting).
-    :param state_scales: per-state scales of the scaled reading (overrides ``STATE_SCALES``).
-    :param noise_std: wheel-speed noise standard deviation [rad/s].
-    :param max_iter: Gauss-Newton iterations per update (default 4, 2 with the EKF arrival cost).
-    :param model_error: process noise in the window (beyond the paper): ``"auto"`` (default: the EKF's model-error
-        standard deviations ``Q_std`` of v and slip when the arrival cost is "ekf", else None), a pair
-        (std_v [m/s], std_slip [-]) per sample, or None for the paper's hard dynamics (12b).
-    :param gate: with ``arrival="ekf"``: when the solution's x(t|t) is further than this squared Mahalanobis
-        distance from the alongside EKF's x(t|t) (in its covariance), the EKF's estimate is returned instead (info
-        ``gated``); None disables the gate (beyond the paper, module docstring).
+    :param config: the options (:class:`estimators.mhe_config.MHEConfig`: horizon, alpha, beta, delta,
+        weighting, arrival, state_scales, noise_std, max_iter, model_error, gate, outlier_gate), or give them as
+        keyword ``options``. ``arrival="paper"`` is the paper's prior terms beta_i ||(x_i - xbar_i)/D||^2 of (12a),
+        ``"ekf"`` the arrival cost of an EKF run alongside (||x(t-N) - xbar||^2 in P^-1, beyond the paper);
+        ``model_error`` the process noise in the window (``"auto"``: the EKF's Q_std of v and slip with the EKF
+        arrival cost, else none); ``gate`` returns the alongside EKF's estimate when the solution is further than
+        this squared Mahalanobis distance from it (info ``gated``); ``outlier_gate`` gates the wheel speed on the
+        alongside EKF's innovation (module docstring, "Outliers").
     :param model: a prebuilt :class:`AugmentedModel`.
-    :param outlier_gate: the wheel-speed gate on the alongside EKF's innovation (module docstring, "Outliers");
-        None trusts every sample.
     """
 
     measurement_columns = ("omega",)
     input_columns = ("T_b",)
     names = ("v", "slip", "theta", "B", "C", "E", "mu")
 
-    def __init__(self, estimated: tuple[str, ...] = ("theta",), dt: float = 0.01, horizon: int = HORIZON,
-                 alpha: float | None = None, beta: float | None = None, delta: float | None = None,
-                 weighting: str = "scaled", arrival: str | None = None, state_scales: dict | None = None,
-                 noise_std: float = OMEGA_NOISE_STD, max_iter: int | None = None,
-                 model_error: tuple[float, float] | str | None = "auto", gate: float | None = GATE_CHI2,
-                 model: AugmentedModel | None = None, outlier_gate: GateParams | None = DEFAULT_GATE):
+    def __init__(self, estimated: tuple[str, ...] = ("theta",), dt: float = 0.01, config: MHEConfig | None = None,
+                 model: AugmentedModel | None = None, **options):
         dt = check_dt(dt)
-        if weighting not in WEIGHTINGS:
-            raise EstimatorConfigError(f"weighting must be one of {WEIGHTINGS}, got {weighting!r}")
-        if arrival is not None and arrival not in ARRIVALS:
-            raise EstimatorConfigError(f"arrival must be one of {ARRIVALS} or None (per-group default), "
-                                       f"got {arrival!r}")
-        if int(horizon) != horizon or horizon < 1:
-            raise EstimatorConfigError(f"horizon must be an integer >= 1, got {horizon!r}")
+        if config is not None and options:
+            raise EstimatorConfigError(f"give either config or options, not both (options: {sorted(options)})")
+        config = config if config is not None else MHEConfig(**options)
         try:
             self.model = model or AugmentedModel(estimated=tuple(estimated), dt=dt)
         except ValueError as exc:
             raise EstimatorConfigError(str(exc)) from None
-        bad = [k for k in (state_scales or {}) if k not in ("v", "slip") + PARAM_NAMES]
-        if bad:
-            raise EstimatorConfigError(f"state_scales keys {bad} unknown; valid: v, slip, {', '.join(PARAM_NAMES)}")
         group = "theta-only" if len(self.model.estimated) <= 1 else "all"
-        tuning = PAPER_TUNING[group]
-        self.alpha = float(tuning["alpha"] if alpha is None else alpha)
-        self.beta = float(tuning["beta"] if beta is None else beta)
-        self.delta = float(tuning["delta"] if delta is None else delta)
-        for name, value, strict in (("alpha", self.alpha, True), ("beta", self.beta, False),
-                                    ("delta", self.delta, False), ("noise_std", noise_std, True)):
-            if not np.isfinite(value) or value < 0 or (strict and value == 0):
-                raise EstimatorConfigError(f"{name} must be finite and {'> 0' if strict else '>= 0'}, got {value!r}")
-        if arrival is None:  # the literal reading is a paper comparison: with the paper's prior terms
-            arrival = "paper" if weighting == "literal" else DEFAULT_ARRIVAL[group]
-        self.arrival = arrival
-        if max_iter is None:
-            max_iter = MAX_ITER_EKF_ARRIVAL if self.arrival == "ekf" else MAX_ITER
-        if int(max_iter) != max_iter or max_iter < 1:
-            raise EstimatorConfigError(f"max_iter must be an integer >= 1, got {max_iter!r}")
-        self.N = int(horizon)
-        self.weighting = weighting
-        self.noise_std = float(noise_std)
-        self.max_iter = int(max_iter)
-        ekf_q = DEFAULT_EKF_TUNING["Q_std"]
-        if isinstance(model_error, str):
-            if model_error != "auto":
-                raise EstimatorConfigError(
-                    f"model_error must be 'auto', None or (std_v, std_slip), got {model_error!r}")
-            model_error = (ekf_q["v"], ekf_q["slip"]) if self.arrival == "ekf" else None
-        if model_error is not None:
-            model_error = np.asarray(model_error, dtype=float)
-            if model_error.shape != (2,) or not np.all(np.isfinite(model_error) & (model_error > 0)):
-                raise EstimatorConfigError(f"model_error must be two positive std's (v, slip), got {model_error!r}")
-        if model_error is not None and self.arrival != "ekf":
-            raise EstimatorConfigError("model_error (process noise) needs arrival='ekf': the paper's prior terms "
-                                       "beta_i pin every window state to the a priori trajectory of eq. (11) and "
-                                       "fight the process noise (measured: the estimate diverges in case 1)")
-        self.model_error = model_error
-        if gate is not None and not (np.isfinite(gate) and gate > 0):
-            raise EstimatorConfigError(f"gate must be a positive squared distance or None, got {gate!r}")
-        self.gate = None if gate is None else float(gate)
-        self.outlier_gate = check_gate(outlier_gate)
-        scales = {**STATE_SCALES[group], **(state_scales or {})}
+        self.config = cfg = config.resolved(group)
+        self.alpha, self.beta, self.delta = cfg.alpha, cfg.beta, cfg.delta
+        self.arrival, self.N, self.weighting = cfg.arrival, cfg.horizon, cfg.weighting
+        self.noise_std, self.max_iter, self.gate = cfg.noise_std, cfg.max_iter, cfg.gate
+        self.model_error = None if cfg.model_error is None else np.asarray(cfg.model_error, dtype=float)
+        self.outlier_gate = cfg.outlier_gate
+        scales = {**STATE_SCALES[group], **(cfg.state_scales or {})}
         names = self.model.names
-        self.D = np.array([scales[n] for n in names]) if weighting == "scaled" else np.ones(len(names))
+        self.D = np.array([scales[n] for n in names]) if cfg.weighting == "scaled" else np.ones(len(names))
         self.lower, self.upper = self.model.lower(), self.model.upper()
         # the arrival-cost filter and outlier gate: the quarter-car EKF itself, with this MHE's noise
         self.arrival_filter = QuarterCarEKF(self.model.estimated, dt, R=self.noise_std**2, model=self.model,

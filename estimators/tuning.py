@@ -11,8 +11,8 @@ from types import MappingProxyType
 
 from fricenv.plants.sui_johansen import OMEGA_NOISE_VAR
 
-__all__ = ["DEFAULT_ARRIVAL", "DEFAULT_EKF_TUNING", "GATE_CHI2", "HORIZON", "MAX_REJECTIONS", "P_FALSE",
-           "PAPER_TUNING", "SLIP_PRIOR", "STATE_SCALES", "V_PRIOR"]
+__all__ = ["A_REF", "DEFAULT_ARRIVAL", "DEFAULT_EKF_TUNING", "GATE_CHI2", "HORIZON", "JUMP_MU_MAX", "MAX_REJECTIONS",
+           "PAPER_TUNING", "P_FALSE", "REF_MARGIN_STD", "SLIP_PRIOR", "STATE_SCALES", "V_PRIOR"]
 
 # ---- the augmented EKF (estimators.ekf), also the MHE's arrival-cost filter
 DEFAULT_EKF_TUNING = {

@@ -108,8 +108,9 @@ def verdicts(rows: list[MismatchRow]) -> list[dict]:
 def format_table(rows: list[MismatchRow]) -> str:
     """Per estimator and effect: worst rms over the runs against its bound, worst error, worst flag share, misses."""
     checked = verdicts(rows)
-    lines = [f"{'estimator':<9} {'effect':<18} {'runs':>4} {'rms mean':>9} {'rms max':>8} {'worst':>7} "
-             f"{'flags max':>9} {'reinits':>7} {'missed':>6}"]
+    header = (f"{'estimator':<9} {'effect':<18} {'runs':>4} {'rms mean':>9} {'rms max':>8} {'worst':>7} "
+              f"{'flags max':>9} {'reinits':>7} {'missed':>6}")
+    lines = [header]
     keys = sorted({(c["estimator"], c["effect"]) for c in checked}, key=lambda k: (k[0], k[1] != NOMINAL, k[1]))
     for est, eff in keys:
         cs = [c for c in checked if c["estimator"] == est and c["effect"] == eff]
