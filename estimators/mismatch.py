@@ -7,13 +7,18 @@ them, all of one sign, each a wheel speed a road can produce. Rejecting that run
 filter until the re-initialisation, which then took the speed from a wheel that may sit in an ABS slip dip. Rules:
 
 (M1) **Persistent innovation.** A failing sample that follows a failing sample with an innovation of the same sign,
-     in a run whose every sample implies a tire torque a road can produce (:func:`estimators.jump.jump_test`,
-     friction within ``JUMP_MU_MAX`` times the load), is not an outlier: the model is off. The filter raises its
-     process noise on (v, slip) for this sample just enough that the sample sits on the gate's bound,
+     each implying a tire torque a road can produce from the last wheel speed the filter used (eq. (J2) of
+     :mod:`estimators.jump`, friction within ``JUMP_MU_MAX`` times the load), and whose innovation moved from the last sample's by no more
+     than the gate allows for the difference of two samples (``(e - e_prev)^2 <= 2 S bound``: a model error grows,
+     a spike jumps), and whose NIS is below ``MISMATCH_NIS_MAX`` bounds (a model error grows into the gate: the
+     brake-lag stops' failing samples have NIS 20-250; two x0.5 spikes in a row at 40 rad/s about 1900), is not an
+     outlier: the model is off. The filter raises its process noise on (v, slip) for this sample just enough that
+     the sample sits on the gate's bound,
      ``H (P + c Q_vs) H^T + R = e^2 / bound``, and updates with it (``Verdict.MISMATCH``; the estimate's health
      stays the filter's own, its info carries ``mismatch``, the factor c). An isolated spike passes no such test
      (the sample after it agrees with the prediction); a spike of a tenth or ten times the speed, or a dropout to
-     zero at speed, implies a tire force many times the load and stays an outlier.
+     zero at speed, implies a tire force many times the load: it stays an outlier and joins no run (the run goes
+     on from the last physical sample).
 (M2) **Reference speed.** As an ABS ECU builds its reference: the fastest plausible wheel, with bounded deceleration,
      ``v_ref(k) = max(omega(k) r - margin, v_ref(k-1) - A_REF dt)``, the wheel term only for a sample the gate
      used (a rejected sample is not plausible); while braking it is a lower bound of the car's speed that the wheel
@@ -28,9 +33,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from estimators.jump import jump_test
 from estimators.outliers import GateParams, Verdict, gate, nis
-from estimators.tuning import A_REF, JUMP_MU_MAX, REF_MARGIN_STD, SLIP_PRIOR
+from estimators.tuning import A_REF, JUMP_MU_MAX, MISMATCH_NIS_MAX, REF_MARGIN_STD, SLIP_PRIOR
 
 __all__ = ["WheelSpeedGuard"]
 
@@ -38,10 +42,12 @@ __all__ = ["WheelSpeedGuard"]
 @dataclass
 class _State:
     rejected: int = 0  # failing samples in a row before this one
-    armed: bool = False  # every failing sample of the run implied a physical tire torque
-    sign: float = 0.0  # sign of the last failing sample's innovation
-    omega_ref: float = np.nan  # the speed the next implied torque is measured from [rad/s]
+    run: int = 0  # physical failing samples of one sign in a row (spikes excluded)
+    sign: float = 0.0  # sign of the run's innovations
+    omega_used: float = np.nan  # the last wheel speed the filter used [rad/s]
+    since: int = 1  # samples since it
     v_ref: float = np.nan  # reference speed [m/s]
+    e_prev: float = np.nan  # the last sample's innovation [rad/s]
 
 
 class WheelSpeedGuard:
@@ -116,23 +122,30 @@ class WheelSpeedGuard:
         verdict, rejected = gate(value, s.rejected, self.params)
         inflation = 0.0
         if verdict != Verdict.ACCEPT:
-            ref = s.omega_ref if np.isfinite(s.omega_ref) else omega
-            p = self.model.p
-            jump, armed, _ = jump_test(s.rejected, s.armed, s.sign, ref, omega, -float(brake_torque), e,
-                                       self.model.dt, p.J, self.b_bound)
-            if jump:  # (M1): the model is off, not the sample
+            # (J2) of estimators.jump over the samples since the last one used: a tire torque a road can produce?
+            span = s.since * self.model.dt
+            b_implied = (s.omega_used - omega) / span - float(brake_torque) / self.model.p.J
+            physical = bool(np.isfinite(b_implied) and abs(b_implied) <= self.b_bound)
+            sign = float(np.sign(e))
+            persistent = physical and s.run >= 1 and sign == s.sign
+            smooth = np.isfinite(s.e_prev) and (e - s.e_prev) ** 2 <= 2.0 * S * self.params.bound
+            if persistent and smooth and value <= MISMATCH_NIS_MAX * self.params.bound:  # (M1): the model is off
                 Hq = H[0, :2]
                 inflation = (e * e / self.params.bound - S) / max(float(Hq @ Q[:2, :2] @ Hq), 1e-300)
                 P = P.copy()
                 P[:2, :2] += max(inflation, 0.0) * Q[:2, :2]
                 verdict, rejected = Verdict.MISMATCH, s.rejected  # a run of mismatches never re-initialises
-            s.armed, s.sign, s.omega_ref = armed, float(np.sign(e)), omega
+            if physical:  # a sample no road can produce is a spike: it joins no run
+                s.run = s.run + 1 if sign == s.sign else 1
+                s.sign, s.e_prev = sign, e
         self._reference(None if verdict == Verdict.REJECT else omega)
         if verdict == Verdict.REINIT:
             x, P = self.reinit(x, P, P0, omega)
-        if verdict != Verdict.REJECT:
-            s.omega_ref = omega
+        if verdict == Verdict.REJECT:
+            s.since += 1
+        else:
+            s.omega_used, s.since = omega, 1
         if verdict in (Verdict.ACCEPT, Verdict.REINIT):
-            s.armed, s.sign = False, 0.0
+            s.run, s.sign, s.e_prev = 0, 0.0, np.nan
         s.rejected = rejected
         return verdict, x, P, inflation

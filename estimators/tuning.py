@@ -12,6 +12,7 @@ from types import MappingProxyType
 from fricenv.plants.sui_johansen import OMEGA_NOISE_VAR
 
 __all__ = ["A_REF", "DEFAULT_ARRIVAL", "DEFAULT_EKF_TUNING", "GATE_CHI2", "HORIZON", "JUMP_MU_MAX", "MAX_REJECTIONS",
+           "MISMATCH_NIS_MAX",
            "PAPER_TUNING", "P_FALSE", "REF_MARGIN_STD", "SLIP_PRIOR", "STATE_SCALES", "V_PRIOR"]
 
 # ---- the augmented EKF (estimators.ekf), also the MHE's arrival-cost filter
@@ -51,3 +52,4 @@ MAX_REJECTIONS = 10  # default number of samples in a row that may be rejected b
 JUMP_MU_MAX = 1.5  # largest friction coefficient a road may show in a run of failing samples (the presets peak at 1) [-]
 A_REF = 12.0  # deceleration bound of the reference speed, about 1.2 g (the presets peak at 1.0) [m/s^2]
 REF_MARGIN_STD = 2.0  # the reference follows the wheel speed less this many noise std's [-]
+MISMATCH_NIS_MAX = 10.0  # a persistent innovation above this many gate bounds is taken as outliers (M1) [-]
