@@ -1,8 +1,11 @@
-"""Brake from 20 m/s on dry, wet, snow and ice with every classical controller; print and plot the results.
+"""What fricenv does, in about a minute: classical ABS, estimators in the loop, a diagnosed log, the corrected simulator.
 
-For each road and controller the table gives the stopping distance to v_stop = 2 m/s, the physical limit
-(v0^2 - v_stop^2) / (2 g mu_max), their ratio, and whether the wheel locked (omega r < 0.05 v for > 0.1 s).
-A PNG of speed, slip and brake torque against time for all controllers on one road goes to --out.
+1. Brake from 20 m/s on dry, wet, snow and ice with every classical controller: per road and controller the
+   stopping distance to v_stop = 2 m/s, the physical limit (v0^2 - v_stop^2) / (2 g mu_max), their ratio, and
+   whether the wheel locked (omega r < 0.05 v for > 0.1 s); a PNG of speed, slip and torque on one road.
+2. to 4. (:mod:`fricenv.commands.demo_story`, unless ``--quick``): the slip controller on the EKF/RLS's and the
+   MHE's estimates against the true state; a log with a hidden effect diagnosed; that effect in the simulator.
+   ``OUT/index.md`` links every table, plot and report.
 """
 
 from __future__ import annotations
@@ -10,6 +13,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from fricenv.commands import demo_story as story
 from fricenv.errors import InvalidInputError, user_input
 
 DEFAULT_ROADS = ("dry", "wet", "snow", "ice")
@@ -25,6 +29,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--roads", nargs="+", default=list(DEFAULT_ROADS),
                         help="roads to brake on: presets or scenarios like dry->ice (default: dry wet snow ice)")
     parser.add_argument("--plot-road", default="dry", help="road whose traces are plotted (default: dry)")
+    parser.add_argument("--quick", action="store_true", help="the classical ABS table only (about 2 s)")
+    parser.add_argument("--jobs", type=int, default=2, help="worker processes of the diagnosis (default: 2)")
 
 
 def run_demo(roads, v0: float, seed: int) -> tuple[list[dict], dict]:
@@ -106,14 +112,47 @@ def run(args) -> int:
     from fricenv.utils import write_json
 
     check_options(args)
+    if args.jobs < 1:
+        raise InvalidInputError(f"--jobs must be >= 1, got {args.jobs}")
+    out = Path(args.out)
     roads = list(dict.fromkeys([*args.roads, args.plot_road]))
     results, traces = run_demo(roads, args.v0, args.seed)
     shown = [r for r in results if r["road"] in args.roads]
-    print(format_table(shown))
-    png = Path(args.out) / PLOT_FILE.format(road=args.plot_road.replace(">", ""))
+    table = format_table(shown)
+    _section("1. Classical ABS controllers", table)
+    png = out / PLOT_FILE.format(road=args.plot_road.replace(">", ""))
     plot_traces(traces[args.plot_road], args.plot_road, png)
-    print(f"\nplot: {png}")
+    summary = {"results": shown}
+    if not args.quick:
+        summary.update(_story(out, args, table, png.name))
+    print(f"\nplots and report: {out / story.INDEX if not args.quick else png}")
     if args.json:
-        write_json(args.json, {"results": shown})
+        write_json(args.json, summary)
         print(f"json: {args.json}")
     return 0
+
+
+def _section(title: str, body: str) -> None:
+    print(f"\n{title}\n{body}", flush=True)
+
+
+def _story(out: Path, args, abs_table: str, abs_plot: str) -> dict:
+    """Parts 2 to 4 of the demo, printed as they finish; the index page last."""
+    loop = story.estimators_in_the_loop(args.seed)
+    loop_table = story.format_loop_table(loop)
+    _section("2. The same slip controller on the true state and on estimates", loop_table)
+    story.plot_loop(loop, out / story.LOOP_PLOT)
+    diag = story.diagnose_hidden_effect(out, args.jobs)
+    names = ", ".join(e["effect"] for e in diag["effects"]) or diag["verdict"]
+    _section("3. A log with a hidden effect, diagnosed blind",
+             f"true: {diag['truth']}; verdict: {names} {[e['params'] for e in diag['effects']]}; "
+             f"gap {diag['gap_before']:.3g} -> {diag['gap_after']:.3g} noise units (held out); "
+             f"report {diag['report']}")
+    rows, traces = story.corrected_simulator(diag["report"], args.seed)
+    corrected_table = story.format_corrected_table(rows)
+    _section(f"4. The corrected simulator: stopping distance on {story.HIDDEN_ROAD} from {story.V0:.0f} m/s",
+             corrected_table)
+    story.plot_corrected(traces, out / story.CORRECTED_PLOT)
+    story.write_index(out, {"abs_table": abs_table, "abs_plot": abs_plot, "loop_table": loop_table,
+                            "diagnosis": diag, "corrected_table": corrected_table})
+    return {"estimators_in_the_loop": loop, "diagnosis": diag, "corrected": rows}

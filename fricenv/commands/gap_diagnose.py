@@ -9,7 +9,9 @@ A fleet: fricenv gap diagnose logs/ --out fleet_dir (a folder: its *.csv logs; o
 code is then 1.
 
 Writes DIR/report.json (DESIGN.md schema), DIR/report.md and PNG plots (atomically: temporary name, then rename)
-and prints a short summary. --params FILE.json overrides the nominal vehicle parameters (m, J, r, Fz, g); for
+and prints a short summary. --params FILE.json overrides the nominal vehicle parameters (m, J, r, Fz, g) and may
+hold a car section ({"car": {"mass": 790.0, "lf": 1.248, "lr": 1.7328}}); a car's session (a log with a throttle,
+yaw rate or several wheels) is diagnosed across its braking events (fricenv.gap.car); for
 --plant payload (log columns t, M, f_x, f_y, theta, X, Y) it gives the known calibration "S" (3x3 row-major) and
 optionally m, I_G, rho_x, rho_y.
 """
@@ -18,6 +20,7 @@ from __future__ import annotations
 
 import argparse
 from collections import Counter
+from pathlib import Path
 
 from fricenv.errors import InvalidInputError
 from fricenv.gap.plants import GAP_PLANTS
@@ -91,7 +94,15 @@ def _candidates(args: argparse.Namespace, valid: tuple[str, ...]) -> tuple[str, 
 
 
 def run(args: argparse.Namespace) -> int:
-    """Read, diagnose, report (a fleet: every log of a folder or glob pattern, and the fleet summary)."""
+    """Read, diagnose, report (a fleet: every log of a folder or glob pattern, and the fleet summary); each warning
+    of the log checks is one line on stderr."""
+    from fricenv.logs.checks import one_line_warnings
+
+    with one_line_warnings():
+        return _run(args)
+
+
+def _run(args: argparse.Namespace) -> int:
     from fricenv.gap.fleet.run import is_fleet_source
 
     if is_fleet_source(args.source):
@@ -115,7 +126,7 @@ def _report(args: argparse.Namespace, dg, report: dict, summary: str) -> int:
     print(summary)
     top = ", ".join(f"{c['effect']} {c['gap_after']:.3g}" for c in report["candidates"][:3])
     print(f"best candidates (held-out gap): {top}")
-    print(f"report: {args.out}/report.json, report.md ({dg.seconds:.1f} s)")
+    print(f"report: {Path(args.out) / 'report.json'}, report.md ({dg.seconds:.1f} s)")
     return 0
 
 
@@ -152,5 +163,5 @@ def _run_fleet(args: argparse.Namespace) -> int:
     rate = s["diagnosed"] / s["wall_seconds"] * 3600 if s["diagnosed"] else 0.0
     print(f"diagnosed {s['diagnosed']} in {s['wall_seconds']:.0f} s ({rate:.0f} logs/hour), "
           f"skipped {s['skipped']} already reported, {s['failed']} failed")
-    print(f"fleet: {args.out}/fleet.json, fleet.md")
+    print(f"fleet: {Path(args.out) / 'fleet.json'}, fleet.md")
     return 1 if s["failed"] else 0

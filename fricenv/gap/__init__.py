@@ -9,9 +9,11 @@ shrinks once that effect is added.
   and the vehicle speed reconstructed from the wheel (:mod:`~fricenv.gap.signals.speed`).
 - :mod:`fricenv.gap.quarter_car` and :mod:`fricenv.gap.payload`: one subpackage per plant: its data, fits, candidates,
   verdict, report, real stand-in and validation.
+- :mod:`fricenv.gap.car`: a car's session: its braking events found in a long log, the car's calibrations shared by
+  every event, a four-wheel model fitted across the events and held out by event.
 - :mod:`fricenv.gap.plants`: the plant registry through which the commands and the fleet reach a plant.
 - :mod:`fricenv.gap.fleet`: many logs at once, on local processes or Ray, and the fleet summary.
 
-Dependencies point one way: ``fleet`` and ``plants`` -> the plant subpackages -> ``signals`` -> ``core``
+Dependencies point one way: ``fleet`` -> ``plants`` -> ``car`` -> the plant subpackages -> ``signals`` -> ``core``
 (an import-linter contract).
 """

@@ -44,20 +44,38 @@ def _qc_config(candidates, jobs):
 
 
 def _qc_diagnose(path, params_file, cfg):
-    from fricenv.gap.quarter_car.diagnose import diagnose_file
+    """A quarter-car log, read once; a car's session (fricenv.gap.car) is diagnosed across its braking events."""
+    from fricenv.gap.car.entry import diagnose_car_log
+    from fricenv.gap.quarter_car.diagnose import diagnose, load_params
+    from fricenv.logs import read_log
+    from fricenv.plants.quarter_car import PAPER_PARAMS
 
-    return diagnose_file(path, "quarter-car", params_file, cfg)
+    log = read_log(path, "quarter-car")
+    session = diagnose_car_log(log, params_file, candidates=cfg.candidates)
+    if session is not None:
+        return session
+    return diagnose(log, load_params(params_file) if params_file is not None else PAPER_PARAMS, cfg)
 
 
 def _qc_report(dg, out, plots: bool = True) -> dict:
+    from fricenv.gap.car.entry import is_session_diagnosis
     from fricenv.gap.quarter_car.report import write_report
 
+    if is_session_diagnosis(dg):
+        from fricenv.gap.car.report import write_session_report
+
+        return write_session_report(dg, out, "quarter-car", plots=plots)
     return write_report(dg, out, "quarter-car", plots=plots)
 
 
 def _qc_summary(dg) -> str:
+    from fricenv.gap.car.entry import is_session_diagnosis
     from fricenv.gap.quarter_car.report import summary_line
 
+    if is_session_diagnosis(dg):
+        from fricenv.gap.car.report import summary_line as session_line
+
+        return session_line(dg)
     return summary_line(dg)
 
 

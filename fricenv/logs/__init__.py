@@ -9,24 +9,26 @@ Real exports (docs/contracts.md, section 1): ``read_log(path, plant, column_map=
 a column map (:mod:`fricenv.logs.logmap`) names, in the map's units. Jittered time stamps and dropped rows are
 resampled onto a uniform grid, held samples of a slower channel are marked missing (NaN), and the log records what was done
 (``resampled``, ``missing``, ``torque_from_pressure``); the rules are in :mod:`fricenv.logs.resample`.
+
+A header written as the last ``#`` line before the data is read as the header (:mod:`fricenv.logs.csvfile`); time is
+re-based to the first sample (``t_offset``); a car's session may add ``throttle``, ``yaw_rate``, ``steer`` and the four
+wheels; :mod:`fricenv.logs.checks` catches a person's or a logger's mistakes before any long work (``warnings``).
 """
 
 from __future__ import annotations
 
 import os
-import re
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from fricenv.errors import InvalidInputError
+from fricenv.logs import checks
 from fricenv.logs import resample as rs
-from fricenv.logs.logmap import HEADER_UNIT as _HEADER_UNIT
-from fricenv.logs.logmap import SI_UNITS as _SI_UNITS
-from fricenv.logs.logmap import UNITS, ColumnMap, ColumnMapError, apply_map, load_map
-from fricenv.logs.logmap import unit_key as _unit_key
+from fricenv.logs.checks import LogCheckWarning
+from fricenv.logs.csvfile import LogFormatError, parse
+from fricenv.logs.logmap import UNITS, WHEELS, ColumnMap, ColumnMapError, apply_map, load_map, time_offset
 from fricenv.logs.sensor_filter import SensorFilter, parse_comment
 from fricenv.plants.sui_johansen import RADIUS
 from fricenv.utils import atomic_write
@@ -35,6 +37,7 @@ __all__ = [
     "PLANTS",
     "TORQUE_FROM_PRESSURE",
     "ColumnMapError",
+    "LogCheckWarning",
     "LogFormatError",
     "PayloadLog",
     "QuarterCarLog",
@@ -45,11 +48,20 @@ __all__ = [
 
 # The comment line that marks a brake torque computed from a line pressure with a nominal factor.
 TORQUE_FROM_PRESSURE = "torque_source: pressure"
+# Comment lines: the first sample's time in the original base, a drive torque as throttle, a check's warning.
+# a wheel channel converted from a rim speed, and the radius [m] it was converted with
+WHEEL_RADIUS = "wheel_radius:"
+T_OFFSET = "t_offset_s:"
+THROTTLE_UNIT = "throttle_unit:"
+WARNING = "warning:"
 # Plausibility limits, chosen to catch a wrong unit (rpm for rad/s, km/h for m/s, degrees for rad), not noise.
 _MAX_WHEEL_SURFACE_SPEED = 100.0  # |omega| r above this [m/s] (360 km/h) means omega is not in rad/s
 _MAX_SPEED = 100.0  # [m/s]
 _MAX_ACCEL = 30.0  # |a_x| [m/s^2], about 3 g
-_MAX_TORQUE = 2.0e4  # |T_b| [N m]
+_MAX_TORQUE = 2.0e4  # |T_b| [N m], also a drive torque as throttle
+_MAX_YAW_RATE = 10.0  # |yaw_rate| [rad/s]: 570 deg/s
+_MAX_STEER = 4.0 * np.pi  # |steer| [rad]: two turns of a hand wheel
+_MAX_THROTTLE = 100.5  # [%]
 # omega r / v while rolling, if v is logged: rpm gives ~9.5 and v in km/h ~0.28 or ~3.6; the upper bound leaves
 # room for the traction overshoot of a wheel spinning up after a brake release (relaxation length at low speed)
 _OMEGA_R_OVER_V = (0.5, 2.5)
@@ -58,15 +70,6 @@ _ROLLING_PERCENTILE = 95.0  # of omega r / v over the moving samples
 _MAX_ANGULAR_RATE = 50.0  # median |theta'| [rad/s]
 _MAX_LINEAR_RATE = 20.0  # median |X'|, |Y'| [m/s]
 _NOMINAL_RADIUS = RADIUS  # [m], Sui & Johansen Table I; only used for the unit checks
-
-
-# A number as a CSV holds it: ASCII decimal, optional exponent, or nan/inf (rejected later with their line). Python's
-# float() alone would also take "1_0" and non-ASCII digits.
-_NUMBER = re.compile(r"^\s*[+-]?((\d+\.?\d*|\.\d+)([eE][+-]?\d+)?|nan|inf|infinity)\s*$", re.IGNORECASE | re.ASCII)
-
-
-class LogFormatError(InvalidInputError):
-    """A log file that does not follow the DESIGN.md contract (a ``ValueError``; one line naming the file)."""
 
 
 @dataclass(frozen=True)
@@ -87,9 +90,22 @@ class QuarterCarLog:
     missing: dict[str, float] = field(default_factory=dict, compare=False)  # channel -> share of NaN samples
     # channel -> its low-pass as the user stated it (a "sensor_filter:" comment line, fricenv.logs.sensor_filter)
     sensor_filters: dict[str, SensorFilter] = field(default_factory=dict, compare=False)
+    # a car's session: drive, yaw rate, steering and the other wheels (None: not logged)
+    throttle: np.ndarray | None = None  # throttle [%] or drive torque [N m] (throttle_unit)
+    yaw_rate: np.ndarray | None = None  # [rad/s]
+    steer: np.ndarray | None = None  # steering angle [rad]
+    omega_fl: np.ndarray | None = None  # wheel speeds [rad/s]: front left, front right, rear left, rear right
+    omega_fr: np.ndarray | None = None
+    omega_rl: np.ndarray | None = None
+    omega_rr: np.ndarray | None = None
+    throttle_unit: str = field(default="%", compare=False)  # "%" or "N m"
+    t_offset: float = field(default=0.0, compare=False)  # the first sample's time in the log's original base [s]
+    warnings: tuple[str, ...] = field(default=(), compare=False)  # the checks' findings, "<channel>: ..."
+    # wheel channel -> the radius [m] the column map converted its rim speed with (a "wheel_radius:" line)
+    radii: dict[str, float] = field(default_factory=dict, compare=False)
 
     REQUIRED = ("t", "T_b", "omega")
-    OPTIONAL = ("v", "a_x")
+    OPTIONAL = ("v", "a_x", "throttle", "yaw_rate", "steer", *WHEELS)
 
     @property
     def dt(self) -> float:
@@ -116,6 +132,8 @@ class PayloadLog:
     source: str = field(default="<memory>", compare=False)
     resampled: dict | None = field(default=None, compare=False)
     missing: dict[str, float] = field(default_factory=dict, compare=False)
+    t_offset: float = field(default=0.0, compare=False)  # the first sample's time in the log's original base [s]
+    warnings: tuple[str, ...] = field(default=(), compare=False)
 
     REQUIRED = ("t", "M", "f_x", "f_y", "theta", "X", "Y")
     OPTIONAL = ()
@@ -133,7 +151,8 @@ PLANTS: dict[str, type] = {"quarter-car": QuarterCarLog, "payload": PayloadLog}
 # Channels that must be finite in every row; the others may be missing (NaN). Filled: short NaN runs interpolated.
 _NEVER_MISSING = ("t", "T_b")
 _FILLED = ("omega",)
-_HOLD = ("T_b",)  # resampled by zero-order hold
+_HOLD = ("T_b", "throttle")  # commands: resampled by zero-order hold
+_NOT_HELD = ("t", *_HOLD, *_FILLED, *WHEELS)  # never marked held: commands and wheel speeds (exact repeats are real)
 
 
 def _log_class(plant: str) -> type:
@@ -143,77 +162,8 @@ def _log_class(plant: str) -> type:
         raise ValueError(f"unknown plant {plant!r}; valid plants: {', '.join(PLANTS)}") from None
 
 
-def _read_text(path: Path) -> str:
-    try:
-        return path.read_text(encoding="utf-8-sig")  # -sig: a leading byte-order mark is not part of the header
-    except FileNotFoundError:
-        raise LogFormatError(f"{path}: no such file") from None
-    except IsADirectoryError:
-        raise LogFormatError(f"{path}: is a directory, expected a CSV file") from None
-    except UnicodeDecodeError:
-        raise LogFormatError(f"{path}: not a text (CSV) file") from None
-    except OSError as exc:
-        raise LogFormatError(f"{path}: cannot read the file ({exc.strerror})") from None
-
-
-def _row(path: Path, lineno: int, line: str, header: list[str]) -> list[float]:
-    """The values of a data row; an empty cell is NaN (a missing sample)."""
-    cells = line.split(",")
-    if len(cells) != len(header):
-        raise LogFormatError(f"{path}:{lineno}: {len(cells)} values, the header has {len(header)} columns")
-    empty = [not cell.strip(" \t") for cell in cells]  # ASCII blanks only: a no-break space is not "empty"
-    for name, cell, blank in zip(header, cells, empty):
-        if not blank and not _NUMBER.match(cell):
-            raise LogFormatError(f"{path}:{lineno}: column {name!r}: {cell.strip()!r} is not a number")
-    return [np.nan if blank else float(cell) for cell, blank in zip(cells, empty)]
-
-
-def _parse(path: Path, raw_header: bool = False):
-    """Comments, header and a float table with the file line number of each row.
-
-    :param raw_header: keep the header cells as written (a column map names them); else reduce ``name [SI unit]``.
-    """
-    comments: list[str] = []
-    header: list[str] | None = None
-    rows: list[list[float]] = []
-    line_numbers: list[int] = []
-    for lineno, raw in enumerate(_read_text(path).splitlines(), start=1):
-        line = raw.strip(" \t")  # ASCII blanks only: a no-break space at an end is a bad cell, not nothing
-        if not line:
-            continue
-        if header is None:
-            if line.startswith("#"):
-                comments.append(line[1:].strip())
-                continue
-            header = [c.strip() if raw_header else _column_name(path, lineno, c) for c in line.split(",")]
-            if len(set(header)) != len(header):
-                dup = sorted({h for h in header if header.count(h) > 1})
-                raise LogFormatError(f"{path}:{lineno}: duplicate column(s) {', '.join(dup)} in header")
-            continue
-        rows.append(_row(path, lineno, line, header))
-        line_numbers.append(lineno)
-    if header is None:
-        raise LogFormatError(f"{path}: no header row")
-    if len(rows) < 3:
-        raise LogFormatError(f"{path}: needs at least 3 data rows, found {len(rows)}")
-    return comments, header, np.array(rows, dtype=float), np.array(line_numbers)
-
-
-def _column_name(path: Path, lineno: int, cell: str) -> str:
-    """The column name of a header cell; a unit in brackets is accepted if it is the column's SI unit."""
-    cell = cell.strip()
-    match = _HEADER_UNIT.match(cell)
-    if match is None or match["name"].strip() not in _SI_UNITS:
-        return cell
-    name, unit = match["name"].strip(), (match["u1"] if match["u1"] is not None else match["u2"]).strip()
-    if _unit_key(unit) != _unit_key(_SI_UNITS[name]):
-        raise LogFormatError(f"{path}:{lineno}: column {cell!r}: unit {unit!r}, expected {_SI_UNITS[name]}; "
-                             f"convert the column to SI units or give a column map (--map)")
-    return name
-
-
 def _check_time(path: Path, t: np.ndarray, lines: np.ndarray) -> rs.Grid | None:
-    """Increasing, finite steps; the resampling grid (None: already uniform)."""
+    """Increasing, finite steps at 10 Hz - 1 kHz; the resampling grid (None: already uniform)."""
     with np.errstate(over="ignore", invalid="ignore"):
         dt = np.diff(t)
     huge = np.flatnonzero(~np.isfinite(dt))
@@ -224,7 +174,8 @@ def _check_time(path: Path, t: np.ndarray, lines: np.ndarray) -> rs.Grid | None:
     bad = np.flatnonzero(dt <= 0)
     if bad.size:
         i = bad[0] + 1
-        raise LogFormatError(f"{path}:{lines[i]}: column 't' is not increasing ({t[i - 1]:.6g} then {t[i]:.6g})")
+        raise LogFormatError(f"{path}:{lines[i]}: column 't' is not increasing ({t[i - 1]!r} then {t[i]!r})")
+    checks.check_rate(path, float(np.median(dt)), int(lines[0]))
     try:
         return rs.plan_grid(t)
     except rs.StepError as exc:
@@ -261,6 +212,10 @@ def _check_quarter_car(path: Path, cols: dict[str, np.ndarray], lines: np.ndarra
                 )
     if "a_x" in cols:
         _check_range(path, "a_x", cols["a_x"], lines, _MAX_ACCEL, "expected m/s^2")
+    for name, limit, hint in (("yaw_rate", _MAX_YAW_RATE, "expected rad/s; is it in deg/s?"),
+                              ("steer", _MAX_STEER, "expected rad; is it in degrees?")):
+        if name in cols:
+            _check_range(path, name, cols[name], lines, limit, hint)
 
 
 def _check_rate(path: Path, name: str, x: np.ndarray, t: np.ndarray, lines: np.ndarray, limit: float,
@@ -290,21 +245,37 @@ def _check_payload(path: Path, cols: dict[str, np.ndarray], lines: np.ndarray) -
 _PLANT_CHECKS = {"quarter-car": _check_quarter_car, "payload": _check_payload}
 
 
+@dataclass
+class _Mapped:
+    """What the column map tells besides the channels: the first stamp, the wheels' radii, the throttle's unit."""
+
+    offset: float = 0.0  # [s] the first time stamp, subtracted from t
+    radii: dict[str, float] = field(default_factory=dict)
+    throttle_unit: str = "%"
+    comments: list[str] = field(default_factory=list)
+
+
 def _columns(path: Path, plant: str, header: list[str], table: np.ndarray,
-             column_map: ColumnMap | str | os.PathLike | None) -> tuple[dict[str, np.ndarray], list[str]]:
-    """The contract channels of the table (through the column map if one is given) and comment lines to add."""
+             column_map: ColumnMap | str | os.PathLike | None) -> tuple[dict[str, np.ndarray], _Mapped]:
+    """The contract channels of the table (through the column map if one is given; then with the time re-based
+    to its first stamp), and what the map adds (comment lines among it)."""
     cls = _log_class(plant)
     if column_map is not None:
         cmap = column_map if isinstance(column_map, ColumnMap) else load_map(
             column_map, plant, cls.REQUIRED + cls.OPTIONAL, cls.REQUIRED)
         cols, sources = apply_map(cmap, header, table, str(path))
-        added = [f"converted from {path.name} with the column map {Path(cmap.source).name}"]
+        info = _Mapped(time_offset(header, table, sources))
+        info.radii = {name: e.radius for name, e in cmap.channels.items()
+                      if e.radius is not None and UNITS[sources[name][1]].kind == "speed"}
+        if "throttle" in sources and UNITS[sources["throttle"][1]].kind == "torque":
+            info.throttle_unit = "N m"
+        info.comments = [f"converted from {path.name} with the column map {Path(cmap.source).name}"]
         if "T_b" in sources and UNITS[sources["T_b"][1]].kind == "pressure":
             factor = cmap.channels["T_b"].factor
-            added += [TORQUE_FROM_PRESSURE,
-                      f"T_b = {sources['T_b'][0]} x {factor:g} N m per Pa (a nominal factor: expect a brake_gain)"]
-        added += [e.filter.comment(name) for name, e in cmap.channels.items() if e.filter is not None]
-        return cols, added
+            stated = f"T_b = {sources['T_b'][0]} x {factor:g} N m per Pa (a nominal factor: expect a brake_gain)"
+            info.comments += [TORQUE_FROM_PRESSURE, stated]
+        info.comments += [e.filter.comment(name) for name, e in cmap.channels.items() if e.filter is not None]
+        return cols, info
     missing = [name for name in cls.REQUIRED if name not in header]
     if missing:
         raise LogFormatError(
@@ -315,7 +286,7 @@ def _columns(path: Path, plant: str, header: list[str], table: np.ndarray,
     extra = [name for name in header if name not in known]
     if extra:
         warnings.warn(f"{path}: ignoring unknown column(s) {', '.join(extra)}", stacklevel=3)
-    return {name: table[:, header.index(name)] for name in header if name in known}, []
+    return {name: table[:, header.index(name)] for name in header if name in known}, _Mapped()
 
 
 def _check_values(path: Path, cls: type, cols: dict[str, np.ndarray], lines: np.ndarray) -> None:
@@ -346,7 +317,7 @@ def _mark_held(cols: dict[str, np.ndarray], step: float) -> tuple[str, ...]:
     Returns the channels that had held samples (a slower sensor)."""
     slow = []
     for name, x in cols.items():
-        if name not in ("t", *_HOLD, *_FILLED):
+        if name not in _NOT_HELD:
             held = rs.held_mask(x, step)
             cols[name] = np.where(held, np.nan, x)
             if held.any():
@@ -358,6 +329,11 @@ def read_log(path: str | os.PathLike, plant: str = "quarter-car",
              column_map: ColumnMap | str | os.PathLike | None = None) -> QuarterCarLog | PayloadLog:
     """Read and validate a log file; resample it onto a uniform grid if its stamps jitter or rows were dropped.
 
+    Time is re-based to the first sample (``log.t_offset`` keeps that sample's time in the original base, and a
+    ``t_offset_s:`` comment line carries it through a written log). The checks of :mod:`fricenv.logs.checks` run
+    here: an error stops the reading, a warning is issued as a :class:`LogCheckWarning` and kept in ``log.warnings``
+    (with those a written log carries as ``warning:`` comment lines).
+
     :param path: CSV file in the DESIGN.md format, or any export that ``column_map`` describes.
     :param plant: ``"quarter-car"`` or ``"payload"``.
     :param column_map: a column map (file or :class:`fricenv.logs.logmap.ColumnMap`; docs/contracts.md,
@@ -368,21 +344,84 @@ def read_log(path: str | os.PathLike, plant: str = "quarter-car",
     """
     cls = _log_class(plant)
     path = Path(path)
-    comments, header, table, lines = _parse(path, raw_header=column_map is not None)
-    cols, added = _columns(path, plant, header, table, column_map)
+    comments, header, table, lines = parse(path, raw_header=column_map is not None)
+    cols, info = _columns(path, plant, header, table, column_map)
     _check_values(path, cls, cols, lines)
     grid = _check_time(path, cols["t"], lines)
+    if column_map is None:  # a mapped time is re-based already, in its own unit (apply_map)
+        info.offset = float(cols["t"][0])
+        cols["t"] = cols["t"] - info.offset
+    if plant == "quarter-car":
+        checks.check_speeds(path, cols, info.radii.get("omega", _NOMINAL_RADIUS))
     _PLANT_CHECKS[plant](path, cols, lines)  # on the values as logged, held ones included
-    slow = _mark_held(cols, grid.median_step if grid is not None else float(np.median(np.diff(cols["t"]))))
+    step = grid.median_step if grid is not None else float(np.median(np.diff(cols["t"])))
+    slow = _mark_held(cols, step)
     if grid is not None:
         cols = rs.resample(cols["t"], cols, grid, hold=_HOLD, keep=slow)
-    notes = {"comments": tuple(comments) + tuple(c for c in added if c not in comments), "source": str(path),
+    old, kept = _carried(path, comments)
+    found = []
+    if plant == "quarter-car":
+        info.throttle_unit = old.get("throttle_unit", info.throttle_unit)
+        _check_throttle(path, cols, info.throttle_unit)
+        found = checks.check_session(path, cols, float(cols["t"][1] - cols["t"][0]), info.radii, _NOMINAL_RADIUS)
+    for line in found:
+        warnings.warn(LogCheckWarning(f"{path}: {line}"), stacklevel=2)
+    offset = old.get("t_offset", 0.0) + info.offset
+    found = list(old.get("warnings", ())) + [w for w in found if w not in old.get("warnings", ())]
+    added = ([f"{T_OFFSET} {offset!r}"] if offset != 0.0 else []) + info.comments + [f"{WARNING} {w}" for w in found]
+    notes = {"comments": tuple(kept) + tuple(c for c in added if c not in kept), "source": str(path),
              "resampled": None if grid is None else grid.summary(),
-             "missing": {name: float(np.mean(np.isnan(x))) for name, x in cols.items() if name != "t"}}
+             "missing": {name: float(np.mean(np.isnan(x))) for name, x in cols.items() if name != "t"},
+             "t_offset": offset, "warnings": tuple(found)}
     if plant == "quarter-car":
         notes["torque_from_pressure"] = TORQUE_FROM_PRESSURE in notes["comments"]
         notes["sensor_filters"] = _stated_filters(path, notes["comments"], cols)
+        notes["throttle_unit"] = info.throttle_unit
+        notes["radii"] = {**old.get("radii", {}), **info.radii}
+        notes["comments"] += tuple(f"{WHEEL_RADIUS} {c} {r!r}" for c, r in notes["radii"].items())
+        if info.throttle_unit != "%":
+            notes["comments"] += (f"{THROTTLE_UNIT} {info.throttle_unit}",)
     return cls(**cols, **notes)
+
+
+def _carried(path: Path, comments: list[str]) -> tuple[dict, list[str]]:
+    """What a written log's comment lines carry (``t_offset``, ``throttle_unit``, ``radii``, ``warnings``) and the
+    other comment lines. The time offset, throttle unit and wheel radius lines are taken out (the reader writes them
+    afresh)."""
+    found: dict = {"warnings": []}
+    kept = []
+    for line in comments:
+        if line.startswith(T_OFFSET):
+            try:
+                found["t_offset"] = float(line[len(T_OFFSET):])
+            except ValueError:
+                raise LogFormatError(f"{path}: comment line {line!r}: expected a time in seconds") from None
+        elif line.startswith(WHEEL_RADIUS):
+            try:
+                channel, radius = line[len(WHEEL_RADIUS):].split()
+                found.setdefault("radii", {})[channel] = float(radius)
+            except ValueError:
+                raise LogFormatError(f"{path}: comment line {line!r}: expected '{WHEEL_RADIUS} <channel> <radius m>'"
+                                     ) from None
+        elif line.startswith(THROTTLE_UNIT):
+            unit = line[len(THROTTLE_UNIT):].strip()
+            if unit not in ("%", "N m"):
+                raise LogFormatError(f"{path}: comment line {line!r}: the throttle unit is '%' or 'N m'")
+            found["throttle_unit"] = unit
+        else:
+            if line.startswith(WARNING):
+                found["warnings"].append(line[len(WARNING):].strip())
+            kept.append(line)
+    return found, kept
+
+
+def _check_throttle(path: Path, cols: dict[str, np.ndarray], unit: str) -> None:
+    if "throttle" in cols:
+        limit, hint = (_MAX_THROTTLE, "expected %") if unit == "%" else (_MAX_TORQUE, "expected N m")
+        bad = np.flatnonzero(np.abs(cols["throttle"]) > limit)
+        if bad.size:
+            raise LogFormatError(f"{path}: column 'throttle': value {cols['throttle'][bad[0]]:.6g} is implausible "
+                                 f"({hint}, limit {limit:g})")
 
 
 def _stated_filters(path: Path, comments: tuple[str, ...], cols: dict) -> dict[str, SensorFilter]:
@@ -399,9 +438,11 @@ def _stated_filters(path: Path, comments: tuple[str, ...], cols: dict) -> dict[s
 
 
 def write_log(path: str | os.PathLike, log: QuarterCarLog | PayloadLog, comments: tuple[str, ...] = ()) -> None:
-    """Write a log atomically in the DESIGN.md format; optional columns that are ``None`` are left out, a missing
-    sample is written ``nan``, a torque from pressure is marked by the :data:`TORQUE_FROM_PRESSURE` line and a
-    stated sensor filter by its ``sensor_filter:`` line.
+    """Write a log atomically in the DESIGN.md format, every value at full precision (the shortest decimal that
+    reads back to the same float); optional columns that are ``None`` are left out, a missing sample is written
+    ``nan``, a torque from pressure is marked by the :data:`TORQUE_FROM_PRESSURE` line, a stated sensor filter by its
+    ``sensor_filter:`` line, a time offset by its ``t_offset_s:`` line, a drive torque as throttle by
+    ``throttle_unit: N m``, and each warning by a ``warning:`` line.
 
     :param path: destination CSV.
     :param log: the log to write.
@@ -409,15 +450,21 @@ def write_log(path: str | os.PathLike, log: QuarterCarLog | PayloadLog, comments
     """
     names = [name for name in (*log.REQUIRED, *log.OPTIONAL) if getattr(log, name) is not None]
     table = np.column_stack([np.asarray(getattr(log, name), dtype=float) for name in names])
-    lines = list(comments or log.comments)
+    lines = [c for c in (comments or log.comments) if not c.startswith((T_OFFSET, THROTTLE_UNIT, WHEEL_RADIUS))]
+    if getattr(log, "t_offset", 0.0):
+        lines.append(f"{T_OFFSET} {float(log.t_offset)!r}")
+    lines += [f"{WHEEL_RADIUS} {c} {r!r}" for c, r in getattr(log, "radii", {}).items()]
+    if getattr(log, "throttle", None) is not None and log.throttle_unit != "%":
+        lines.append(f"{THROTTLE_UNIT} {log.throttle_unit}")
     if getattr(log, "torque_from_pressure", False) and TORQUE_FROM_PRESSURE not in lines:
         lines.append(TORQUE_FROM_PRESSURE)
     lines += [f.comment(c) for c, f in getattr(log, "sensor_filters", {}).items() if f.comment(c) not in lines]
+    lines += [f"{WARNING} {w}" for w in getattr(log, "warnings", ()) if f"{WARNING} {w}" not in lines]
     with atomic_write(path) as fh:
         for line in lines:
             fh.write(f"# {line}\n")
         fh.write(",".join(names) + "\n")
-        np.savetxt(fh, table, delimiter=",", fmt="%.10g")
+        fh.writelines(",".join(map(repr, row)) + "\n" for row in table.tolist())
 
 
 def log_notes(log: QuarterCarLog | PayloadLog) -> tuple[str, ...]:

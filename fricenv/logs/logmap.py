@@ -11,7 +11,8 @@ A map is a JSON object::
                   "a_x":   {"column": "ax", "unit": "g"}}}
 
 ``factor`` is the brake torque per line pressure [N m per Pa] (whatever unit the pressure column is in); ``radius``
-[m] turns a wheel's rim speed into ``omega``; ``filter`` (``v``, ``a_x``) states the sensor's low-pass,
+[m] turns a wheel's rim speed into ``omega`` (or ``omega_fl``, ``omega_fr``, ``omega_rl``, ``omega_rr``, the other
+wheels); the optional ``throttle`` (% or a drive torque in N m), ``yaw_rate`` and ``steer`` describe a car's session; ``filter`` (``v``, ``a_x``) states the sensor's low-pass,
 ``{"order": 2, "cutoff_hz": 5.0}`` (:mod:`fricenv.logs.sensor_filter`). A ``unit`` left out is taken from the header
 cell (``wheel_rl(kmph)``), else the channel's SI unit. Every error is a :class:`ColumnMapError` naming the map file and key.
 """
@@ -45,6 +46,7 @@ __all__ = [
     "load_map",
     "parse_map",
     "split_header_cell",
+    "time_offset",
     "unit_key",
 ]
 
@@ -72,15 +74,23 @@ UNITS: dict[str, Unit] = {
     "MPa": Unit("pressure", 1e6), "psi": Unit("pressure", 6894.757293168),
     "rad": Unit("angle", 1.0), "deg": Unit("angle", math.pi / 180.0),
     "m": Unit("length", 1.0), "cm": Unit("length", 1e-2), "mm": Unit("length", 1e-3),
+    "%": Unit("percent", 1.0),  # a throttle pedal or command, kept in percent
 }
 ALIASES = {"sec": "s", "msec": "ms", "epoch": "epoch_s", "kmph": "km/h", "kph": "km/h", "km/hr": "km/h",
-           "1/min": "rpm", "mps": "m/s", "ms-2": "m/s^2", "degree": "deg", "degrees": "deg", "radians": "rad"}
-# The SI unit of each contract channel and the kinds of source unit it accepts.
+           "1/min": "rpm", "mps": "m/s", "percent": "%", "ms-2": "m/s^2",
+           "degree": "deg", "degrees": "deg", "radians": "rad"}
+# The wheels besides the mapped one (front/rear, left/right), each mapped like omega (with its radius).
+WHEELS = ("omega_fl", "omega_fr", "omega_rl", "omega_rr")
+# The SI unit of each contract channel (a throttle stays in percent) and the kinds of source unit it accepts.
 SI_UNITS = {"t": "s", "T_b": "N m", "omega": "rad/s", "v": "m/s", "a_x": "m/s^2",
+            "throttle": "%", "yaw_rate": "rad/s", "steer": "rad", **{w: "rad/s" for w in WHEELS},
             "M": "N m", "f_x": "N", "f_y": "N", "theta": "rad", "X": "m", "Y": "m"}
 CHANNEL_KINDS = {"t": ("time", "epoch"), "T_b": ("torque", "pressure"), "omega": ("angular_speed", "speed"),
-                 "v": ("speed",), "a_x": ("acceleration",), "M": ("torque",), "f_x": ("force",), "f_y": ("force",),
-                 "theta": ("angle",), "X": ("length",), "Y": ("length",)}
+                 "v": ("speed",), "a_x": ("acceleration",), "throttle": ("percent", "torque"),
+                 "yaw_rate": ("angular_speed",), "steer": ("angle",),
+                 **{w: ("angular_speed", "speed") for w in WHEELS},
+                 "M": ("torque",), "f_x": ("force",), "f_y": ("force",), "theta": ("angle",), "X": ("length",),
+                 "Y": ("length",)}
 ENTRY_KEYS = ("column", "unit", "factor", "radius", "filter")
 # A header cell "name [unit]" or "name (unit)".
 HEADER_UNIT = re.compile(r"^(?P<name>[^\[\]()]+?)\s*(\[(?P<u1>[^\]]*)\]|\((?P<u2>[^)]*)\))$")
@@ -224,11 +234,20 @@ def _column_index(cmap: ColumnMap, entry: ChannelSource, header: list[str], log_
     raise _fail(cmap.source, key, f"{entry.column!r}: {problem} in {log_name} (columns: {shown})")
 
 
+def _same_unit(header_unit: str | None, map_unit: str) -> bool:
+    """A header unit agrees with the map's: unknown, equal, or a time in seconds the map calls epoch seconds (the
+    reader re-bases every time to its first sample, so the two read alike)."""
+    if header_unit is None or header_unit == map_unit:
+        return True
+    a, b = UNITS[header_unit], UNITS[map_unit]
+    return {a.kind, b.kind} == {"time", "epoch"} and a.scale == b.scale
+
+
 def _resolved_unit(cmap: ColumnMap, entry: ChannelSource, header_unit: str | None) -> str:
     """The entry's unit: the map's, else the header cell's, else the channel's SI unit."""
     key = f"channels.{entry.channel}.unit"
     if entry.unit is not None:
-        if header_unit is not None and find_unit(header_unit) not in (None, entry.unit):
+        if header_unit is not None and not _same_unit(find_unit(header_unit), entry.unit):
             raise _fail(cmap.source, key, f"{entry.unit!r}, but the column header says {header_unit!r}")
         return entry.unit
     if header_unit is not None:
@@ -237,12 +256,13 @@ def _resolved_unit(cmap: ColumnMap, entry: ChannelSource, header_unit: str | Non
 
 
 def _convert(cmap: ColumnMap, entry: ChannelSource, unit: str, x: np.ndarray) -> np.ndarray:
-    """Source values -> SI contract values (eq.: omega = v_rim / r; T_b = p [Pa] * factor)."""
+    """Source values -> SI contract values (eq.: omega = v_rim / r; T_b = p [Pa] * factor). A time is re-based to
+    its first stamp (:func:`time_offset` gives that stamp in seconds)."""
     spec, key = UNITS[unit], f"channels.{entry.channel}"
     y = x * spec.scale
-    if spec.kind == "epoch":
+    if spec.kind in ("epoch", "time"):
         return (x - x[0]) * spec.scale  # difference first: an epoch stamp times 1e-3 would lose digits
-    if entry.channel == "omega" and spec.kind == "speed":
+    if entry.channel in ("omega", *WHEELS) and spec.kind == "speed":
         if entry.radius is None:
             raise _fail(cmap.source, f"{key}.radius", f"required for a wheel rim speed in {unit} (the radius [m])")
         return y / entry.radius
@@ -252,6 +272,12 @@ def _convert(cmap: ColumnMap, entry: ChannelSource, unit: str, x: np.ndarray) ->
                         f"required for a brake pressure in {unit}: the brake torque per pressure [N m per Pa]")
         return y * entry.factor
     return y
+
+
+def time_offset(header: list[str], table: np.ndarray, sources: dict[str, tuple[str, str]]) -> float:
+    """The first time stamp of a mapped export in seconds (what :func:`apply_map` subtracted from ``t``)."""
+    cell, unit = sources["t"]
+    return float(table[0, header.index(cell)]) * UNITS[unit].scale
 
 
 def apply_map(cmap: ColumnMap, header: list[str], table: np.ndarray, log_name: str

@@ -9,7 +9,8 @@ from fricenv.cli import main
 
 def test_demo_writes_table_json_and_png(tmp_path, capsys):
     out_json = tmp_path / "demo.json"
-    assert main(["demo", "--roads", "dry", "wet", "--out", str(tmp_path / "demo"), "--json", str(out_json)]) == 0
+    assert main(["demo", "--quick", "--roads", "dry", "wet", "--out", str(tmp_path / "demo"), "--json",
+                 str(out_json)]) == 0
     data = json.loads(out_json.read_text())
     rows = data["results"]
     assert {(r["road"], r["controller"]) for r in rows} == {
@@ -22,6 +23,37 @@ def test_demo_writes_table_json_and_png(tmp_path, capsys):
     assert (tmp_path / "demo" / "demo_dry.png").stat().st_size > 10_000
     printed = capsys.readouterr().out
     assert "rule-abs" in printed and "limit [m]" in printed
+
+
+def test_the_corrected_simulator_part_puts_the_reported_effect_into_the_plant(tmp_path):
+    """A report naming the true effect gives the same stopping distances as the plant with that effect; the nominal
+    plant stops shorter (a brake lag delays every pressure rise)."""
+    from fricenv.commands import demo_story as story
+
+    name, params = story.HIDDEN_EFFECT
+    report = tmp_path / "report.json"
+    report.write_text(json.dumps({"verdict": name, "params": params, "effects": [{"effect": name, "params": params}]}))
+    rows, traces = story.corrected_simulator(str(report), seed=0)
+    by = {(r["plant"], r["controller"]): r["distance_m"] for r in rows}
+    for ctl in story.CORRECTED_CONTROLLERS:
+        assert by[("corrected", ctl)] == pytest.approx(by[("true effect", ctl)], rel=1e-9)
+        assert by[("nominal", ctl)] < by[("true effect", ctl)] - 1.0
+    assert "true effect [m]" in story.format_corrected_table(rows)
+
+
+@pytest.mark.slow
+def test_the_whole_demo_diagnoses_the_hidden_effect_and_links_every_part(tmp_path, capsys):
+    out = tmp_path / "demo"
+    assert main(["demo", "--out", str(out), "--json", str(tmp_path / "demo.json")]) == 0
+    data = json.loads((tmp_path / "demo.json").read_text())
+    name, params = __import__("fricenv.commands.demo_story", fromlist=["x"]).HIDDEN_EFFECT
+    assert data["diagnosis"]["effects"][0]["effect"] == name
+    assert data["diagnosis"]["gap_after"] < 0.5 * data["diagnosis"]["gap_before"]
+    assert {r["policy"] for r in data["estimators_in_the_loop"]} == {"slip-pi", "est+slip-pi[ekf-rls]",
+                                                                      "est+slip-pi[mhe]"}
+    index = (out / "index.md").read_text()
+    for link in ("demo_dry.png", "estimators_in_the_loop.png", "corrected_simulator.png", "diagnosis/report.md"):
+        assert link in index and (out / link).is_file()
 
 
 def test_demo_rejects_unknown_road(tmp_path, capsys):

@@ -80,7 +80,7 @@ def test_a_candidate_whose_single_fit_failed_is_still_tried_and_added(monkeypatc
     single_mse = {"brake_gain": 1.5, "drag": 1.9, "relaxation_length": 2.4}  # nominal: 2.0
     joint_mse = {"brake_gain+drag": 1.45, "brake_gain+relaxation_length": 1.0}
 
-    def fake_extend(current, extra, folds, d, cfg, jobs, nominal, known):
+    def fake_extend(ctx, nominal, current, extra, known):
         names = ["+".join(selection.effects_of(current) + [c.effect]) for c in extra]
         return [CandidateFit(effect=n, names=ROAD_NAMES, x=np.ones(4), train_mse=joint_mse.get(n, 1.5),
                              test_mse=joint_mse.get(n, 1.5), window_mse=np.ones(4)) for n in names]
@@ -90,8 +90,7 @@ def test_a_candidate_whose_single_fit_failed_is_still_tried_and_added(monkeypatc
     monkeypatch.setattr(selection, "at_range_edge", lambda f, p: [])
     singles = sorted((CandidateFit(effect=e, names=ROAD_NAMES, x=np.ones(4), train_mse=m, test_mse=m,
                                    window_mse=np.ones(4)) for e, m in single_mse.items()), key=lambda f: f.test_mse)
-    whole, steps = selection.forward_select(singles[0], singles, singles[0], [None, None], None, None,
-                                            DiagnoseConfig(), 1)
+    whole, steps = selection.forward_select(_stub_context(), singles[0], singles[0], singles)
     assert selection.effects_of(whole) == ["brake_gain", "relaxation_length"]
     assert {s["effect"] for s in steps} == {"drag", "relaxation_length"}  # both tried in the first step
 
@@ -203,3 +202,10 @@ def test_a_relaxation_length_whose_single_fit_is_far_off_is_added_to_a_radius_er
     assert set(named) == set(truth), dg.where["forward_selection"]
     assert named["relaxation_length"]["sigma"] == pytest.approx(truth["relaxation_length"]["sigma"], rel=0.15)
     assert named["radius_error"]["r_eff"] == pytest.approx(truth["radius_error"]["r_eff"], rel=0.01)
+
+
+def _stub_context():
+    """A diagnosis context for stubbed joint fits: two folds, no data, the default settings."""
+    from fricenv.gap.quarter_car.context import FitContext
+
+    return FitContext(SimpleNamespace(p=None), (None, None), DiagnoseConfig(), 1)

@@ -1,5 +1,5 @@
 """Issue 15 item 4: what size an effect needs to show above a log's noise (:mod:`fricenv.gap.quarter_car.detectability`), and
-the payload F/T filter's lag read from its noise (:func:`fricenv.gap.signals.sensors.filter_lag`)."""
+the payload F/T filter's lag read from its noise (:func:`fricenv.gap.signals.filters.filter_lag`)."""
 
 from __future__ import annotations
 
@@ -18,7 +18,7 @@ from fricenv.gap.quarter_car.fitting import fit_nominal, refine_noise, score
 from fricenv.gap.quarter_car.simulate import NoiseSpec, simulate_log
 from fricenv.gap.quarter_car.stats import fold_data
 from fricenv.gap.quarter_car.windows import prepare
-from fricenv.gap.signals.sensors import filter_lag
+from fricenv.gap.signals.filters import filter_lag
 from fricenv.logs import QuarterCarLog
 from fricenv.plants import quarter_car as qc
 from fricenv.plants.tire import ROADS

@@ -527,3 +527,18 @@ def test_mu_change_starts_lie_at_distinct_places_and_find_the_change(diagnosed):
     assert starts[0][at["theta_after"]] < starts[0][at["theta"]]  # the friction drops
 
 
+
+
+def test_times_in_the_report_count_from_the_first_sample_of_an_epoch_stamped_log(tmp_path):
+    """A friction change logged with epoch stamps: its t_change and the worst segments are read from the first
+    sample, and where["time_base"] keeps the epoch offset at full precision."""
+    params, road, driver, seed, _ = CASES["mu_change"]
+    log, _ = simulate_log([make_effect("mu_change", **params)], road, driver, seed=seed, duration=4.0)
+    epoch = 1_700_000_123.456789
+    path = tmp_path / "epoch.csv"
+    write_log(path, replace(log, t=log.t + epoch))
+    dg = diagnose_file(path, cfg=replace(CFG, candidates=("mu_change",)))
+    assert dg.where["time_base"] == {"origin": "first_sample", "offset_s": pytest.approx(epoch + log.t[0], abs=1e-6)}
+    assert dg.where["warnings"] == []
+    assert all(0.0 <= s["t_start"] < s["t_end"] <= log.t[-1] - log.t[0] + 1e-9 for s in dg.where["segments"])
+    assert dg.params["t_change"] == pytest.approx(params["t_change"] - log.t[0], abs=0.15)

@@ -1,5 +1,5 @@
 """Issue 15 item 2: a low-passed ``v`` / ``a_x`` (an IMU driver's filter) read from the log itself and realigned by
-the filter's lag (:func:`fricenv.gap.signals.sensors.shared_lag`, :func:`fricenv.gap.quarter_car.windows.prepare`), and an unfiltered
+the filter's lag (:func:`fricenv.gap.signals.filters.shared_lag`, :func:`fricenv.gap.quarter_car.windows.prepare`), and an unfiltered
 log left as it was."""
 
 from __future__ import annotations
@@ -10,15 +10,8 @@ from scipy.signal import butter, group_delay, sosfilt, sosfilt_zi, sosfreqz
 
 from fricenv.gap.quarter_car.config import DiagnoseConfig
 from fricenv.gap.quarter_car.windows import prepare
-from fricenv.gap.signals.sensors import (
-    LAG_TOP,
-    _rolloff,
-    advanced,
-    condition_channel,
-    filter_lag,
-    lag_against,
-    shared_lag,
-)
+from fricenv.gap.signals.filters import LAG_TOP, _rolloff, advanced, filter_lag, lag_against, shared_lag
+from fricenv.gap.signals.sensors import condition_channel
 from fricenv.logs import QuarterCarLog
 from fricenv.plants import quarter_car as qc
 
@@ -238,7 +231,7 @@ def test_deconvolution_restores_a_filtered_deceleration_better_than_a_shift(rate
     logger's rate: undoing the filter (:func:`deconvolved`, the filter :func:`filter_of_lag` derives from its
     delay alone) leaves at most half the error of advancing the channel by that delay, which keeps the smoothing
     that a model would otherwise read as a brake lag."""
-    from fricenv.gap.signals.sensors import deconvolved, filter_of_lag
+    from fricenv.gap.signals.filters import deconvolved, filter_of_lag
 
     t = np.arange(800) / 100.0
     u = np.clip((t - 1) / 0.15, 0, 1) * -6 + np.clip((t - 3) / 0.15, 0, 1) * 6 + \

@@ -210,7 +210,7 @@ def _stub_selection(monkeypatch, gains: dict):
     100 times the error drop."""
     from fricenv.gap.quarter_car import selection
 
-    def fake_extend(current, extra, folds, d, cfg, jobs, nominal, known):
+    def fake_extend(ctx, nominal, current, extra, known):
         out = []
         for c in extra:
             names = selection.effects_of(current) + [c.effect]
@@ -230,8 +230,7 @@ def _stub_selection(monkeypatch, gains: dict):
 def test_forward_selection_adds_significant_effects_and_stops(monkeypatch):
     # drag and relaxation matter (z 50 and 30 when added), brake_lag adds 0.01 (z 1 < sig_z 4): not added
     selection, singles = _stub_selection(monkeypatch, {"drag": 0.5, "relaxation_length": 0.3, "brake_lag": 0.01})
-    whole, steps = selection.forward_select(singles[0], singles, singles[0], [None, None], None, None,
-                                            DiagnoseConfig(), 1)
+    whole, steps = selection.forward_select(_stub_context(), singles[0], singles[0], singles)
     assert selection.effects_of(whole) == ["drag", "relaxation_length"]
     assert [s["effect"] for s in steps if s["added"]] == ["relaxation_length"]
     assert whole.test_mse == pytest.approx(2.0 - 0.8, abs=1e-12)
@@ -240,8 +239,7 @@ def test_forward_selection_adds_significant_effects_and_stops(monkeypatch):
 def test_forward_selection_stops_at_three_and_tries_expected_first(monkeypatch):
     gains = {"drag": 0.5, "relaxation_length": 0.3, "radius_error": 0.2, "brake_gain": 0.1, "brake_lag": 0.09}
     selection, singles = _stub_selection(monkeypatch, gains)
-    whole, steps = selection.forward_select(singles[0], singles, singles[0], [None, None], None, None,
-                                            DiagnoseConfig(), 1, expected=("brake_gain",))
+    whole, steps = selection.forward_select(_stub_context(), singles[0], singles[0], singles, expected=("brake_gain",))
     assert len(selection.effects_of(whole)) == selection.MAX_EFFECTS
     assert steps[0]["effect"] == "brake_gain"  # tried first although it gains least
     assert selection.effects_of(whole)[0] == "drag"
@@ -338,3 +336,10 @@ def test_a_discovery_is_named_before_an_expected_calibration():
     assert [e["effect"] for e in _order(effects, expected)] == ["brake_lag", "brake_gain"]
     assert [e["effect"] for e in _order(effects[:1], expected)] == ["brake_gain"]
     assert [e["effect"] for e in _order(effects, {})] == ["brake_gain", "brake_lag"]
+
+
+def _stub_context():
+    """A diagnosis context for stubbed joint fits: two folds, no data, the default settings."""
+    from fricenv.gap.quarter_car.context import FitContext
+
+    return FitContext(SimpleNamespace(p=None), (None, None), DiagnoseConfig(), 1)

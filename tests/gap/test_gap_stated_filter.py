@@ -11,7 +11,8 @@ from scipy.signal import butter, sosfilt, sosfilt_zi
 
 from fricenv.gap.quarter_car.config import DiagnoseConfig
 from fricenv.gap.quarter_car.windows import LAG_USE_HZ, NOISE_FLOOR, prepare
-from fricenv.gap.signals.sensors import condition_channel, deconvolved, group_delay
+from fricenv.gap.signals.filters import deconvolved, group_delay
+from fricenv.gap.signals.sensors import condition_channel
 from fricenv.logs import QuarterCarLog
 from fricenv.logs.sensor_filter import SensorFilter
 from fricenv.plants import quarter_car as qc

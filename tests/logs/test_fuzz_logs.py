@@ -16,7 +16,8 @@ from fricenv.logs import PLANTS, LogFormatError, read_log
 
 FUZZ = settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 R = 0.345  # nominal radius [m], for plausible quarter-car rows
-SI_UNITS = {"t": "s", "T_b": "N m", "omega": "rad/s", "v": "m/s", "a_x": "m/s^2",
+SI_UNITS = {"t": "s", "T_b": "N m", "omega": "rad/s", "v": "m/s", "a_x": "m/s^2", "throttle": "%",
+            "yaw_rate": "rad/s", "steer": "rad", **{w: "rad/s" for w in ("omega_fl", "omega_fr", "omega_rl", "omega_rr")},
             "M": "N m", "f_x": "N", "f_y": "N", "theta": "rad", "X": "m", "Y": "m"}
 
 
@@ -25,7 +26,10 @@ def _plausible(name: str, k: int, dt: float, rng: np.random.Generator) -> float:
     if name == "t":
         return k * dt
     v = 20.0 - 0.05 * k
-    return {"T_b": rng.uniform(0, 1500), "omega": v / R * rng.uniform(0.9, 1.0), "v": v,
+    if name.startswith("omega"):  # the mapped wheel and the other four
+        return v / R * rng.uniform(0.9, 1.0)
+    return {"T_b": rng.uniform(0, 1500), "v": v, "throttle": rng.uniform(0, 100), "yaw_rate": rng.uniform(-0.5, 0.5),
+            "steer": rng.uniform(-0.3, 0.3),
             "a_x": rng.uniform(-9, 0), "theta": 0.01 * k, "X": 0.001 * k, "Y": 0.002 * k}.get(name,
                                                                                           rng.uniform(-5, 5))
 

@@ -12,7 +12,8 @@ from scipy.signal import butter, sosfilt, sosfiltfilt
 
 from fricenv.effects.payload import PAYLOAD_EFFECTS
 from fricenv.gap.core.noise import estimate_noise
-from fricenv.gap.signals.sensors import band_noise, condition_channel, filter_lag, frame_times, looks_filtered
+from fricenv.gap.signals.filters import filter_lag
+from fricenv.gap.signals.sensors import band_noise, condition_channel, frame_times, looks_filtered
 from fricenv.logs import PayloadLog
 from fricenv.plants import payload as pl
 
@@ -79,7 +80,7 @@ class PayloadData:
     p: pl.PayloadParams
     sensors: dict | None = None  # column -> missing share, outliers (:mod:`fricenv.gap.signals.sensors`)
     wrench_lag_max: float = 0.0  # largest lag fitted for a low-passed force-moment sensor (0: not filtered) [s]
-    # the low-passed force-moment sensor's lag read from its noise roll-off (sensors.filter_lag; None: not filtered,
+    # the low-passed force-moment sensor's lag read from its noise roll-off (fricenv.gap.signals.filters.filter_lag; None: not filtered,
     # or no roll-off below the logger's Nyquist frequency) [s]
     wrench_lag: float | None = None
 

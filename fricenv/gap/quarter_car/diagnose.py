@@ -85,9 +85,11 @@ from fricenv.gap.quarter_car.candidates import (
 )
 from fricenv.gap.quarter_car.changepoint import change_point_starts
 from fricenv.gap.quarter_car.config import DEFAULT_CONFIG, FIT_LOSSES, DiagnoseConfig
+from fricenv.gap.quarter_car.context import FitContext
 from fricenv.gap.quarter_car.data import Data
 from fricenv.gap.quarter_car.drift import drift_test, fit_time_split
 from fricenv.gap.quarter_car.excitation import excitation, untestable
+from fricenv.gap.quarter_car.findings import Findings
 from fricenv.gap.quarter_car.fitting import distinct_starts, fit_nominal, refine_noise, score
 from fricenv.gap.quarter_car.localise import localise, tests_table
 from fricenv.gap.quarter_car.params import ROAD_NAMES, param_names, road_of
@@ -150,7 +152,7 @@ class Diagnosis:
     gap_before: float
     gap_after: float
     params: dict
-    where: dict
+    findings: Findings
     candidates: list  # CandidateFit, best first (single effects)
     nominal: CandidateFit
     joint: CandidateFit | None
@@ -160,6 +162,11 @@ class Diagnosis:
     source: str = "<memory>"
     effects: list = field(default_factory=list)  # [{"effect", "params"}, ...] the selected set in order
     whole: CandidateFit | None = None  # the selected set's cross-fitted model
+
+    @property
+    def where(self) -> dict:
+        """report.json's ``where`` (:meth:`Findings.as_where`)."""
+        return self.findings.as_where()
 
 
 # Effects a log's provenance predicts: log attribute -> (effect, why). Such an effect is tried first in the forward
@@ -184,14 +191,15 @@ class _Selection:
     periodic: dict | None = None  # the line in the nominal wheel-speed residual (fricenv.gap.quarter_car.periodic), if any
 
 
-def _calibrate_and_fit(folds: list[Data], d: Data, cfg: DiagnoseConfig, jobs: int):
+def _calibrate_and_fit(ctx: FitContext):
     """The nominal road fitted per fold (the first fold's fit also refines the noise levels the folds share), and
     every testable candidate fitted per fold; a fold's candidate fits start in the worker processes as soon as its
     nominal fit is done, while this process calibrates the next fold.
 
-    :return: (nominal fits per fold, candidate fits per fold, the effects not testable, the config with the
-        testable candidates only, in whose ``candidates`` order the fits are).
+    :return: (nominal fits per fold, candidate fits per fold, the effects not testable, the context whose settings
+        hold the testable candidates only, in whose ``candidates`` order the fits are).
     """
+    folds, d, cfg, jobs = ctx.folds, ctx.d, ctx.cfg, ctx.jobs
     with progress.task("calibrate the nominal model", total=len(folds)) as advance:
         first = fit_nominal(folds[0], cfg)
         refine_noise(first, folds[0])  # the folds share the noise levels (one dict)
@@ -207,18 +215,18 @@ def _calibrate_and_fit(folds: list[Data], d: Data, cfg: DiagnoseConfig, jobs: in
             pending.append(start_fits([([c], nominal_folds[-1].road_x(), f, run_cfg, None) for c in candidates],
                                       jobs))
             advance()
-    return nominal_folds, [collect() for collect in pending], not_testable, run_cfg
+    return nominal_folds, [collect() for collect in pending], not_testable, replace(ctx, cfg=run_cfg)
 
 
-def _candidates(nominal_folds: list[CandidateFit], per_fold: list[list], folds: list[Data], d: Data,
-                cfg: DiagnoseConfig, jobs: int):
+def _candidates(ctx: FitContext, nominal_folds: list[CandidateFit], per_fold: list[list]):
     """The candidates cross-fitted from their fits per fold (``per_fold[j][i]``: candidate i on fold j); the nominal
     model refitted from the candidates' roads.
 
     :return: (cross-fitted nominal model, cross-fitted candidates in ``cfg.candidates`` order).
     """
+    d, cfg = ctx.d, ctx.cfg
     nominal_folds = map_tasks(nested_nominal, [(nf, fits, f, cfg)
-                                               for f, nf, fits in zip(folds, nominal_folds, per_fold)], jobs,
+                                               for f, nf, fits in zip(ctx.folds, nominal_folds, per_fold)], ctx.jobs,
                               "refit the nominal model")
     nominal = cross_fitted(nominal_folds, d)
     fits = [cross_fitted([fold_fits[i] for fold_fits in per_fold], d) for i in range(len(cfg.candidates))]
@@ -227,9 +235,9 @@ def _candidates(nominal_folds: list[CandidateFit], per_fold: list[list], folds: 
     return nominal, fits
 
 
-def _select(nominal: CandidateFit, fits: list, folds: list[Data], d: Data, p: qc.QuarterCarParams,
-            cfg: DiagnoseConfig, jobs: int) -> _Selection:
+def _select(ctx: FitContext, nominal: CandidateFit, fits: list) -> _Selection:
     """Significance, range edges, the joint fit of the two best eligible candidates, and the verdict rule."""
+    d, p, cfg = ctx.d, ctx.p, ctx.cfg
     fits = sorted(fits, key=lambda f: f.adjusted_mse)
     sig = [f for f in fits if significant(f, nominal, cfg)]
     s = _Selection(fits=fits, significant=sig, edges={f.effect: at_range_edge(f, p) for f in fits})
@@ -237,8 +245,8 @@ def _select(nominal: CandidateFit, fits: list, folds: list[Data], d: Data, p: qc
     if cfg.joint and len(eligible) >= 2:
         a, b = eligible[0], eligible[1]
         seeds = {a.effect: a.effect_params(), b.effect: b.effect_params()}
-        tasks = [([a.effect, b.effect], road_of(x), f, cfg, seeds) for f, x in zip(folds, a.x_folds)]
-        s.joint = cross_fitted(run_fits(tasks, jobs, "joint fit"), d)
+        tasks = [([a.effect, b.effect], road_of(x), f, cfg, seeds) for f, x in zip(ctx.folds, a.x_folds)]
+        s.joint = cross_fitted(run_fits(tasks, ctx.jobs, "joint fit"), d)
         test_against(nominal, s.joint, d)
         s.joint_wins = significant(s.joint, nominal, cfg) and explains(s.joint, nominal, cfg) and \
             not at_range_edge(s.joint, p) and s.joint.adjusted_mse < eligible[0].adjusted_mse
@@ -251,12 +259,12 @@ def _select(nominal: CandidateFit, fits: list, folds: list[Data], d: Data, p: qc
     return s
 
 
-def _check_drift(s: _Selection, nominal: CandidateFit, d: Data, cfg: DiagnoseConfig, jobs: int) -> None:
+def _check_drift(ctx: FitContext, s: _Selection, nominal: CandidateFit) -> None:
     """Refit the model that closes the gap on each half of the log; replace it by its constant refit, and make the
     verdict ``unexplained`` if its parameters drift."""
-    tested_joint = s.joint_wins and not explains(s.chosen, nominal, cfg)  # the model that closes the gap
-    s.drift, refit = drift_test(s.joint if tested_joint else s.chosen, d, cfg, jobs)
-    test_against(nominal, refit, d)
+    tested_joint = s.joint_wins and not explains(s.chosen, nominal, ctx.cfg)  # the model that closes the gap
+    s.drift, refit = drift_test(s.joint if tested_joint else s.chosen, ctx.d, ctx.cfg, ctx.jobs)
+    test_against(nominal, refit, ctx.d)
     if tested_joint:
         s.joint = refit
     else:
@@ -279,43 +287,36 @@ def diagnose(log: QuarterCarLog, p: qc.QuarterCarParams = qc.PAPER_PARAMS,
     t_start = time.perf_counter()
     cfg.check()
     d = prepare(log, p, cfg)
-    folds = [fold_data(d, j) for j in range(int(cfg.folds))]
-    jobs = default_jobs(cfg.jobs)
+    ctx = FitContext(d, tuple(fold_data(d, j) for j in range(int(cfg.folds))), cfg, default_jobs(cfg.jobs))
     expected = {e: why for attr, (e, why) in EXPECTED_EFFECTS.items() if getattr(log, attr, False)}
-    with warnings.catch_warnings(), shared_pool(jobs):  # one start of the worker processes for every map below
+    with warnings.catch_warnings(), shared_pool(ctx.jobs):  # one start of the worker processes for every map below
         warnings.simplefilter("ignore", RuntimeWarning)
-        nominal_folds, per_fold, not_testable, run_cfg = _calibrate_and_fit(folds, d, cfg, jobs)
-        nominal, fits = _candidates(nominal_folds, per_fold, folds, d, run_cfg, jobs)
-        s = _select(nominal, fits, folds, d, p, run_cfg, jobs)
+        nominal_folds, per_fold, not_testable, run = _calibrate_and_fit(ctx)
+        nominal, fits = _candidates(run, nominal_folds, per_fold)
+        s = _select(run, nominal, fits)
         # each half needs training windows in every fold: at least ``folds`` windows per half
         drift_check = cfg.drift_check and len(d.starts) >= 2 * int(cfg.folds)
         if s.chosen is not None and drift_check:
-            _check_drift(s, nominal, d, cfg, jobs)
-        whole, steps = _forward(s, nominal, folds, d, p, cfg, jobs, tuple(expected))
+            _check_drift(ctx, s, nominal)
+        whole, steps = _forward(ctx, s, nominal, tuple(expected))
         if whole is not None and s.chosen is None and drift_check:
-            whole = _set_drifts(s, whole, d, cfg, jobs)
+            whole = _set_drifts(ctx, s, whole)
     effects = [] if whole is None else _order(split_params(whole), expected)
+    if s.periodic is not None and whole is not None:  # the line is the effect's own signature if the set removes it
+        s.periodic["remains_with_effects"] = periodic_line(whole, d) is not None
     not_testable = not_testable.shown({f.effect for f in s.significant} | {e["effect"] for e in effects})
-    where = _where(nominal, s, d, cfg)
-    where["not_testable"] = not_testable
-    where["detectable"] = not_testable.detectable  # issue 15: smallest significant size per effect (excitation.py)
-    if not_testable.caveats:
-        where["caveats"] = not_testable.caveats  # tested in part (the registry's caveat rules)
-    where["sensors"] = d.sensors
-    where["forward_selection"] = steps
-    if expected:
-        where["expected_effects"] = expected
-    where["periodic"] = s.periodic
+    findings = _findings(nominal, s, d, cfg, not_testable, steps, expected)
+    findings.extra.update(time_base={"origin": "first_sample", "offset_s": float(log.t_offset)},
+                          warnings=list(log.warnings))
     verdict = effects[0]["effect"] if effects else s.verdict  # a discovery before an expected calibration
     return Diagnosis(verdict=verdict, gap_before=nominal.gap,
                      gap_after=nominal.gap if whole is None else whole.gap,
-                     params=next((e["params"] for e in effects if e["effect"] == verdict), {}), where=where,
+                     params=next((e["params"] for e in effects if e["effect"] == verdict), {}), findings=findings,
                      candidates=s.fits, nominal=nominal, joint=s.joint, data=d, residuals=s.residuals,
                      seconds=time.perf_counter() - t_start, source=log.source, effects=effects, whole=whole)
 
 
-def _forward(s: _Selection, nominal: CandidateFit, folds: list[Data], d: Data, p: qc.QuarterCarParams,
-             cfg: DiagnoseConfig, jobs: int, expected: tuple[str, ...]):
+def _forward(ctx: FitContext, s: _Selection, nominal: CandidateFit, expected: tuple[str, ...]):
     """Forward selection from the verdict's effect; on an ``unexplained`` verdict with significant candidates (and
     no drift), from the best of them, and the set becomes the verdict if it closes the gap (:func:`explains`) where
     no single effect did. Returns (the whole set's model or None, the steps tried)."""
@@ -326,18 +327,18 @@ def _forward(s: _Selection, nominal: CandidateFit, folds: list[Data], d: Data, p
     if first is None:
         return None, []
     known = {frozenset(s.joint.effect.split("+")): s.joint} if s.joint is not None else {}
-    whole, steps = forward_select(first, s.fits, nominal, folds, d, p, cfg, jobs, expected, known)
-    if s.chosen is None and (whole is first or not explains(whole, nominal, cfg)):
+    whole, steps = forward_select(ctx, nominal, first, s.fits, expected, known)
+    if s.chosen is None and (whole is first or not explains(whole, nominal, ctx.cfg)):
         return None, steps
     return whole, steps
 
 
-def _set_drifts(s: _Selection, whole: CandidateFit, d: Data, cfg: DiagnoseConfig, jobs: int) -> CandidateFit | None:
+def _set_drifts(ctx: FitContext, s: _Selection, whole: CandidateFit) -> CandidateFit | None:
     """The drift test of a set that the forward selection made the verdict where no single effect closed the gap
     (the verdict was ``unexplained``, so no single model was tested for drift): its effects' parameters must be
     constant too. A brake fade is otherwise read as a brake gain plus a drag whose speed dependence imitates the
     fade's heating (clean seed 3804, logs 25 and 32). Returns the set, or None when its parameters drift."""
-    s.drift, _ = drift_test(whole, d, cfg, jobs)
+    s.drift, _ = drift_test(whole, ctx.d, ctx.cfg, ctx.jobs)
     return None if s.drift["drifts"] else whole
 
 
@@ -348,26 +349,28 @@ def _order(effects: list[dict], expected: dict) -> list[dict]:
     return [e for e in effects if e["effect"] not in expected] + [e for e in effects if e["effect"] in expected]
 
 
-def _where(nominal: CandidateFit, s: _Selection, d: Data, cfg: DiagnoseConfig) -> dict:
-    """The report's ``where`` from the localisation and the tests (the residuals for the plots go into ``s``)."""
-    where, s.residuals = localise(nominal, s.chosen, d, cfg.folds)
-    where["tests"] = tests_table(s.fits, s.significant, s.edges)
-    where["robust_gap_before"] = robust_gap(nominal)
-    if s.drift is not None:
-        where["drift_test"] = s.drift
-    if s.joint is not None:
-        where["joint_fit"] = {"effects": s.joint.effect.split("+"), "params": s.joint.effect_params(),
-                              "gap_after": s.joint.gap, "t_stat": s.joint.t_stat}
-    return where
+def _findings(nominal: CandidateFit, s: _Selection, d: Data, cfg: DiagnoseConfig, not_testable, steps: list,
+              expected: dict) -> Findings:
+    """The evidence behind the verdict: the localisation, the tests and the selection (the residuals for the
+    plots go into ``s``)."""
+    localisation, s.residuals = localise(nominal, s.chosen, d, cfg.folds)
+    joint = None if s.joint is None else {"effects": s.joint.effect.split("+"), "params": s.joint.effect_params(),
+                                          "gap_after": s.joint.gap, "t_stat": s.joint.t_stat}
+    return Findings(localisation=localisation, tests=tests_table(s.fits, s.significant, s.edges),
+                    robust_gap_before=robust_gap(nominal), not_testable=not_testable, sensors=d.sensors,
+                    forward_selection=steps, periodic=s.periodic, drift_test=s.drift, joint_fit=joint,
+                    expected_effects=expected or None)
 
 
 def load_params(path) -> qc.QuarterCarParams:
-    """Vehicle parameters from a JSON file (keys of :class:`QuarterCarParams`; unknown keys rejected)."""
+    """Vehicle parameters from a JSON file (keys of :class:`QuarterCarParams`; unknown keys rejected). A ``car``
+    section (a car's mass and axle positions, docs/contracts.md section 2) is not a quarter-car key: it is passed
+    over here and read by the car's own loader."""
     from dataclasses import fields as dc_fields
 
     from fricenv.utils import read_json_object
 
-    raw = read_json_object(path, "vehicle parameters")
+    raw = {k: v for k, v in read_json_object(path, "vehicle parameters").items() if k != "car"}
     valid = [f.name for f in dc_fields(qc.QuarterCarParams)]
     unknown = sorted(set(raw) - set(valid))
     if unknown:

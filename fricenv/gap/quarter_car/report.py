@@ -49,16 +49,19 @@ def report_markdown(dg: Diagnosis, report: dict, images: Sequence[str] = (PLOT_T
     :param images: the plot files written beside it, linked at the end (empty: no image links).
     """
     w = report["where"]
-    lines = [f"# Sim-to-real gap report: {Path(dg.source).name}", "",
-             f"**Verdict: `{report['verdict']}`**" + (f" with {report['params']}" if report["params"] else ""), "",
+    lines = [f"# Sim-to-real gap report: {Path(dg.source).name}", "", f"**Verdict: `{report['verdict']}`**", "",
+             *_effects_table(report["effects"]),
              f"- held-out gap before: {report['gap_before']:.3f} (noise units; 0 = the model fits within noise)",
              f"- held-out gap after:  {report['gap_after']:.3f}",
              (f"- data: {w['data']['samples']} samples, channels {', '.join(w['data']['channels'])}; "
               f"{w['data']['windows']} prediction windows of {w['data']['horizon_s']:.2f} s, "
               f"each held out once ({w['data']['folds']}-fold cross-fitting); speed: {w['data']['speed_source']}"),
              f"- certainty: {w['data']['certainty']}",
+             (f"- times from the log's first sample (its stamp in the log's own base: "
+              f"{w['time_base']['offset_s']!r} s)" if "time_base" in w else "- times as logged"),
              "- calibrated nominal road: " + ", ".join(f"{k}={v:.4g}" for k, v in w["nominal_road"].items()),
              f"- diagnosis time: {dg.seconds:.1f} s", "",
+             *(["## Warnings on the log", "", *[f"- {x}" for x in w["warnings"]], ""] if w.get("warnings") else []),
              "## Where the gap lies", "", "Worst time segments (nominal model):", ""]
     for s in w["segments"]:
         lines.append(f"- {s['t_start']:.2f}-{s['t_end']:.2f} s: gap {s['gap']:.2f}"
@@ -95,11 +98,7 @@ def report_markdown(dg: Diagnosis, report: dict, images: Sequence[str] = (PLOT_T
                        + ("Its parameters drift: the gap is caused by something this constant library effect only "
                           "imitates, hence `unexplained`." if dt["drifts"] else "No significant drift."))]
     if w.get("periodic"):
-        pl = w["periodic"]
-        lines += ["", (f"The nominal model's wheel-speed residual holds a line at {pl['freq_hz']:.1f} Hz, "
-                       f"{pl['ratio']:.0f} times its spectrum's median level: a periodic gap (a wheel hop, a brake "
-                       "judder) that no library effect makes"
-                       + (", hence `unexplained`." if pl.get("decided") else "."))]
+        lines += ["", _periodic_sentence(w["periodic"])]
     lines += ["", ("Score: share of the nominal model's held-out excess squared error the candidate closes. "
                    "z paired: held-out improvement of the squared normalised error (without its largest window) "
                    "over its spread under the measurement noise given the two models' prediction difference; a "
@@ -110,6 +109,29 @@ def report_markdown(dg: Diagnosis, report: dict, images: Sequence[str] = (PLOT_T
                    "DiagnoseConfig.ratio_explained of the nominal one, or below gap_within_noise. The robust "
                    f"nominal gap is {w.get('robust_gap_before', float('nan')):.3f}."), ""]
     return "\n".join(lines + image_links(images))
+
+
+def _effects_table(effects: list[dict]) -> list[str]:
+    """The selected effects' parameters as a table with their units (none for ``none``/``unexplained``)."""
+    from fricenv.effects import registry
+
+    if not effects:
+        return []
+    lines = ["| effect | parameter | value | unit |", "| --- | --- | --- | --- |"]
+    for e in effects:
+        units = {q.name: q.unit for q in registry.get(e["effect"]).params}
+        lines += [f"| {e['effect']} | {k} | {v:.4g} | {units.get(k, '') or '-'} |" for k, v in e["params"].items()]
+    return lines + [""]
+
+
+def _periodic_sentence(line: dict) -> str:
+    """What a line in the nominal wheel-speed residual means for the verdict."""
+    head = (f"The nominal model's wheel-speed residual holds a line at {line['freq_hz']:.1f} Hz, "
+            f"{line['ratio']:.0f} times its spectrum's median level")
+    if line.get("remains_with_effects") is False:
+        return head + ": the selected effects remove it (their own signature, such as ABS cycles through a lag)."
+    return head + (": a periodic gap (a wheel hop, a brake judder) that no library effect makes"
+                   + (", hence `unexplained`." if line.get("decided") else "."))
 
 
 def _testability_lines(w: dict) -> list[str]:

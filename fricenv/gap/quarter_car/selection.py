@@ -34,12 +34,12 @@ from dataclasses import replace
 from fricenv.effects import registry
 from fricenv.gap.quarter_car.candidates import run_fits, test_against
 from fricenv.gap.quarter_car.config import DiagnoseConfig
+from fricenv.gap.quarter_car.context import FitContext
 from fricenv.gap.quarter_car.data import Data
 from fricenv.gap.quarter_car.fitting import fit_context
 from fricenv.gap.quarter_car.params import road_of
 from fricenv.gap.quarter_car.stats import CandidateFit, cross_fitted, paired_z
 from fricenv.gap.quarter_car.verdict import at_range_edge
-from fricenv.plants import quarter_car as qc
 
 __all__ = ["MAX_EFFECTS", "SCREEN_SHARE", "TRIED_PER_STEP", "confounded", "effects_of", "forward_select",
            "split_params"]
@@ -74,25 +74,24 @@ def _seeds(current: CandidateFit, c: CandidateFit, d: Data, restart: bool = Fals
     return seeds
 
 
-def _fit_joints(current: CandidateFit, extra: Sequence[CandidateFit], folds: list[Data], d: Data,
-                cfg: DiagnoseConfig, jobs: int, nominal: CandidateFit,
+def _fit_joints(ctx: FitContext, nominal: CandidateFit, current: CandidateFit, extra: Sequence[CandidateFit],
                 restart: Collection[str] = ()) -> list[CandidateFit]:
     """The current set plus each of ``extra``, fitted per fold (seeded by :func:`_seeds`; the effects in ``restart``
     from the registry's start list), cross-fitted and tested against the nominal model."""
-    base = effects_of(current)
-    roads = current.x_folds or (current.x,) * len(folds)
-    tasks = [(base + [c.effect], road_of(x), f, cfg, _seeds(current, c, d, c.effect in restart))
-             for c in extra for f, x in zip(folds, roads)]
-    fits = run_fits(tasks, jobs, "forward selection") if tasks else []
-    k = len(folds)
+    base, d = effects_of(current), ctx.d
+    roads = current.x_folds or (current.x,) * len(ctx.folds)
+    tasks = [(base + [c.effect], road_of(x), f, ctx.cfg, _seeds(current, c, d, c.effect in restart))
+             for c in extra for f, x in zip(ctx.folds, roads)]
+    fits = run_fits(tasks, ctx.jobs, "forward selection") if tasks else []
+    k = len(ctx.folds)
     joints = [cross_fitted(fits[i * k:(i + 1) * k], d) for i in range(len(extra))]
     for joint in joints:
         test_against(nominal, joint, d)
     return joints
 
 
-def _extend(current: CandidateFit, extra: Sequence[CandidateFit], folds: list[Data], d: Data, cfg: DiagnoseConfig,
-            jobs: int, nominal: CandidateFit, known: dict) -> list[CandidateFit]:
+def _extend(ctx: FitContext, nominal: CandidateFit, current: CandidateFit, extra: Sequence[CandidateFit],
+            known: dict) -> list[CandidateFit]:
     """The current set plus each of ``extra``, fitted per fold and cross-fitted; a set in ``known`` (frozenset of
     effect names -> cross-fitted model) is not refitted.
 
@@ -102,25 +101,25 @@ def _extend(current: CandidateFit, extra: Sequence[CandidateFit], folds: list[Da
     all ``cfg.fit_starts`` starts of the list that won, which gives exactly the unscreened fit (the best start's run
     is the first of them).
     """
-    base = effects_of(current)
+    base, d, cfg = effects_of(current), ctx.d, ctx.cfg
     todo = [c for c in extra if frozenset(base + [c.effect]) not in known]
-    quick = replace(cfg, fit_starts=1) if cfg.fit_starts > 1 else cfg
-    joints = _fit_joints(current, todo, folds, d, quick, jobs, nominal)
-    restarted = dict(_restart(current, todo, joints, folds, d, quick, jobs, nominal))
+    quick = replace(ctx, cfg=replace(cfg, fit_starts=1)) if cfg.fit_starts > 1 else ctx
+    joints = _fit_joints(quick, nominal, current, todo)
+    restarted = dict(_restart(quick, nominal, current, todo, joints))
     joints = [restarted.get(i, j) for i, j in enumerate(joints)]
     again = [i for i, (c, j) in enumerate(zip(todo, joints))
-             if quick is not cfg and (paired_z(current, j, d) > SCREEN_SHARE * cfg.sig_z
+             if quick is not ctx and (paired_z(current, j, d) > SCREEN_SHARE * cfg.sig_z
                                       or confounded(current, c, j, d, cfg))]
     restart = {todo[i].effect for i in restarted}  # refitted from all starts of the list that won the screen
-    for i, joint in zip(again, _fit_joints(current, [todo[i] for i in again], folds, d, cfg, jobs, nominal, restart)):
+    for i, joint in zip(again, _fit_joints(ctx, nominal, current, [todo[i] for i in again], restart)):
         joints[i] = joint
     for c, joint in zip(todo, joints):
         known[frozenset(base + [c.effect])] = joint
     return [known[frozenset(base + [c.effect])] for c in extra]
 
 
-def _restart(current: CandidateFit, todo: Sequence[CandidateFit], joints: list[CandidateFit], folds: list[Data],
-             d: Data, cfg: DiagnoseConfig, jobs: int, nominal: CandidateFit) -> list[tuple[int, CandidateFit]]:
+def _restart(ctx: FitContext, nominal: CandidateFit, current: CandidateFit, todo: Sequence[CandidateFit],
+             joints: list[CandidateFit]) -> list[tuple[int, CandidateFit]]:
     """Joint fits that ended in a local minimum, fitted again from the registry's start list: (index, refit) where
     the refit fits the training windows better.
 
@@ -131,12 +130,11 @@ def _restart(current: CandidateFit, todo: Sequence[CandidateFit], joints: list[C
     """
     stuck = [i for i, j in enumerate(joints) if j.train_mse > current.train_mse]
     # only a candidate its single fit started can start elsewhere: one with a start list in the registry
-    stuck = [i for i in stuck if todo[i].effect in _seeds(current, todo[i], d)
-             and registry.get(todo[i].effect).starts(fit_context(d))]
+    stuck = [i for i in stuck if todo[i].effect in _seeds(current, todo[i], ctx.d)
+             and registry.get(todo[i].effect).starts(fit_context(ctx.d))]
     if not stuck:
         return []
-    refits = _fit_joints(current, [todo[i] for i in stuck], folds, d, cfg, jobs, nominal,
-                         {todo[i].effect for i in stuck})
+    refits = _fit_joints(ctx, nominal, current, [todo[i] for i in stuck], {todo[i].effect for i in stuck})
     return [(i, r) for i, r in zip(stuck, refits) if r.train_mse < joints[i].train_mse]
 
 
@@ -152,26 +150,27 @@ def confounded(current: CandidateFit, single: CandidateFit, joint: CandidateFit,
     return effects_of(current)
 
 
-def forward_select(first: CandidateFit, significant: Sequence[CandidateFit], nominal: CandidateFit,
-                   folds: list[Data], d: Data, p: qc.QuarterCarParams, cfg: DiagnoseConfig, jobs: int,
+def forward_select(ctx: FitContext, nominal: CandidateFit, first: CandidateFit, significant: Sequence[CandidateFit],
                    expected: Sequence[str] = (), known: dict | None = None) -> tuple[CandidateFit, list[dict]]:
     """The selected set, grown from ``first``.
 
+    :param ctx: the diagnosis' log, folds, settings and workers.
+    :param nominal: the cross-fitted nominal model every joint model is tested against.
     :param significant: the single candidates the selection may add (every fitted one), best first.
     :param expected: effects always tried first (a calibration the log's provenance predicts).
     :param known: sets already fitted (frozenset of effect names -> cross-fitted model), not refitted.
     :return: (the whole set's cross-fitted model, one record per step tried: the effect, its paired z over the
         set before it, whether it was added, and ``confounded_with`` where it applies).
     """
-    current, steps, known = first, [], dict(known or {})
+    current, steps, known, d, cfg = first, [], dict(known or {}), ctx.d, ctx.cfg
     pool = [f for f in significant if f.effect not in effects_of(first)]
     while pool and len(effects_of(current)) < MAX_EFFECTS:
         pool.sort(key=lambda f: (f.effect not in expected, f.adjusted_mse))
         tried = pool[:TRIED_PER_STEP]
-        joints = _extend(current, tried, folds, d, cfg, jobs, nominal, known)
+        joints = _extend(ctx, nominal, current, tried, known)
         z = [paired_z(current, j, d) for j in joints]
         ok = [i for i, j in enumerate(joints) if z[i] > cfg.sig_z and j.adjusted_mse < current.adjusted_mse
-              and not at_range_edge(j, p)]
+              and not at_range_edge(j, ctx.p)]
         new = [{"effect": c.effect, "z_over_set": z[i], "added": False} for i, c in enumerate(tried)]
         if not ok:
             for i, c in enumerate(tried):

@@ -21,7 +21,8 @@ from fricenv.gap.core.pool import default_jobs
 from fricenv.gap.quarter_car.config import DiagnoseConfig
 from fricenv.gap.quarter_car.data import Data
 from fricenv.gap.quarter_car.params import ROAD_NAMES
-from fricenv.gap.signals.sensors import LAG_TOP, condition_channel, lag_against, shared_lag
+from fricenv.gap.signals.filters import LAG_TOP, lag_against, shared_lag
+from fricenv.gap.signals.sensors import condition_channel
 from fricenv.gap.signals.speed import filtered_transient_slip, reconstruct_speed
 from fricenv.gap.signals.stated_filter import apply_stated
 from fricenv.logs import QuarterCarLog
@@ -42,7 +43,7 @@ FREE_ROLL_TORQUE = 0.02  # free rolling: |T_b| below this share of max |T_b| [-]
 SAVGOL = (11, 2)  # speed smoother: window [samples], polynomial order
 NOISE_FLOOR = {"omega": 1e-3, "v": 1e-3, "a_x": 1e-3}  # smallest accepted noise std per channel (SI)
 FILTERED_CHANNELS = ("v", "a_x")  # channels a logger may low-pass (IMU, speed estimate); omega is a pulse count
-DECONVOLVED = ("a_x",)  # filtered channels whose filter is undone, not only its lag (sensors.shared_lag)
+DECONVOLVED = ("a_x",)  # filtered channels whose filter is undone, not only its lag (fricenv.gap.signals.filters.shared_lag)
 # A low-passed channel's filter is read from its noise spectrum above LAG_BAND_HZ (the braking dynamics' own power
 # lies mostly below), and its lag is the filter's mean group delay over (0, LAG_USE_HZ] (the band of the motion a
 # prediction window sees) [Hz].
@@ -80,7 +81,7 @@ def horizon_samples(cfg: DiagnoseConfig, dt: float) -> int:
 def _conditioned(log: QuarterCarLog, free_end: int, p: qc.QuarterCarParams) -> dict:
     """Every logged channel's :class:`fricenv.gap.signals.sensors.ChannelCondition` (``free_end``: the quiet start); the
     channels a logger may low-pass are realigned by their filter's lag when their noise shows its roll-off
-    (:func:`fricenv.gap.signals.sensors.shared_lag`, band from ``LAG_BAND_HZ``, lag over ``(0, LAG_USE_HZ]``), or by the
+    (:func:`fricenv.gap.signals.filters.shared_lag`, band from ``LAG_BAND_HZ``, lag over ``(0, LAG_USE_HZ]``), or by the
     filter the column map states (:func:`fricenv.gap.signals.stated_filter.apply_stated`)."""
     out = {}
     for c in ("omega", "v", "a_x"):

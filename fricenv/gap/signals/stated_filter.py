@@ -1,6 +1,6 @@
 """Sensor filters the user states (the column map's ``filter``, :mod:`fricenv.logs.sensor_filter`), undone.
 
-Read from a channel's noise roll-off (:func:`fricenv.gap.signals.sensors.shared_lag`), a sensor filter's order and lag come
+Read from a channel's noise roll-off (:func:`fricenv.gap.signals.filters.shared_lag`), a sensor filter's order and lag come
 out only roughly: on the independent simulator's real-like logs, whose ``v`` and ``a_x`` all went through one
 second-order 5 Hz Butterworth, the roll-off read orders 2 to 4 and lags of 36-100 ms against the filter's 45 ms
 (tuning seed 3000). Undoing a filter of the wrong order or lag leaves errors of tens of percent in a deceleration's
@@ -12,7 +12,8 @@ from __future__ import annotations
 
 from dataclasses import replace
 
-from fricenv.gap.signals.sensors import ChannelCondition, advanced, deconvolved, fill_missing, group_delay
+from fricenv.gap.signals.filters import advanced, deconvolved, group_delay
+from fricenv.gap.signals.sensors import ChannelCondition, fill_missing
 from fricenv.logs.sensor_filter import SensorFilter
 
 __all__ = ["apply_stated"]
@@ -23,7 +24,7 @@ def apply_stated(conds: dict[str, ChannelCondition], stated: dict[str, SensorFil
     """The channels of ``conds`` that have a stated filter, realigned by it.
 
     Each is flagged filtered with certainty (``filter_evidence: "column map"``), its filter reported as stated, and
-    either undone (:func:`fricenv.gap.signals.sensors.deconvolved`, the channels in ``deconvolve``: a deceleration whose
+    either undone (:func:`fricenv.gap.signals.filters.deconvolved`, the channels in ``deconvolve``: a deceleration whose
     brake applies reach the cut-off) or advanced by its mean group delay over ``(0, f_use]`` (a speed, whose signal
     lies far below it).
 
