@@ -19,12 +19,12 @@ import numpy as np
 
 from estimators.base import Estimate, Estimator, EstimatorConfigError, Health, check_dt
 from estimators.mismatch import WheelSpeedGuard
-from estimators.outliers import DEFAULT_GATE, GateParams, Verdict, check_gate, gate, nis
+from estimators.outliers import DEFAULT_GATE, GateParams, Verdict, check_gate
 from estimators.quarter_car_model import PARAM_NAMES, AugmentedModel
 from estimators.tuning import DEFAULT_EKF_TUNING, HORIZON, PAPER_TUNING, SLIP_PRIOR, V_PRIOR
 
 __all__ = ["DEFAULT_EKF_TUNING", "SLIP_PRIOR", "V_PRIOR", "ExtendedKalmanFilter", "ParameterInformation", "QuarterCarEKF",
-           "ekf_predict", "ekf_update", "gate_wheel_speed", "innovation_covariance", "reinit_from_wheel_speed"]
+           "ekf_predict", "ekf_update", "innovation_covariance"]
 
 
 def _sym(P: np.ndarray) -> np.ndarray:
@@ -107,49 +107,6 @@ class ExtendedKalmanFilter:
         return ekf_update(x, P, np.atleast_1d(y), np.atleast_1d(yp), np.atleast_2d(H), self.R)
 
 
-
-
-def reinit_from_wheel_speed(model: AugmentedModel, x: np.ndarray, P: np.ndarray, P0: np.ndarray,
-                            omega: float) -> tuple[np.ndarray, np.ndarray]:
-    """Re-initialise the measured states from one wheel speed (the gate's re-initialisation, estimators.outliers).
-
-    One wheel speed cannot separate v from the slip (eq. (7)), and the filter's own slip is not to be trusted
-    after a run of rejections (a filter that followed a dropout to zero has its slip near 1, which would make
-    ``omega r / (1 - slip)`` ten times too fast): the slip goes back to its a priori value ``SLIP_PRIOR`` and v to
-    the value that makes eq. (7) hold, ``v = omega r / (1 - SLIP_PRIOR)``; the (v, slip) covariance goes back to
-    its initial block of ``P0`` and their correlations with the parameters are dropped.
-
-    :param model: the augmented model (for r).
-    :param x: current state, (n,).
-    :param P: current covariance, (n, n).
-    :param P0: initial covariance, (n, n).
-    :param omega: the measured wheel speed [rad/s].
-    :return: (x, P) re-initialised.
-    """
-    x = x.copy()
-    x[0] = max(float(omega) * model.p.r / (1.0 - SLIP_PRIOR), 0.0)
-    x[1] = SLIP_PRIOR
-    P = P.copy()
-    P[:2, :] = 0.0
-    P[:, :2] = 0.0
-    P[:2, :2] = P0[:2, :2]
-    return x, P
-
-
-def gate_wheel_speed(model: AugmentedModel, x: np.ndarray, P: np.ndarray, P0: np.ndarray, R: np.ndarray,
-                     y: np.ndarray, rejected: int, params: GateParams | None):
-    """The quarter-car filters' gate (:mod:`estimators.outliers`) on wheel speed ``y`` against the prior (x, P).
-
-    :return: (verdict, consecutive rejections after it, x, P), x and P re-initialised from y on ``REINIT``
-        (:func:`reinit_from_wheel_speed`); ``ACCEPT`` when ``params`` is None.
-    """
-    if params is None:
-        return Verdict.ACCEPT, 0, x, P
-    S = innovation_covariance(P, model.h_jacobian(x), R)[1]
-    verdict, rejected = gate(nis(y - model.h(x), S), rejected, params)
-    if verdict == Verdict.REINIT:
-        x, P = reinit_from_wheel_speed(model, x, P, P0, float(y[0]))
-    return verdict, rejected, x, P
 
 
 class ParameterInformation:
@@ -308,7 +265,7 @@ class QuarterCarEKF(Estimator):
         if not self.propagate(x_post, P_post, float(uu[0])):  # keep the last good state
             return self._estimate(self.x, Health.SOLVER_FAILED, {"reason": "non-finite EKF step"})
         self.information.add(P_prior, None if innov is None else P_post)
-        if verdict in (Verdict.ACCEPT, Verdict.MISMATCH):
+        if verdict in (Verdict.ACCEPT, Verdict.MISMATCH, Verdict.START):
             health = Health.OK if self.information.excited(P_post) else Health.NOT_EXCITED
         else:
             health = Health.OUTLIER if verdict == Verdict.REJECT else Health.REINITIALISED

@@ -233,7 +233,7 @@ class RegularizedMHE(Estimator):
         verdict = self._take(y, float(uu[0]))
         est = self._window_estimate(float(uu[0]))
         self._ekf_predict(float(uu[0]))
-        if verdict in (Verdict.ACCEPT, Verdict.MISMATCH):  # a model error is no outlier (estimators.mismatch)
+        if verdict in (Verdict.ACCEPT, Verdict.MISMATCH, Verdict.START):  # no outlier (estimators.mismatch)
             return est
         health = Health.OUTLIER if verdict == Verdict.REJECT else Health.REINITIALISED
         return Estimate(est.values, health, {**est.info, "window_health": est.health})
@@ -242,7 +242,7 @@ class RegularizedMHE(Estimator):
         """Gate the sample and update the arrival filter (the EKF's correction), append it to the window buffers."""
         f = self.arrival_filter
         verdict, x_post, P_post, _, _ = f.correct(y)
-        if verdict == Verdict.REINIT:  # the arrival filter restarted from the sample: so does the window
+        if verdict in (Verdict.REINIT, Verdict.START):  # the arrival filter restarted from the sample: so does the window
             self._y, self._u, self._used = [], [], []
             self._arr_hist.clear()
             self.x_prior0, self._X_prev = f.x.copy(), None

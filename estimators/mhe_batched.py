@@ -175,7 +175,7 @@ class BatchedMHE:
     def _take(self, active: np.ndarray, y: np.ndarray, u: np.ndarray) -> np.ndarray:
         """Gate, restart the windows of re-initialised sub-envs, append the sample, the EKF's update."""
         verdict = self._gate(active, y)
-        reinit = verdict == Verdict.REINIT
+        reinit = (verdict == Verdict.REINIT) | (verdict == Verdict.START)  # the window restarts
         self.count[reinit], self.has_prev[reinit] = 0, False
         full = active & (self.count == self.N1)  # the window slides: drop the oldest sample
         for buf in (self.y, self.u, self.used, self.hist_x, self.hist_P):

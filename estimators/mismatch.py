@@ -25,6 +25,8 @@ filter until the re-initialisation, which then took the speed from a wheel that 
      touches whenever it rolls freely. A re-initialisation takes the speed from it, ``v = max(v_ref, omega r)``
      (the filter's own speed after a run of rejections is not to be trusted), and the slip that makes eq. (7) hold
      at that speed (a locked wheel or a dropout to zero: slip 1): never the speed of a wheel that may be slipping.
+(M3) **Start.** The state after a reset is a guess (19 m/s a priori): a first sample that fails against it is no
+     outlier; the filter starts from it as from a re-initialisation (``Verdict.START``) and keeps its own health.
 """
 
 from __future__ import annotations
@@ -138,14 +140,16 @@ class WheelSpeedGuard:
             if physical:  # a sample no road can produce is a spike: it joins no run
                 s.run = s.run + 1 if sign == s.sign else 1
                 s.sign, s.e_prev = sign, e
+        if verdict != Verdict.ACCEPT and not np.isfinite(s.omega_used):  # (M3): no sample used yet
+            verdict, rejected = Verdict.START, 0
         self._reference(None if verdict == Verdict.REJECT else omega)
-        if verdict == Verdict.REINIT:
+        if verdict in (Verdict.REINIT, Verdict.START):
             x, P = self.reinit(x, P, P0, omega)
         if verdict == Verdict.REJECT:
             s.since += 1
         else:
             s.omega_used, s.since = omega, 1
-        if verdict in (Verdict.ACCEPT, Verdict.REINIT):
+        if verdict in (Verdict.ACCEPT, Verdict.REINIT, Verdict.START):
             s.run, s.sign, s.e_prev = 0, 0.0, np.nan
         s.rejected = rejected
         return verdict, x, P, inflation

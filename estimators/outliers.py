@@ -85,6 +85,7 @@ class Verdict(enum.IntEnum):
     REJECT = 1  # skip the update (Health.OUTLIER)
     REINIT = 2  # too many rejections in a row: re-initialise from the sample (Health.REINITIALISED)
     MISMATCH = 3  # a persistent innovation: the model is off, update with raised process noise (estimators.mismatch)
+    START = 4  # the first sample after a reset fails against the a priori guess: start from it (estimators.mismatch)
 
 
 def nis(innovation, S) -> float:
