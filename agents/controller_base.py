@@ -10,7 +10,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fricenv.envs.braking_core import BrakingSim, ObsField
+from fricenv.envs.braking_sim import BrakingSim
+from fricenv.envs.config import ObsField
 from fricenv.plants.quarter_car import PAPER_PARAMS, QuarterCarParams
 
 __all__ = ["FIELD_AX", "FIELD_SLIP", "FIELD_TORQUE", "FIELD_V", "FIELD_WHEEL_DECEL", "FIELD_WHEEL_SPEED", "SPEED_FLOOR",

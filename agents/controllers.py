@@ -1,4 +1,4 @@
-"""Classical ABS controllers for ``fricenv/Braking-v0`` (and the batched :class:`~fricenv.envs.braking_core.BrakingSim`).
+"""Classical ABS controllers for ``fricenv/Braking-v0`` (and the batched :class:`~fricenv.envs.braking_sim.BrakingSim`).
 
 All controllers share one interface: ``reset()`` at the start of an episode and ``act(obs) -> action`` with the
 env's normalised action (shape ``(1,)`` for one observation ``(obs_dim,)``, shape ``(n,)`` for a batch
@@ -39,7 +39,7 @@ from agents.controller_base import (  # noqa: F401 (re-exported: the public name
 )
 from fricenv.plants.quarter_car import QuarterCarParams
 from fricenv.plants.sui_johansen import OMEGA_NOISE_STD
-from fricenv.plants.tire import MagicFormula
+from fricenv.plants.tire import MagicFormula, ecu_slip
 
 __all__ = [
     "CONTROLLERS",
@@ -149,7 +149,7 @@ class RuleBasedABS(Controller):
         s["fresh"][:] = False
         # Reference speed: a_x integration, pulled up to the wheel speed (the vehicle is never slower).
         s["v_ref"] = np.maximum(s["v_ref"] + ax * dt, wheel - p.omega_margin * p.omega_noise_std * r)
-        slip = 1.0 - wheel / np.maximum(s["v_ref"], SPEED_FLOOR)
+        slip = ecu_slip(self.reader.get(obs, FIELD_WHEEL_SPEED), s["v_ref"], r, SPEED_FLOOR)
         ph = s["phase"]
         rising = (ph == PH_BUILD) | (ph == PH_REAPPLY)
         new = np.where(rising & (excess > p.decel_minus), PH_HOLD, ph)
@@ -299,7 +299,7 @@ class SlipController(_GainScheduledSlip):
         v_hat, lam_ref = self.source(values)
         v_hat = np.asarray(v_hat, dtype=float)
         lam_ref = np.asarray(lam_ref, dtype=float)
-        lam = 1.0 - values[FIELD_WHEEL_SPEED] * p.r / np.maximum(v_hat, SPEED_FLOOR)
+        lam = ecu_slip(values[FIELD_WHEEL_SPEED], v_hat, p.r, SPEED_FLOOR)
         mu_hat = np.maximum(-p.m * values[FIELD_AX] / p.Fz, 0.0)
         return self._pi(v_hat, lam, lam_ref, _equilibrium_torque(mu_hat, lam_ref, p))
 

@@ -25,8 +25,9 @@ from __future__ import annotations
 import contextlib
 import csv
 import dataclasses
+import json
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -57,16 +58,18 @@ ROAD_NAMES = ("dry", "wet", "snow", "ice")
 TRANSITIONS = ("dry->ice", "ice->dry")
 CHANGE_DISTANCE = 15.0  # [m]
 DEFAULT_SEEDS = 3
-ROW_KEYS = ("policy", "estimator", "scenario", "ratio_mean", "ratio_std", "locks", "slip_err_mean", "stopped",
+ROW_KEYS = ("policy", "estimator", "scenario", "cell", "effects", "ratio_mean", "ratio_std", "locks", "slip_err_mean", "stopped",
             "episodes")
 
 
 @dataclass(frozen=True)
 class Scenario:
-    """One evaluation scenario."""
+    """One evaluation scenario: a road, a speed and the plant's effects (``[]``: the nominal plant)."""
 
     road: str  # road spec of Braking-v0
     v0: float  # initial speed [m/s]
+    effects: tuple = field(default=(), compare=False)  # {"effect", "params"} entries of Braking-v0's effects=
+    cell: str = "nominal"  # the effects' label in tables (an effect-grid cell, "custom" or "nominal")
 
     @property
     def name(self) -> str:
@@ -103,7 +106,7 @@ def _controller(spec: PolicySpec, env):
 
 
 def run_episode(spec: PolicySpec, scenario: Scenario, seed: int) -> dict[str, Any]:
-    """One episode of a policy on a scenario: ratio, lock, mean |slip - lambda*|, stopped.
+    """One episode of a policy on a scenario (its plant's effects on): ratio, lock, mean |slip - lambda*|, stopped.
 
     :param spec: the policy.
     :param scenario: the scenario.
@@ -112,7 +115,7 @@ def run_episode(spec: PolicySpec, scenario: Scenario, seed: int) -> dict[str, An
     from fricenv.envs.factory import make_braking
 
     env = make_braking(spec.estimator, road=scenario.road, v0=scenario.v0, change_distance=CHANGE_DISTANCE,
-                       observation=spec.observation)
+                       observation=spec.observation, effects=list(scenario.effects) or None)
     try:
         return run_controller(_controller(spec, env), env, seed)
     finally:
@@ -188,17 +191,19 @@ def evaluate(policies: Sequence[str | PolicySpec], scenarios: Sequence[Scenario]
 
 def summarize(jobs, results) -> list[dict[str, Any]]:
     """Group episode results by (policy, scenario) into summary rows."""
-    groups: dict[tuple[str, str], dict[str, Any]] = {}
+    groups: dict[tuple[str, str, str], dict[str, Any]] = {}
     for (spec, sc, _), res in zip(jobs, results):
-        g = groups.setdefault((spec.label, sc.name), {"spec": spec, "res": []})
+        g = groups.setdefault((spec.label, sc.name, sc.cell), {"spec": spec, "effects": sc.effects, "res": []})
         g["res"].append(res)
     rows = []
-    for (label, scenario), g in groups.items():
+    for (label, scenario, cell), g in groups.items():
         ratios = np.array([r["ratio"] for r in g["res"]])
         rows.append({
             "policy": label,
             "estimator": g["spec"].estimator,
             "scenario": scenario,
+            "cell": cell,
+            "effects": [dict(e) for e in g["effects"]],
             "ratio_mean": float(np.mean(ratios)),
             "ratio_std": float(np.std(ratios)),
             "locks": int(sum(r["lock"] for r in g["res"])),
@@ -211,10 +216,13 @@ def summarize(jobs, results) -> list[dict[str, Any]]:
 
 def format_table(rows: Sequence[dict[str, Any]]) -> str:
     """A plain-text table: one line per (policy, scenario)."""
-    head = f"{'policy':<26} {'scenario':<14} {'ratio':>16} {'locks':>5} {'|slip-l*|':>9} {'stopped':>7}"
+    cells = any(r.get("cell", "nominal") != "nominal" for r in rows)
+    head = f"{'policy':<26} {'scenario':<14} " + (f"{'plant':<24} " if cells else "") + \
+        f"{'ratio':>16} {'locks':>5} {'|slip-l*|':>9} {'stopped':>7}"
     lines = [head, "-" * len(head)]
     for r in rows:
-        lines.append(f"{r['policy']:<26} {r['scenario']:<14} {r['ratio_mean']:>8.3f} +- {r['ratio_std']:<5.3f} "
+        plant = f"{r.get('cell', 'nominal'):<24} " if cells else ""
+        lines.append(f"{r['policy']:<26} {r['scenario']:<14} {plant}{r['ratio_mean']:>8.3f} +- {r['ratio_std']:<5.3f} "
                      f"{r['locks']:>5d} {r['slip_err_mean']:>9.3f} {r['stopped']:>3d}/{r['episodes']:<3d}")
     return "\n".join(lines)
 
@@ -237,9 +245,12 @@ def write_outputs(rows: Sequence[dict[str, Any]], out_dir: str | Path | None = N
         w = csv.DictWriter(fh, fieldnames=list(ROW_KEYS), lineterminator="\n")
         w.writeheader()
         for r in rows:
-            w.writerow({k: r[k] for k in ROW_KEYS})
+            w.writerow({k: json.dumps(r[k]) if k == "effects" else r.get(k, "nominal") if k == "cell" else r[k]
+                        for k in ROW_KEYS})
     written["csv"] = out / "results.csv"
-    written["png"] = _bar_chart(rows, out / "ratios.png", title)
+    cells = set(r.get("cell", "nominal") for r in rows)
+    chart = [r for r in rows if r.get("cell", "nominal") == "nominal"] if len(cells) > 1 else rows
+    written["png"] = _bar_chart(chart, out / "ratios.png", title)  # one plant per chart: the nominal of a grid
     return written
 
 
@@ -323,13 +334,11 @@ def _run_trainings(jobs: list[dict], workers: int, ray: str | None = None) -> li
 
 
 def _finished_run(run_dir: Path) -> dict | None:
-    import json
-
     meta, model = run_dir / "train.json", run_dir / "model.zip"
     return json.loads(meta.read_text()) if meta.is_file() and model.is_file() else None
 
 
-# Memory baselines of the headline comparison (issue 17): no estimate, but memory of the raw ECU observations.
+# Memory baselines of the headline comparison: no estimate, but memory of the raw ECU observations.
 MEMORY_BASELINES: dict[str, dict[str, Any]] = {
     "ppo-stack4": {"algo": "ppo", "frame_stack": 4},  # PPO on the last 4 observations
     "recurrent-ppo": {"algo": "recurrent-ppo"},  # sb3-contrib's RecurrentPPO (LSTM)
@@ -351,10 +360,26 @@ def _training_jobs(out: Path, estimators: Sequence[str], baselines: Sequence[str
             for name, kw in rows.items() for seed in train_seeds}
 
 
+def check_compare_args(estimators: Sequence[str], baselines: Sequence[str], pipeline: str,
+                       train_seeds: Sequence[int]) -> None:
+    """Validate the rows of :func:`compare_abs` before any training (ValueError naming the bad one)."""
+    from fricenv.envs.estimator_observation import check_estimator_name
+
+    for est in estimators:
+        check_estimator_name(est)
+    for name in baselines:
+        if name not in MEMORY_BASELINES:
+            raise ValueError(f"unknown memory baseline {name!r}; valid: {', '.join(MEMORY_BASELINES)}")
+    parse_policy(f"{PIPELINE_PREFIX}{pipeline}")
+    if not train_seeds:
+        raise ValueError("train_seeds must name at least one training seed")
+
+
 def compare_abs(out: str | Path, estimators: Sequence[str] = ("none", "ekf-rls", "oracle"),
                 algo: str = "ppo", steps: int = 300_000, pipeline: str = "ekf-rls", train_seeds: Sequence[int] = (0,),
                 seeds: int = DEFAULT_SEEDS, workers: int = 2, reuse: bool = False,
-                baselines: Sequence[str] = tuple(MEMORY_BASELINES), ray: str | None = None) -> dict[str, Any]:
+                baselines: Sequence[str] = tuple(MEMORY_BASELINES), ray: str | None = None,
+                scenarios: Sequence[Scenario] | None = None) -> dict[str, Any]:
     """Train every row on every training seed, then evaluate them with the rule ABS and the pipeline.
 
     :param out: directory; runs go to ``out/<row>-s<seed>`` (rows ``<algo>-<estimator>`` and the baselines).
@@ -369,19 +394,15 @@ def compare_abs(out: str | Path, estimators: Sequence[str] = ("none", "ekf-rls",
     :param baselines: memory baselines (:data:`MEMORY_BASELINES`) trained without estimates.
     :param ray: None (local processes), ``"auto"`` or a Ray cluster address: trainings and evaluation jobs run as
         Ray tasks (``out`` must then be on a file system every node sees).
+    :param scenarios: evaluation scenarios (default :data:`SCENARIOS`; the effect grid's:
+        :func:`agents.effect_scenarios.grid_scenarios`).
     :return: ``rows`` (:data:`COMPARE_KEYS` and more), ``training`` (:data:`TRAINING_KEYS` per run),
         ``evaluation_time_s``.
     """
     import time
 
-    from fricenv.envs.estimator_observation import check_estimator_name
-
     out = Path(out)
-    for est in estimators:
-        check_estimator_name(est)
-    parse_policy(f"{PIPELINE_PREFIX}{pipeline}")
-    if not train_seeds:
-        raise ValueError("train_seeds must name at least one training seed")
+    check_compare_args(estimators, baselines, pipeline, train_seeds)
     jobs = _training_jobs(out, estimators, baselines, algo, steps, train_seeds)
     metas = {key: _finished_run(job["out"]) if reuse else None for key, job in jobs.items()}
     todo = [key for key, meta in metas.items() if meta is None]
@@ -391,8 +412,8 @@ def compare_abs(out: str | Path, estimators: Sequence[str] = ("none", "ekf-rls",
         spec = parse_policy(str(job["out"]))
         specs.append(dataclasses.replace(spec, label=f"{spec.label}#s{job['seed']}"))
     t0 = time.perf_counter()
-    rows = evaluate(specs + ["rule-abs", f"{PIPELINE_PREFIX}{pipeline}"], seeds=seeds, workers=workers,
-                    ray=ray)
+    rows = evaluate(specs + ["rule-abs", f"{PIPELINE_PREFIX}{pipeline}"], scenarios=scenarios or SCENARIOS,
+                    seeds=seeds, workers=workers, ray=ray)
     for row in rows:
         label, _, seed = row["policy"].partition("#s")
         row["policy"], row["train_seed"] = label, int(seed) if seed else None

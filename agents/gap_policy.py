@@ -1,4 +1,4 @@
-"""Policy-level sim-to-real gap (issue 6, item 4): how far the simulator's prediction of a controller's stopping
+"""Policy-level sim-to-real gap: how far the simulator's prediction of a controller's stopping
 distance is off on the "real" plant, before and after the diagnosed effect is added to the simulator.
 
 For a controller (``rule-abs``, ``slip-pi``, ``oracle-slip``, ``locked``), an estimator pipeline
@@ -10,9 +10,9 @@ stopping distance, averaged over noise seeds (the same seeds in every simulator,
    ``fricenv gap simulate`` does); or, for a real log, nothing: only its diagnosis report is given;
 3. in the **augmented** (corrected) simulator: the nominal one plus the diagnosed effects with their fitted
    parameters. The typical
-   flow: the controller brakes the stand-in once more with a free-rolling start and that run is logged (DESIGN.md
-   log format); :func:`fricenv.gap.quarter_car.diagnose.diagnose` names the effect and fits it; or the verdict and parameters
-   come from a ``report.json``.
+   flow: the controller brakes the stand-in once more with a free-rolling start and that run is logged (the log
+   format of docs/contracts.md); :func:`fricenv.gap.quarter_car.diagnose.diagnose` names the effect and fits it; or
+   the verdict and parameters come from a ``report.json``.
 
 ``prediction_error_before = (d_nominal - d_real) / d_real`` and ``prediction_error_after = (d_augmented - d_real) /
 d_real`` (signed shares) say how far the simulator's prediction of the real stopping distance was off. Optionally
@@ -54,9 +54,10 @@ from agents.controllers import (
 )
 from agents.policy_spec import PolicySpecError, parse_policy_spec
 from fricenv.effects.quarter_car import DEFAULT_SUBSTEPS, EFFECTS, effect_params, make_effect
-from fricenv.envs import braking_core as core
+from fricenv.envs import config as core
 from fricenv.envs.effect_spec import describe_effects, effects_from_report
 from fricenv.envs.factory import make_braking
+from fricenv.envs.scenario import V0_DEFAULT, limit_distance
 from fricenv.gap.quarter_car.simulate import STAND_IN_SUBSTEPS, V_END, NoiseSpec
 from fricenv.logs import QuarterCarLog
 from fricenv.plants.tire import MagicFormula, get_road
@@ -75,7 +76,7 @@ __all__ = [
 
 FREE_ROLL = 0.4  # free-rolling stretch before the brake onset [s] (gap simulate draws 0.3-0.6 s)
 DEFAULT_SEEDS = 10  # noise seeds averaged over: rule-abs under an actuator effect has a bimodal distance
-V0 = core.V0_DEFAULT  # initial speed [m/s], the ABS figure's 20 m/s
+V0 = V0_DEFAULT  # initial speed [m/s], the ABS figure's 20 m/s
 LOG_MAX_TIME = 8.0  # longest closed-loop log handed to the diagnosis [s] (snow from 20 m/s takes ~7 s)
 LOG_STREAM = 0x6C6F67  # seed-sequence key of the log-only noise (v, a_x columns, free-roll wheel speed)
 # Retune grids: controller -> (parameter, values). rule-abs: the excess wheel deceleration that starts a dump from
@@ -99,7 +100,7 @@ class GapPolicy:
     :param kind: ``controller`` | ``pipeline`` | ``trained``.
     :param source: the spec string.
     :param estimator: estimator whose outputs the policy sees (``none`` for plain controllers).
-    :param config_kwargs: :class:`~fricenv.envs.braking_core.BrakingConfig` fields the policy needs.
+    :param config_kwargs: :class:`~fricenv.envs.config.BrakingConfig` fields the policy needs.
     """
 
     label: str
@@ -240,8 +241,8 @@ def stopping_distances(policy: GapPolicy, road: str | MagicFormula, effects: Seq
 def closed_loop_log(policy: GapPolicy, road: str | MagicFormula, effects: Sequence, seed: int, v0: float = V0,
                     free_roll: float = FREE_ROLL, substeps: int = STAND_IN_SUBSTEPS,
                     max_time: float = LOG_MAX_TIME, log_noise: NoiseSpec | None = None) -> QuarterCarLog:
-    """A DESIGN.md log of ``policy`` braking the stand-in: free roll, then the closed loop until the car is slower
-    than ``fricenv.gap.quarter_car.simulate.V_END`` (the stand-in's log end) or ``max_time`` has passed. Columns: the commanded
+    """A log (docs/contracts.md format) of ``policy`` braking the stand-in: free roll, then the closed loop until the
+    car is slower than ``fricenv.gap.quarter_car.simulate.V_END`` (the stand-in's log end) or ``max_time`` has passed. Columns: the commanded
     torque, the env's measured wheel speed, and the true speed and acceleration plus ``log_noise``."""
     road_mf = get_road(road) if isinstance(road, str) else road
     env = make_env(policy, road_mf, effects, v0, substeps)
@@ -373,7 +374,7 @@ def _gap_figures(pol: GapPolicy, road: MagicFormula, effects: Sequence, verdict:
                  runs: dict[str, list[Episode] | None], seed_list: list[int], v0: float) -> dict[str, Any]:
     """The distances, ratios and prediction errors of the three simulators (the ``--json`` keys)."""
     c = pol.config()
-    limit = float(core.limit_distance(v0, c.v_stop, road.mu_max, road.mu_max, math.inf, c.params.g))
+    limit = float(limit_distance(v0, c.v_stop, road.mu_max, road.mu_max, math.inf, c.params.g))
     keys = ("nominal", "augmented", "real")
     dist = {k: _mean(runs[k]) if runs[k] is not None else None for k in keys}
     d_real = dist["real"]

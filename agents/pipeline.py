@@ -24,7 +24,7 @@ After a failed or skipped update (health ``SOLVER_FAILED`` / ``INVALID_INPUT`` /
 at its last value (initially the peak of the nominal curve). ``OUTLIER`` stays out of ``USABLE``: its estimate rests
 on the gate's prediction of the wheel speed, not on a measurement, holding the reference for that sample costs
 nothing, and the gate re-initialises after ``max_rejections`` (10) in a row, fewer than ``STALE_STEPS`` (20), so
-outliers alone never make the estimate stale. Safe fallback (issue 17): when the estimate is stale
+outliers alone never make the estimate stale. Safe fallback: when the estimate is stale
 (no usable update for ``STALE_STEPS`` control steps in a row) or implausible (a non-finite or negative ``v_hat``, or
 one more than ``V_MARGIN`` below the measured wheel's surface speed ``omega_m r`` for ``BELOW_STEPS`` steps in a row,
 which braking never gives), the

@@ -22,7 +22,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from fricenv.envs.braking_core import SCENARIO_SEPARATOR
+from fricenv.envs.scenario import SCENARIO_SEPARATOR
 
 __all__ = ["CHANGE_PROBABILITY", "CHANGE_RANGE", "V0_RANGE", "ScenarioMix", "ScenarioSampler"]
 

@@ -11,7 +11,19 @@ file                              content
 ``checkpoints/``                  periodic checkpoints (model and VecNormalize statistics)
 ``tb/``                           TensorBoard logs (``tensorboard`` is a dependency; without it, a warning)
 ``train.json``                    env, estimator, algorithm, seed, steps, hyperparameters, wall time, steps/s
+``config.yml``                    what rl-zoo3 keeps: env id, algorithm, policy, steps, normalisation, frame
+                                  stack and the hyperparameters
+``env_kwargs.yml``                the keyword arguments of ``gymnasium.make(env_id, **env_kwargs)`` that
+                                  build the env the policy acts on (the estimator, the action map)
 ================================  ========================================================================
+
+The policy loads the standard way: ``PPO.load("model.zip")`` and ``VecNormalize.load("vecnormalize.pkl", venv)``
+on ``venv = DummyVecEnv([lambda: gymnasium.make(env_id, **env_kwargs)])`` (``VecNormalize.training = False``)
+give the same env commands as :func:`load_policy` (the action map is inside that env).
+
+Steps: PPO trains whole rollouts (``n_envs x n_steps`` env steps) and SAC whole rounds of its ``n_envs`` envs, so
+the trained steps are ``steps`` rounded up to that unit (:func:`agents.run_files.rounded_steps`); ``train.json``
+has both.
 
 Braking scenarios (:class:`ScenarioMix`): each episode draws either a preset road (dry, wet, snow, ice;
 probability ``1 - change_probability``) or a friction change between two different presets at a distance drawn
@@ -77,7 +89,7 @@ VEC_KINDS = ("auto", "native", "dummy", "subproc")
 @dataclass(frozen=True)
 class PPOConfig:
     """PPO hyperparameters (the ABS task's are in ``agents/hyperparams/braking.json``; these field defaults are the
-    ones tuned on Braking-v0 with randomised roads, 8 envs, before issue 17).
+    ones first tuned on Braking-v0 with randomised roads, 8 envs).
 
     The reward is dense (braking efficiency per step) and the slip dynamics are fast (tens of ms), so a short
     horizon (gamma 0.95, i.e. ~0.2 s) is enough and learns faster than the usual 0.99; rewards are normalised by
@@ -217,9 +229,10 @@ def _tensorboard_dir(out: Path) -> str | None:
     return str(out / "tb")
 
 
-def _checked_config(env: str, estimator: str, algo: str, steps: int, vec: str,
-                    config: PPOConfig | SACConfig | None) -> PPOConfig | SACConfig:
-    """Validate the arguments of :func:`train`; the hyperparameters to use."""
+def check_train_args(env: str, estimator: str, algo: str, steps: int, vec: str,
+                     config: PPOConfig | SACConfig | None) -> PPOConfig | SACConfig:
+    """Validate the arguments of :func:`train` (ValueError or TypeError naming the bad one); the hyperparameters
+    to use."""
     _check_choice(env, ENVS, "env")
     _check_choice(algo, ALGOS, "algo")
     _check_choice(vec, VEC_KINDS, "vec")
@@ -344,12 +357,12 @@ def train(out: str | Path, env: str = "braking", estimator: str = "none", algo: 
     :param env_kwargs: extra env arguments.
     :param verbose: SB3 verbosity.
     :param frame_stack: k > 0: the policy sees the last k observations (SB3's ``VecFrameStack``), the memory
-        baseline of issue 17; 0: the observation alone.
+        baseline; 0: the observation alone.
     """
     import torch
     from stable_baselines3.common.callbacks import CheckpointCallback
 
-    cfg = _checked_config(env, estimator, algo, steps, vec, config)
+    cfg = check_train_args(env, estimator, algo, steps, vec, config)
     torch.set_num_threads(1)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -374,11 +387,15 @@ def train(out: str | Path, env: str = "braking", estimator: str = "none", algo: 
     venv.close()
     trained = int(model.num_timesteps)
     meta = {"env": env, "estimator": estimator, "algo": algo, "seed": seed, "steps": trained,
+            "steps_requested": int(steps),
             "wall_time_s": wall, "steps_per_second": trained / wall, "cpu_time_s": cpu,
             "config": dataclasses.asdict(cfg),
             "vec": vec, "env_kwargs": env_kwargs or {}, "tensorboard": tb is not None,
             "torch_threads": torch.get_num_threads(), "frame_stack": frame_stack}
     write_json(out / META_FILE, meta)
+    from agents.run_files import write_zoo_files, zoo_files
+
+    write_zoo_files(out, *zoo_files(env, estimator, algo, cfg, trained, env_kwargs, frame_stack))
     return TrainResult(out=out, model_path=model_path, vecnormalize_path=vn_path, steps=trained, wall_time=wall,
                        steps_per_second=trained / wall, meta=meta)
 

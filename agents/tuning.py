@@ -1,4 +1,4 @@
-"""Optuna hyperparameter search for ``fricenv train`` on the ABS task (issue 17 item 2, issue 18 item 3), as
+"""Optuna hyperparameter search for ``fricenv train`` on the ABS task, as
 rl-baselines3-zoo does it: a seeded TPE sampler, a median pruner, and an objective that trains with
 :mod:`agents.training` and scores the policy on held-out episodes.
 
@@ -11,7 +11,7 @@ score every policy on the *tuning scenario set* (:data:`TUNING_SCENARIOS`: dry, 
     score = mean ratio + WORST_WEIGHT * (worst scenario's mean ratio - 1) + LOCK_PENALTY * (share of episodes
             with a wheel lock)                                                                   (lower is better)
 
-(the worst scenario counts because issue 17's target is every scenario within 5 %, not the mean: a policy that
+(the worst scenario counts because the target is every scenario within 5 %, not the mean: a policy that
 over-brakes wet by 25 % and is perfect elsewhere must not win).
 
 The stage's score is reported to the pruner, which stops a trial whose score is worse than the median of the
@@ -455,7 +455,8 @@ def _write(study, settings: TuneSettings, n_new: int, wall: float) -> TuneResult
     split = seed_split(settings)
     doc = {"_comment": (f"Optuna study {settings.study_name!r} (fricenv tune): best of {len(complete)} complete "
                         f"trial(s) per algorithm, {settings.steps} steps each, estimator {settings.estimator}; "
-                        f"score = mean ratio + {LOCK_PENALTY} x lock share on the tuning scenarios and seeds."),
+                        f"score = mean ratio + {WORST_WEIGHT} x (worst scenario's mean ratio - 1) + "
+                        f"{LOCK_PENALTY} x lock share on the tuning scenarios and seeds."),
            "_seeds": split,
            "_best": {algo: {"trial": t.number, "score": t.value} for algo, (t, _) in best_by_algo.items()}}
     doc.update({algo: dataclasses.asdict(cfg) for algo, (_, cfg) in best_by_algo.items()})

@@ -5,9 +5,9 @@ Formula parameters ``(theta, B, C, E)`` as constant augmented states (eqs. (19c)
 not estimated are held at fixed values (by default the paper's nominal eq. (18): theta = 0.6, B = 12, C = 1.3,
 E = 0).
 
-Continuous dynamics: the slip form eq. (6) of :func:`fricenv.plants.quarter_car.slip_form_derivatives`, written
-once more here as a CasADi expression because CasADi needs a symbolic graph; the Magic Formula's CasADi
-expression is :func:`magic_formula_casadi`, tested equal to :func:`fricenv.plants.tire.magic_formula`.
+Continuous dynamics: the slip form eq. (6), :func:`fricenv.plants.quarter_car.slip_ode` with the Magic Formula of
+:func:`fricenv.plants.tire.magic_formula`, the same functions evaluated over CasADi (``CASADI_NP``) to give the
+symbolic graph the solvers differentiate.
 Measurement eq. (7): ``y = omega = v (1 - lambda) / r``.
 
 Discretization: the slip equation is stiff (time constant ``v / (F_z mu'(lambda) (r^2/J + (1-lambda)/m))``, about
@@ -25,13 +25,17 @@ ABS operating range (v > 3 m/s, slip < 0.5) the estimators are run in.
 
 from __future__ import annotations
 
+import types
 from dataclasses import dataclass, field
 
 import casadi as ca
 import numpy as np
 
 from fricenv.plants import sui_johansen as sj
-from fricenv.plants.quarter_car import PAPER_PARAMS, QuarterCarParams
+from fricenv.plants.namespace import with_namespace
+from fricenv.plants.quarter_car import PAPER_PARAMS, QuarterCarParams, slip_ode
+from fricenv.plants.rosenbrock import ROS2_GAMMA
+from fricenv.plants.tire import magic_formula
 
 __all__ = [
     "BOUNDS",
@@ -55,22 +59,16 @@ BOUNDS: dict[str, tuple[float, float]] = {
     "E": (-7.5, 2.0),
 }
 V_FLOOR = 0.5  # [m/s] smallest speed in the model's 1/v (the estimators run above 3 m/s)
-ROS2_GAMMA = 1.0 + 1.0 / np.sqrt(2.0)  # L-stable ROS2 constant, as in the plant
 DEFAULT_SUBSTEPS = 3  # ROS2 substeps per 10 ms sample (5 ms each; see the module docstring)
 
 
-def magic_formula_casadi(lam, B, C, E, theta):
-    """The Magic Formula, eq. (2), as a CasADi expression (SX or MX); equals ``fricenv.plants.tire.magic_formula``.
-
-    :param lam: slip [-].
-    :param B: stiffness factor [-].
-    :param C: shape factor [-].
-    :param E: curvature factor [-].
-    :param theta: road condition coefficient [-].
-    :return: friction coefficient mu [-].
-    """
-    bs = B * lam
-    return theta * ca.sin(C * ca.atan(bs - E * (bs - ca.atan(bs))))
+# CasADi under numpy's names: the plant's plain-math formulas (fricenv.plants.namespace.with_namespace) build the
+# symbolic model from the same source as the numeric one.
+CASADI_NP = types.SimpleNamespace(arctan=ca.atan, sin=ca.sin, cos=ca.cos, maximum=ca.fmax, minimum=ca.fmin,
+                                  where=ca.if_else)
+# The Magic Formula, eq. (2), as a CasADi expression (SX or MX): fricenv.plants.tire.magic_formula over CASADI_NP.
+magic_formula_casadi = with_namespace(magic_formula, CASADI_NP)
+_slip_ode_casadi = with_namespace(slip_ode, CASADI_NP)  # eq. (6): fricenv.plants.quarter_car.slip_ode
 
 
 @dataclass(frozen=True)
@@ -136,10 +134,7 @@ class AugmentedModel:
         B, C, E, theta = self.road(x)
         v = ca.fmax(x[0], V_FLOOR)
         lam = x[1]
-        Fx = p.Fz * magic_formula_casadi(lam, B, C, E, theta)
-        vdot = -Fx / p.m  # (6a)
-        lamdot = (-((1.0 - lam) / p.m + p.r**2 / p.J) * Fx + p.r / p.J * Tb) / v  # (6b)
-        return vdot, lamdot
+        return _slip_ode_casadi(v, lam, Tb, B, C, E, theta, p.r, p.m, p.J, p.Fz)
 
     def step_sx(self, x, Tb):
         """One sample of the discrete model x+ = f(x, T_b), eq. (8a), as SX (ROS2 substeps)."""
@@ -223,7 +218,5 @@ class AugmentedModel:
 
     def mu(self, x, slip: float | None = None) -> float:
         """Friction coefficient of state ``x`` at its own slip (or at ``slip``)."""
-        from fricenv.plants.tire import magic_formula
-
         B, C, E, theta = self.road(np.asarray(x, dtype=float))
         return float(magic_formula(x[1] if slip is None else slip, B, C, E, theta))

@@ -7,7 +7,10 @@ built, so they keep heavy imports (torch, casadi, SB3) inside ``run``.
 :func:`main` is the one place where errors meet the user:
 
 * a user's mistake (a :class:`fricenv.errors.FricenvError`, a known domain error, a bad option, a missing or
-  unwritable file) prints one line ``fricenv VERB: error: ...`` on stderr and returns 2;
+  unwritable file, a verb that exits with a message) prints one line ``fricenv <full subcommand>: error: ...``
+  (``fricenv gap diagnose: error: ...``) on stderr and returns 2;
+* 1 means "finished, with failed rows": a fleet command (``gap diagnose DIR``) that ran every row and wrote its
+  table, where some rows failed (they are named in the table);
 * SIGINT (Ctrl-C) and SIGTERM stop the work and its worker processes, print one line and return 130 / 143;
 * a closed stdout (``fricenv ... | head``) ends the command quietly with 141;
 * anything else is a bug and keeps its traceback.
@@ -40,6 +43,7 @@ VERBS: dict[tuple[str, str | None], str] = {
     ("paper", "mhe"): "fricenv.commands.paper_mhe",
     ("paper", "ekf-rls"): "fricenv.commands.paper_ekf_rls",
     ("paper", "fms"): "fricenv.commands.paper_fms",
+    ("paper", "robustness"): "fricenv.commands.paper_robustness",
     ("excitation", None): "agents.commands.excitation",
     ("train", None): "agents.commands.train",
     ("tune", None): "agents.commands.tune",
@@ -172,9 +176,13 @@ class TqdmSink:
             self._bars.pop().close()
 
 
-def progress_sink(quiet: bool, stdout_is_terminal: bool) -> TqdmSink | None:
-    """The sink :func:`main` installs: a bar on stderr, or None with ``--quiet`` or when stdout is not a terminal."""
-    return None if quiet or not stdout_is_terminal else TqdmSink()
+def progress_sink(quiet: bool, stdout_is_terminal: bool, prog: str = "fricenv"
+                  ) -> TqdmSink | progress.LineSink | None:
+    """The sink :func:`main` installs: bars on stderr when stdout is a terminal, stage and progress lines on stderr
+    (:class:`fricenv.progress.LineSink`, prefixed with ``prog``) when it is not, None with ``--quiet``."""
+    if quiet:
+        return None
+    return TqdmSink() if stdout_is_terminal else progress.LineSink(prog)
 
 
 def _multiprocessing_helpers() -> set[int]:
@@ -322,6 +330,14 @@ def _interrupted(prog: str, signum: int) -> int:
     return EXIT_SIGNAL_BASE + signum
 
 
+def _strip_prog(message: str, prog: str) -> str:
+    """A message without a leading ``fricenv VERB:`` or ``error:`` of its own (the one format adds them)."""
+    for head in (f"{prog}: error:", f"{prog}:", "error:"):
+        if message.startswith(head):
+            return message[len(head):].strip()
+    return message
+
+
 def _fail(prog: str, message: str) -> None:
     print(f"{prog}: error: {message}", file=sys.stderr)
 
@@ -329,8 +345,8 @@ def _fail(prog: str, message: str) -> None:
 def _run_verb(args: argparse.Namespace) -> int:
     """Check the paths, then run the verb with the progress sink installed."""
     check_paths(args)
-    sink = progress_sink(args.quiet, sys.stdout.isatty())
-    args.show_progress = sink is not None
+    sink = progress_sink(args.quiet, sys.stdout.isatty(), args._prog)
+    args.show_progress = isinstance(sink, TqdmSink)  # a verb's own bars (SB3's) only on a terminal
     with progress.use_sink(sink):
         return int(args._run(args) or 0)
 
@@ -348,7 +364,7 @@ def _dispatch(argv: list[str] | None, context: dict, signals: _Signals) -> int:
         return _run_verb(args)
     except SystemExit as exc:  # --help, --version, or a verb that exits with a message
         if isinstance(exc.code, str):
-            print(" ".join(exc.code.split()), file=sys.stderr)
+            _fail(context["prog"], _strip_prog(" ".join(exc.code.split()), context["prog"]))
             return EXIT_USER_ERROR
         return 0 if exc.code is None else int(exc.code)
     except BrokenPipeError:  # stdout closed early (e.g. piped into head): stop quietly, as POSIX tools do

@@ -1,4 +1,4 @@
-"""Write a fleet of blind 5 s quarter-car logs for the fleet measurement of the README (issue 18).
+"""Write a fleet of blind 5 s quarter-car logs for the fleet measurement (docs/benchmarks.md).
 
 ``python -m tests.fleet_logs N SEED DIR`` writes ``DIR/log000.csv`` ... : ``fricenv.gap.quarter_car.validate``'s cases over its
 categories in turn (every library effect, ``none`` and out-of-library), through ``write_simulated_log`` without

@@ -1,8 +1,8 @@
 """The physics of the independent quarter-car simulator (:mod:`tests.independent_sim`): constants, the model
 integrated by RK4, and the three drivers.
 
-Written from DESIGN.md's equations only and sharing no code with :mod:`fricenv` (see :mod:`tests.independent_sim`,
-which re-exports every name here).
+Written from the papers' equations and the contracts (docs/contracts.md) only, sharing no code with
+:mod:`fricenv` (see :mod:`tests.independent_sim`, which re-exports every name here).
 """
 
 from __future__ import annotations
@@ -92,7 +92,7 @@ SINE_FREQ = (1.0, 6.0)  # modulation frequency [Hz]
 # ----------------------------------------------------------------------------------------------------- model
 @dataclass(frozen=True)
 class Vehicle:
-    """Quarter-car parameters (DESIGN.md plant 1)."""
+    """Quarter-car parameters (Sui & Johansen's plant)."""
 
     m: float = 325.0  # quarter-car mass [kg]
     J: float = 1.0  # wheel inertia [kg m^2]
@@ -128,7 +128,7 @@ class Road:
         return float(mu.max())
 
 
-ROADS = {  # DESIGN.md presets
+ROADS = {  # the road presets: dry and snow from Sui & Johansen, wet and ice simplified Pacejka
     "dry": Road(10.38, 1.65, 0.65663, 1.0, "dry"),
     "wet": Road(12.0, 2.3, 1.0, 0.82, "wet"),
     "snow": Road(14.395, 0.9, -6.439, 0.3, "snow"),
@@ -138,7 +138,7 @@ ROADS = {  # DESIGN.md presets
 
 @dataclass(frozen=True)
 class Effect:
-    """One effect by its DESIGN.md name (or an out-of-library name) with its parameters."""
+    """One effect by its contract name (or an out-of-library name) with its parameters."""
 
     name: str
     params: dict = field(default_factory=dict)

@@ -1,9 +1,9 @@
-"""An independent quarter-car braking simulator and log writer, for judging the gap tool (issue 6).
+"""An independent quarter-car braking simulator and log writer, for judging the gap tool.
 
 This module re-implements the braking physics ON PURPOSE (the one deliberate exception to "one piece of code per
 idea"): it shares no code and no discretisation with :mod:`fricenv.plants`, :mod:`fricenv.effects` or
 :mod:`fricenv.gap`, so that logs drawn from it measure the diagnosis on a source it has never seen. It is written from
-DESIGN.md's equations only:
+the papers' equations and the contracts (docs/contracts.md) only:
 
 - plant 1 (Sui & Johansen, eq. (1)): ``m v' = -F_x``, ``J w' = r F_x - T_b sign(w)``, ``F_x = F_z mu(lambda)``,
   Magic Formula eq. (2) ``mu = theta sin(C atan(B l - E (B l - atan(B l))))``, slip eq. (3) ``l = (v - w r) / v``;
@@ -11,11 +11,11 @@ DESIGN.md's equations only:
   mode ``r^2 F_z mu'(l) / (J v)`` is about 2.9e3 1/s at the 3 m/s stop speed on a stiff wet road, so
   ``h * rate`` < 0.9, inside RK4's real-axis stability limit 2.79), with a wheel-lock treatment: ``omega`` is
   clamped at 0, and a locked wheel stays locked while the brake torque exceeds the tire torque ``r F_x``;
-- the DESIGN.md effects with their contract names and parameters, and two physically real effects outside the
+- the library's effects with their contract names and parameters, and two physically real effects outside the
   library (road-induced vertical-load oscillation, temperature brake fade);
 - three drivers unlike the stand-in's: a human pedal press, a classic wheel-deceleration-threshold ABS working on the
   noisy measured wheel speed, and a sinusoidally modulated torque;
-- a CSV writer following DESIGN.md's log contract directly (not through :mod:`fricenv.logs`).
+- a CSV writer following the log contract of docs/contracts.md directly (not through :mod:`fricenv.logs`).
 
 The physics (constants, model, RK4, drivers) lives in :mod:`tests.independent_model`; every name is re-exported here.
 
@@ -119,7 +119,7 @@ class IndependentCase:
 
 
 def random_road(rng: np.random.Generator) -> Road:
-    """A DESIGN.md preset with B and theta perturbed (+-15 % / +-10 %), C and E as the preset."""
+    """A road preset with B and theta perturbed (+-15 % / +-10 %), C and E as the preset."""
     base = ROADS[list(ROADS)[int(rng.integers(len(ROADS)))]]
     return Road(B=base.B * (1 + ROAD_JITTER_B * rng.uniform(-1, 1)), C=base.C, E=base.E,
                 theta=base.theta * (1 + ROAD_JITTER_THETA * rng.uniform(-1, 1)), name=base.name)
@@ -238,7 +238,7 @@ def simulate_case(case: IndependentCase, veh: Vehicle = VEHICLE) -> dict:
 
 
 def write_csv(path: str | os.PathLike, cols: dict, columns: Sequence[str]) -> None:
-    """Write the DESIGN.md log: a neutral comment, header ``t,T_b,omega[,v][,a_x]``, rows (atomic rename)."""
+    """Write the contract log: a neutral comment, header ``t,T_b,omega[,v][,a_x]``, rows (atomic rename)."""
     names = ["t", "T_b", "omega"] + [c for c in ("v", "a_x") if c in columns]
     tmp = f"{path}.tmp"
     with open(tmp, "w") as fh:
@@ -314,7 +314,7 @@ def _diagnosable_log(tmp: str, case: IndependentCase) -> tuple[str, dict]:
 
 
 def _named_effects(dg) -> list[str]:
-    """The effects a diagnosis names: its selected set if it has one (issue 15), else its verdict."""
+    """The effects a diagnosis names: its selected set if it has one, else its verdict."""
     found = getattr(dg, "effects", None)
     if not found:
         return [dg.verdict]
@@ -378,7 +378,7 @@ def _selection_figures(out: dict, case: IndependentCase, dg) -> None:
 
 
 def right_or_untestable(row: dict) -> bool:
-    """A right verdict, or ``none`` on a log whose report lists the true effect as not testable (issue 15: ``none``
+    """A right verdict, or ``none`` on a log whose report lists the true effect as not testable (``none``
     then says "none of the testable effects", which is right; ``none`` where the effect was testable is wrong)."""
     return bool(row["right"]) or (row["verdict"] == "none" and row["expected"] in row.get("not_testable", ()))
 

@@ -1,4 +1,4 @@
-"""Odd logs that the reader accepts or rejects, for issue 15's "no log that the reader accepts makes the diagnosis
+"""Odd logs that the reader accepts or rejects, for the rule "no log that the reader accepts makes the diagnosis
 crash; every rejection names the file": no braking, a wheel speed that never moves, a wheel locked for good, a
 torque too large to be N m, a negative torque, a step in the wheel speed, no noise at all, half of ``v`` missing,
 ``v`` at zero, wheel-speed spikes on 10 % of the samples, a torque ramp, pure noise. Rates 10 Hz to 1 kHz, 1-6 s,
@@ -137,7 +137,7 @@ def run(n: int, seed: int) -> list[dict]:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Command line: ``python -m tests.odd_logs --n 24 --seed 1``; exit code 1 if any log crashed."""
-    ap = argparse.ArgumentParser(description="Diagnose odd logs; count crashes (issue 15).")
+    ap = argparse.ArgumentParser(description="Diagnose odd logs; count crashes.")
     ap.add_argument("--n", type=int, default=24)
     ap.add_argument("--seed", type=int, default=1)
     args = ap.parse_args(argv)

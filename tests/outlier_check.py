@@ -1,4 +1,4 @@
-"""Which wheel-speed outliers does the diagnosis set aside? Matched by time on blind logs (issue 15 item 2).
+"""Which wheel-speed outliers does the diagnosis set aside? Matched by time on blind logs.
 
 A real-like export (:mod:`tests.real_artifacts`) writes isolated outliers into the wheel speed and records where;
 the diagnosis reads the export through its map, resamples it onto its grid and, preparing it, sets aside what its

@@ -1,4 +1,4 @@
-"""Real logger artifacts applied to a clean contract log: a real-like log source for any test (issue 15, item 6).
+"""Real logger artifacts applied to a clean contract log: a real-like log source for any test.
 
 A clean log (uniform step, SI contract channels, as :mod:`tests.independent_sim` or the payload simulator writes it)
 goes in as a dict of arrays; out comes what a vehicle's CAN logger or a rig's acquisition would have written:

@@ -1,4 +1,4 @@
-"""Real-like payload logs for measuring the payload gap diagnosis (issue 15, item 6 and the payload target).
+"""Real-like payload logs for measuring the payload gap diagnosis.
 
 The cases are those of ``fricenv gap validate --plant payload`` (:mod:`fricenv.gap.payload.validate`: each library
 effect, none, and viscous damping outside the library), simulated at 1 ms and then exported through

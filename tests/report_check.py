@@ -1,4 +1,4 @@
-"""Does a report say true things about a blind log? Its power analysis (issue 15 item 4) and its sensor flags (item 2).
+"""Does a report say true things about a blind log? Its power analysis and its sensor flags.
 
 For every analysed effect the report gives the smallest deviation from "off" that its test detects half the time
 (``where["detectable"]``, :mod:`fricenv.gap.quarter_car.detectability`). On a blind log with one library effect the true size is
@@ -147,7 +147,7 @@ def shown_effects(effects: dict[str, dict], road: dict, dg, cfg) -> dict[str, bo
     shown, and no tool could name it from these data; the true set is not fitted, so "shown" is an upper bound of
     what a fit can find (as for the single-effect oracle).
 
-    :param effects: the log's effects, name -> true parameters (DESIGN.md names, SI units).
+    :param effects: the log's effects, name -> true parameters (contract names, SI units).
     :param road: the true road, keys ``B, C, E, theta``.
     :param dg: the log's diagnosis (its prepared data).
     :param cfg: the diagnosis settings (folds, fit settings, ``sig_z``).

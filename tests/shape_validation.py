@@ -1,4 +1,4 @@
-"""Validate the EKF/RLS curve-shape fit on fresh noise seeds (issue 17 item 3): per road, the share of samples after
+"""Validate the EKF/RLS curve-shape fit on fresh noise seeds: per road, the share of samples after
 settling whose estimated peak slip is the road's (within the test's tolerance), on the braking logs of
 ``tests/estimators/test_curve_shape.py``. The fit was tuned on noise seeds 1-20; report other seeds.
 

@@ -82,7 +82,7 @@ def test_wrong_way_import_breaks_a_contract(tmp_path, module, line, contract, ch
     assert chain in out, res.stdout
 
 
-# Test folders that must stay apart from the RL side (DESIGN.md: estimators are tested on their own), and what
+# Test folders that must stay apart from the RL side (estimators and plants are tested on their own), and what
 # they may not import, directly or through tests.* helpers.
 ISOLATED_TESTS = {"estimators": ("agents", "fricenv.envs", "stable_baselines3", "gymnasium"),
                   "plants": ("agents", "fricenv.envs", "stable_baselines3", "gymnasium")}

@@ -28,6 +28,7 @@ import numpy as np
 from estimators.base import Health, run
 from estimators.registry import make_estimator
 from fricenv.effects.grid import EFFECT_GRID, GRID_SIZES, grid_effect
+from fricenv.effects.quarter_car import make_effect
 from fricenv.gap.quarter_car.simulate import DRIVERS, simulate_log
 from fricenv.plants.quarter_car import PAPER_PARAMS
 from fricenv.plants.tire import ROADS
@@ -75,10 +76,10 @@ def run_cell(task: tuple) -> list[MismatchRow]:
     names, driver, road_name, seed, size, effects = task
     road = ROADS[road_name]
     log, truth = simulate_log([], road, driver, seed=seed)
-    t_mid = 0.5 * float(log.t[-1])
     rows = [MismatchRow(n, driver, road_name, seed, NOMINAL, *_errors(n, log, truth["v"])) for n in names]
     for effect in effects:
-        spec = grid_effect(effect, size, PAPER_PARAMS.r, road.theta, t_mid)
+        cell = grid_effect(effect, size, road_name, truth["v0"], PAPER_PARAMS)
+        spec = make_effect(cell["effect"], **cell["params"])
         elog, etruth = simulate_log([spec], road, driver, seed=seed)
         rows += [MismatchRow(n, driver, road_name, seed, effect, *_errors(n, elog, etruth["v"])) for n in names]
     return rows

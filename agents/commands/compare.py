@@ -9,6 +9,10 @@ and prints the table, a per-policy and training-seed summary (mean and worst rat
 and the training wall times. The budget is printed at the start. ``--excitation`` also trains excitation policies on PayloadExcitation-v0 with and without the RLS estimate
 S_hat in the observation and compares their time to E < 1e-2 and final E with the multi-sine and PRBS.
 
+``--effect-grid`` evaluates the rows on dry and wet at 20 m/s on every cell of the effect grid instead of the
+scenario set, and writes the robustness matrix (``robustness.txt``, ``robustness.json``, the heatmap
+``robustness.png``: policy x cell) into ``--out``; the classical rows keep their nominal tuning.
+
 ``--ray auto|ADDRESS`` runs the trainings and the evaluation episodes as Ray tasks (one CPU each) instead of
 ``--workers`` local processes: 'auto' joins the instance this machine runs or ``RAY_ADDRESS`` names, else starts a
 local one; an address joins that cluster (every node needs fricenv installed and ``--out`` on a shared path).
@@ -39,6 +43,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--baselines", nargs="*", default=list(DEFAULT_BASELINES),
                         help="memory baselines without estimates (default: %(default)s)")
     parser.add_argument("--seeds", type=int, default=3, help="evaluation seeds (default %(default)s)")
+    parser.add_argument("--effect-grid", action="store_true",
+                        help="evaluate every row on dry and wet at 20 m/s on every cell of the effect grid (the "
+                             "nominal plant, each effect at its low and high size) and write the robustness matrix")
     parser.add_argument("--workers", type=int, default=2, help="parallel processes (default %(default)s)")
     parser.add_argument("--ray", metavar="auto|ADDRESS", default=None,
                         help="run trainings and episodes as Ray tasks: 'auto' (a running instance, else a local "
@@ -58,6 +65,7 @@ def run(args) -> int:
     from pathlib import Path
 
     from agents.evaluation import (
+        check_compare_args,
         compare_abs,
         compare_excitation,
         format_table,
@@ -66,19 +74,29 @@ def run(args) -> int:
     )
     from fricenv.utils import write_json
 
+    from fricenv.errors import InvalidInputError, one_line
+
     out = Path(args.out)
+    if args.seeds < 1 or args.workers < 1 or args.steps < 1:
+        raise InvalidInputError("--seeds, --workers and --steps must be >= 1")
+    try:
+        check_compare_args(args.estimators, args.baselines, args.pipeline, args.train_seeds)
+    except ValueError as exc:
+        raise InvalidInputError(one_line(exc)) from None
+    scenarios = None
+    if args.effect_grid:
+        from agents.effect_scenarios import grid_scenarios
+
+        scenarios = grid_scenarios()
     n_runs = (len(args.estimators) + len(args.baselines)) * len(args.train_seeds)
     print(f"budget: {n_runs} trainings ({len(args.estimators)} estimator rows + {len(args.baselines)} memory "
           f"baselines) x {args.steps} steps on training seeds {args.train_seeds}, then evaluation over "
           f"{args.seeds} seeds, " + (f"on Ray {args.ray}" if args.ray else f"{args.workers} workers"))
     t0 = time.perf_counter()
-    try:
-        abs_result = compare_abs(out, estimators=args.estimators, algo=args.algo, steps=args.steps,
-                                 pipeline=args.pipeline, train_seeds=args.train_seeds, seeds=args.seeds,
-                                 workers=args.workers, reuse=args.reuse, baselines=args.baselines,
-                                 ray=args.ray)
-    except ValueError as exc:
-        raise SystemExit(f"fricenv compare: {exc}") from None
+    abs_result = compare_abs(out, estimators=args.estimators, algo=args.algo, steps=args.steps,
+                             pipeline=args.pipeline, train_seeds=args.train_seeds, seeds=args.seeds,
+                             workers=args.workers, reuse=args.reuse, baselines=args.baselines,
+                             ray=args.ray, scenarios=scenarios)
     rows = abs_result["rows"]
     print(format_table(rows))
     print()
@@ -98,6 +116,10 @@ def run(args) -> int:
               f"of training wall time on {args.workers} quiet cores")
     print(f"evaluation wall time {abs_result['evaluation_time_s']:.0f} s")
     written = write_outputs(rows, out, None, title="headline comparison")
+    if args.effect_grid:
+        from agents.commands.evaluate import _write_grid
+
+        written.update(_write_grid(rows, str(out), args.seeds))
     payload = None
     if args.excitation:
         payload = compare_excitation(out / "excitation", steps=args.payload_steps, seed=args.train_seeds[0],

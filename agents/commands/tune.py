@@ -3,8 +3,12 @@
 Each trial samples PPO's hyperparameters (``--algos ppo sac`` also searches SAC, the algorithm being one more
 parameter), trains with ``fricenv train``'s curriculum for ``--steps`` on the TUNING training seeds and, after each
 of ``--evals`` stages, scores the policy on the TUNING scenarios (dry, wet with its early peak, ice, dry->ice and
-ice->dry at 25 m/s) over the TUNING evaluation seeds: mean stopping-distance ratio + 0.1 x share of locked
-episodes (lower is better); the pruner stops trials worse than the median at the same stage.
+ice->dry at 25 m/s) over the TUNING evaluation seeds:
+
+    score = mean stopping-distance ratio + 0.5 x (worst scenario's mean ratio - 1) + 0.1 x share of locked episodes
+
+(lower is better; agents.tuning.WORST_WEIGHT and LOCK_PENALTY); the pruner stops trials worse than the median at
+the same stage.
 
 Seed split: tuning trains on seeds 100..899 (default 101; env seeds s*1000+i) and evaluates on reset seeds
 >= 900000 (default 900000, 900001), disjoint from the reset seeds 0..N-1 of ``fricenv evaluate`` and ``compare``

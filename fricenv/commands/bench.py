@@ -9,7 +9,7 @@ Targets (run one, or all when none is given):
   ppo         a fixed SB3 PPO training slice on the vector env: steps/s and the share of time spent in the env.
   gap         one 5 s log diagnosed by `fricenv gap diagnose` on 2 cores, with all channels and with t, T_b, omega
               only (wall seconds), with the compiled window simulator and projected Jacobian and with the numpy
-              simulator and forward differences (the path before issue 18) in the same run, and their ratio; the
+              simulator and forward differences (the reference path) in the same run, and their ratio; the
               speed reconstruction of the latter against its sample-by-sample reference (ms per call). Not part of
               "all": about a minute per repeat.
   training    PPO training speed as `fricenv train` runs it (committed hyperparameters): env-steps/s without

@@ -98,7 +98,7 @@ def format_table(results: list[dict]) -> str:
 def check_options(args) -> None:
     """Reject unknown roads and an impossible --v0 before any episode runs."""
     from fricenv.envs.braking import BrakingEnv
-    from fricenv.envs.braking_core import valid_road_names
+    from fricenv.envs.scenario import valid_road_names
 
     valid = [r for r in valid_road_names() if not r.startswith("random")]
     for road in [*args.roads, args.plot_road]:

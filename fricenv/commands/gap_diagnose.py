@@ -8,11 +8,11 @@ A fleet: fricenv gap diagnose logs/ --out fleet_dir (a folder: its *.csv logs; o
 --ray auto (or a Ray cluster address) runs them on Ray. A log that fails is a row with its error, and the exit
 code is then 1.
 
-Writes DIR/report.json (DESIGN.md schema), DIR/report.md and PNG plots (atomically: temporary name, then rename)
-and prints a short summary. --params FILE.json overrides the nominal vehicle parameters (m, J, r, Fz, g) and may
-hold a car section ({"car": {"mass": 790.0, "lf": 1.248, "lr": 1.7328}}); a car's session (a log with a throttle,
-yaw rate or several wheels) is diagnosed across its braking events (fricenv.gap.car); for
---plant payload (log columns t, M, f_x, f_y, theta, X, Y) it gives the known calibration "S" (3x3 row-major) and
+Writes DIR/report.json (the schema of docs/contracts.md), DIR/report.md and PNG plots (atomically: temporary
+name, then rename) and prints a short summary. --params FILE.json overrides the nominal vehicle parameters (m, J,
+r, Fz, g) and may hold a car section ({"car": {"mass": 790.0, "lf": 1.248, "lr": 1.7328}}); a car's session (a log
+with a throttle, yaw rate or several wheels) is diagnosed across its braking events (fricenv.gap.car); for --plant
+payload (log columns t, M, f_x, f_y, theta, X, Y) it gives the known calibration "S" (3x3 row-major) and
 optionally m, I_G, rho_x, rho_y.
 """
 
@@ -32,7 +32,8 @@ PLANTS = tuple(GAP_PLANTS)
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of ``fricenv gap diagnose``."""
     parser.add_argument("source", metavar="LOG",
-                        help="log CSV (DESIGN.md format), or a folder of *.csv logs or a quoted glob pattern (a fleet)")
+                        help="log CSV (docs/contracts.md format), or a folder of *.csv logs or a quoted glob "
+                             "pattern (a fleet)")
     parser.add_argument("--plant", default="quarter-car", help="plant of the log (default %(default)s)")
     parser.add_argument("--out", required=True, help="report directory")
     parser.add_argument("--params", metavar="FILE.json", help="nominal plant parameters (JSON object)")

@@ -1,4 +1,4 @@
-"""Write a quarter-car log from the real stand-in with chosen unmodelled effects (DESIGN.md log format).
+"""Write a quarter-car log from the real stand-in with chosen unmodelled effects (docs/contracts.md log format).
 
 Example: fricenv gap simulate --effect brake_lag --param tau=0.04 --road wet --driver abs --seed 3 --out log.csv
 

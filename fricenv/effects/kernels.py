@@ -2,11 +2,11 @@
 prediction windows in one call, element by element in machine code instead of numpy calls on small arrays.
 
 One formula: the physics is not written again here. The ROS2 substep is
-:func:`fricenv.plants.quarter_car_fast.ros2_core` (with the reference's refinement of unphysical substeps,
-:func:`fricenv.plants.quarter_car.refine_where_unphysical`, as bounded recursion), the relaxation plant is
+:func:`fricenv.plants.compiled.substep_refined` (:func:`fricenv.plants.rosenbrock.ros2_substep` with the reference's
+refinement of unphysical substeps, as bounded recursion), the relaxation plant is
 :func:`fricenv.effects.relaxation.relaxation_step_elementwise`, the Magic Formula, the slip and the drag force are
 :mod:`fricenv.plants.tire`'s and :func:`fricenv.effects.library.drag_force`: numba compiles those same Python
-functions (:func:`_compile`, which rebinds their callees to compiled ones). What is written here is the loop of
+functions (:func:`fricenv.plants.compiled.compile_formula`, which rebinds their callees to compiled ones). What is written here is the loop of
 :meth:`EffectSimulator.step` over substeps (actuator chain delay -> lag -> gain -> fade, road change, load transfer,
 sliding-speed friction, drag halves, pitch mode), elementwise. It is tested against ``EffectSimulator`` to 1e-12
 (``tests/effects/test_kernels.py``).
@@ -18,9 +18,6 @@ says so and the caller keeps the numpy simulator. numba is imported by this modu
 
 from __future__ import annotations
 
-import os
-import types
-
 import numba
 import numpy as np
 
@@ -29,9 +26,10 @@ from fricenv.effects import registry
 from fricenv.effects.batch import ModelBatch
 from fricenv.effects.library import drag_force
 from fricenv.effects.relaxation import RELAX_GAMMA, relaxation_step_elementwise
+from fricenv.plants import compiled
 from fricenv.plants import quarter_car as qc
-from fricenv.plants import quarter_car_fast as qcf
-from fricenv.plants.tire import longitudinal_slip, magic_formula
+from fricenv.plants.compiled import compile_formula, jit, substep_refined
+from fricenv.plants.tire import longitudinal_slip
 
 __all__ = ["PARAM_COLUMNS", "actuator_run", "simulate_windows", "supported"]
 
@@ -40,86 +38,12 @@ PARAM_COLUMNS = ("B", "C", "E", "theta", "tau", "delay", "gain", "sigma", "r_eff
                  "c2", "fade", "load", "slide")
 _INDEX_EPS = sim._INDEX_EPS  # EffectSimulator's delay index guard
 _PITCH_OMEGA, _PITCH_ZETA = sim._PITCH_OMEGA, sim._PITCH_ZETA  # EffectSimulator's pitch mode
-# the numpy error model: a float division by zero gives inf or NaN as in numpy (no Python exception check per
-# division, which also costs a branch in every division of the hot loop)
-_jit = numba.njit(cache=True, error_model="numpy")
-# numba's own thread pool, which survives a fork: the gap tool forks its worker processes after the main process
-# ran kernels in threads (GNU OpenMP, numba's first choice here, aborts a forked child that uses it)
-if "NUMBA_THREADING_LAYER" not in os.environ:
-    numba.config.THREADING_LAYER = "workqueue"
-
-
-@numba.njit(cache=True, error_model="numpy", inline="always")
-def _where(condition, x, y):
-    """``np.where`` on floats (numba's makes a 0-d array, which costs an allocation per call)."""
-    return x if condition else y
-
-
-# the numpy namespace the compiled copies of the library's formulas see: numpy with a scalar ``where``
-_NP = types.ModuleType("numpy_for_kernels")
-_NP.__dict__.update({k: getattr(np, k) for k in ("arctan", "sin", "cos", "exp", "maximum", "minimum", "isfinite")})
-_NP.where = _where
-
-
-_COMPILED: dict = {}  # Python function -> its compiled copy
-
-
-def _compile(func, seen: dict = _COMPILED):
-    """numba-compile ``func`` and, first, every plain Python function of fricenv it calls, rebound in a copy of its
-    globals (with :data:`_NP` for numpy), so that the library's own numpy formulas run compiled on floats."""
-    if func in seen:
-        return seen[func]
-    deps = {"np": _NP} if "np" in func.__code__.co_names else {}
-    for name in func.__code__.co_names:
-        g = func.__globals__.get(name)
-        if isinstance(g, types.FunctionType) and g.__module__.startswith("fricenv"):
-            deps[name] = _compile(g, seen)
-    rebound = types.FunctionType(func.__code__, {**func.__globals__, **deps}, func.__name__, func.__defaults__)
-    seen[func] = compiled = numba.njit(error_model="numpy")(rebound)
-    return compiled
-
-
-_ros2 = _compile(qcf.ros2_core)
-_mf = _compile(magic_formula)
-_slip = _compile(longitudinal_slip)
-_drag = _compile(drag_force)
-_relax = _compile(relaxation_step_elementwise)
-_GAMMA = qcf.ROS2_GAMMA
-_REFINE_PARTS = qc.REFINE_PARTS
-_REFINE_MIN_STEP = qc.REFINE_MIN_STEP
-
-
-@_jit
-def _substep_constants(h, r, m, J):
-    """:func:`quarter_car_fast.substep_constants` for rolling radius ``r`` (the same expressions)."""
-    hg = h * _GAMMA
-    return (r, hg / m, hg * r * r / J, hg * r / J, h / m, h * r / J, h / J)
-
-
-@_jit
-def _plant_substep(v, w, Tb, B, C, E, th, s1, h, k, m, J, Fz):
-    """One substep of :func:`quarter_car.step` for one car (``substeps=1``), the refinement included; ``s1`` is
-    ``mu(1)`` at ``theta = 1`` (the sliding friction per unit peak factor), ``k`` from :func:`_substep_constants`
-    for ``h``."""
-    road = (B, C, E, Fz * th, Fz * th * C * B, 1.0 - E, h * Fz * (th * s1) / m)
-    v_new, w_new, broken = _ros2(v, w, Tb, road, k)
-    if not broken or h <= _REFINE_MIN_STEP:
-        return v_new, w_new
-    return _refined(v, w, Tb, B, C, E, th, s1, h / _REFINE_PARTS, k[0], m, J, Fz)
-
-
-@_jit
-def _refined(v, w, Tb, B, C, E, th, s1, h, r, m, J, Fz):
-    """:func:`quarter_car.refine_where_unphysical`: :data:`REFINE_PARTS` substeps of ``h``, each refined again
-    while longer than ``REFINE_MIN_STEP`` (bounded recursion)."""
-    k = _substep_constants(h, r, m, J)
-    for _ in range(_REFINE_PARTS):
-        road = (B, C, E, Fz * th, Fz * th * C * B, 1.0 - E, h * Fz * (th * s1) / m)
-        v_new, w_new, broken = _ros2(v, w, Tb, road, k)
-        if broken and h > _REFINE_MIN_STEP:
-            v_new, w_new = _refined(v, w, Tb, B, C, E, th, s1, h / _REFINE_PARTS, r, m, J, Fz)
-        v, w = v_new, w_new
-    return v, w
+_jit = jit
+_compile = compile_formula
+_mf = compiled.magic_formula_f
+_slip = compiled.slip_f
+_drag = compile_formula(drag_force)
+_relax = compile_formula(relaxation_step_elementwise)
 
 
 @_jit
@@ -175,7 +99,7 @@ def _applied(cmd, k, j, par, Ta, energy, keep, spread, dt, substeps, flags):
 
 
 @_jit
-def _sample(cmd, k, par, x, keep, spread, s1, ks, dt, t0, substeps, flags, consts):
+def _sample(cmd, k, par, x, keep, spread, s1, dt, t0, substeps, flags, consts):
     """Advance one element by one sample (EffectSimulator.step); ``x`` = (v, w, Ta, lam_t, energy, pitch, rate)."""
     m, J, Fz, g = consts
     v, w, Ta, lt, energy, pitch, rate = x
@@ -194,7 +118,7 @@ def _sample(cmd, k, par, x, keep, spread, s1, ks, dt, t0, substeps, flags, const
         else:
             if flags[6]:
                 v = max(v - 0.5 * h * _drag(v, par[11], par[12]) / m, 0.0)
-            v, w = _plant_substep(v, w, torque, par[0], par[1], par[2], th, s1, h, ks, m, J, Fz)
+            v, w = substep_refined(v, w, torque, par[0], par[1], par[2], th, th * s1, h, par[8], m, J, Fz)
             if flags[6]:
                 v = max(v - 0.5 * h * _drag(v, par[11], par[12]) / m, 0.0)
         if flags[2]:
@@ -217,7 +141,6 @@ def _trajectory(cmd, k, p, v, w, Ta, lt, flags, dt, t0, substeps, consts, want_a
         e = np.exp(-h / p[4])
         keep, spread = e, p[4] / h * (1.0 - e)
     s1 = _mf(1.0, p[0], p[1], p[2], 1.0)
-    ks = _substep_constants(h, p[8], consts[0], consts[1])
     x = (v, w, Ta, lt, 0.0, 0.0, 0.0)
     H = out.shape[2]
     for jj in range(H):
@@ -227,7 +150,7 @@ def _trajectory(cmd, k, p, v, w, Ta, lt, flags, dt, t0, substeps, consts, want_a
             F = _tire_force(p, t0 + k * dt, h, x[0], x[1], x[3], x[5], flags, Fz)
             out[2, i, jj] = -(F + _drag(x[0], p[11], p[12])) / m
         if jj < H - 1:
-            x = _sample(cmd, k, p, x, keep, spread, s1, ks, dt, t0, substeps, flags, consts)
+            x = _sample(cmd, k, p, x, keep, spread, s1, dt, t0, substeps, flags, consts)
             k += 1
 
 
@@ -295,42 +218,14 @@ def _flags(b: ModelBatch) -> np.ndarray:
 
 
 def _guard_cache(namespace: dict | None = None, extra_modules: tuple[str, ...] = ()) -> None:
-    """Drop the on-disk compiled code when a module whose functions or constants it compiled in has changed.
+    """:func:`fricenv.plants.compiled.guard_cache` of the cached functions of ``namespace`` (default: this
+    module's), with the effects' formulas among the compiled-in modules.
 
-    numba checks a cached function against its own source file only: an edit of the Magic Formula or of the ROS2
-    substep in another module would otherwise leave the old formula compiled in. The dependencies' sources are
-    hashed next to the cache; a different hash flushes this module's cached functions once (they recompile).
-
-    :param namespace: the globals of the module whose cached functions are guarded (default: this module's).
+    :param namespace: the globals of the module whose cached functions are guarded.
     :param extra_modules: further modules they compile in (imported names).
     """
-    import hashlib
-    import pathlib
-    import sys
-
-    modules = [sys.modules[m] for m in ("fricenv.plants.tire", "fricenv.plants.quarter_car",
-                                        "fricenv.plants.quarter_car_fast", "fricenv.effects.relaxation",
-                                        "fricenv.effects.library", *extra_modules)]
-    digest = hashlib.sha256(b"".join(pathlib.Path(m.__file__).read_bytes() for m in modules)).hexdigest()
-    namespace = globals() if namespace is None else namespace
-    cached = [f for f in namespace.values() if isinstance(f, numba.core.registry.CPUDispatcher)
-              and getattr(f, "_cache", None) is not None and f._cache.__class__.__name__ == "FunctionCache"]
-    if not cached:
-        return
-    stamp = os.path.join(cached[0]._cache.cache_path, namespace["__name__"].rsplit(".", 1)[-1] + ".deps")
-    try:
-        with open(stamp) as fh:
-            if fh.read() == digest:
-                return
-    except OSError:
-        pass
-    for f in cached:
-        f._cache.flush()
-    try:
-        with open(stamp, "w") as fh:
-            fh.write(digest)
-    except OSError:  # a read-only install: numba then caches elsewhere or not at all
-        pass
+    compiled.guard_cache(globals() if namespace is None else namespace,
+                         ("fricenv.effects.relaxation", "fricenv.effects.library", *extra_modules))
 
 
 def supported(batch: ModelBatch) -> bool:

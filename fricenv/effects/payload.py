@@ -9,7 +9,7 @@
 
 :func:`simulate_payload_with_effects` is the payload's real stand-in: the rigid-body dynamics are those of
 :mod:`fricenv.plants.payload` (its accurate RK4 cascade), the effects act on the sensor reading (offset, calibration)
-and on the vision (delay). The diagnosis for payload logs is not implemented yet (issue 6, item 6).
+and on the vision (delay). The diagnosis of payload logs is :mod:`fricenv.gap.payload.diagnose`.
 """
 
 from __future__ import annotations
@@ -100,7 +100,7 @@ PAYLOAD_EFFECT_PARAMS: dict[str, tuple[str, ...]] = {n: tuple(f.name for f in fi
 
 @dataclass(frozen=True)
 class PayloadExcitation:
-    """What a payload log shows, for the effects' testability rules (issue 15 item 3).
+    """What a payload log shows, for the effects' testability rules.
 
     :param duration: log length [s].
     :param wrench_snr: the smallest, over the three wrench readings, of their spread over their noise std [-].

@@ -89,7 +89,7 @@ class FitContext:
 
 @dataclass(frozen=True)
 class Excitation:
-    """What a log shows, for the effects' testability rules (issue 15 item 3).
+    """What a log shows, for the effects' testability rules.
 
     :param has_v: the reference speed is logged.
     :param has_a_x: the longitudinal acceleration is logged.

@@ -5,7 +5,7 @@ One ``register`` call per environment, entry points as strings (the env module i
 
 from gymnasium.envs.registration import register, registry
 
-from fricenv.envs.braking_core import BrakingConfig
+from fricenv.envs.config import BrakingConfig
 
 # Truncation in control steps (time limit / control step) of every registered id: gym.make's TimeLimit and the
 # wrappers that read spec.max_episode_steps see the env's own episode length.

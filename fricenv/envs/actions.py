@@ -11,12 +11,13 @@ import numpy as np
 __all__ = ["check_action"]
 
 
-def check_action(action, shape: tuple[int, ...], hint: str = "") -> np.ndarray:
+def check_action(action, shape: tuple[int, ...], hint: str = "", column: bool = False) -> np.ndarray:
     """``action`` as an array of ``shape``, checked.
 
     :param action: what the caller passed to ``step``.
     :param shape: the action space's shape.
     :param hint: what the entries mean, appended to the shape in the error message (e.g. ``"(M, f_x, f_y)"``).
+    :param column: also accept a column ``shape + (1,)`` (one action entry per row), returned as ``shape``.
     :raises ValueError: a ragged or non-numeric action, a wrong shape, or a NaN/inf entry.
     """
     try:
@@ -25,8 +26,10 @@ def check_action(action, shape: tuple[int, ...], hint: str = "") -> np.ndarray:
         raise ValueError(f"action must be a numeric array of shape {shape}, got a ragged sequence {action!r}") from None
     if a.dtype.kind not in "fiu":
         raise ValueError(f"action must be numeric, got dtype {a.dtype}")
+    if column and a.shape == (*shape, 1):
+        a = a.reshape(shape)
     if a.shape != shape:
         raise ValueError(f"action must have shape {shape}{' ' + hint if hint else ''}, got shape {a.shape}")
-    if not np.all(np.isfinite(a)):
+    if not np.isfinite(a).all():
         raise ValueError(f"action must be finite, got {a.tolist()!r} (NaN or inf)")
     return a

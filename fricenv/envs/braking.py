@@ -1,5 +1,5 @@
 """``fricenv/Braking-v0``: straight-line ABS braking of a quarter car, a thin Gymnasium shell over
-:class:`fricenv.envs.braking_core.BrakingSim` with one car."""
+:class:`fricenv.envs.braking_sim.BrakingSim` with one car."""
 
 from __future__ import annotations
 
@@ -10,10 +10,12 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from fricenv.envs import braking_core as core
+from fricenv.envs import config as cfg
 from fricenv.envs.actions import check_action
+from fricenv.envs.braking_sim import BrakingSim
 from fricenv.envs.effect_plant import effect_plant_or_none
 from fricenv.envs.rendering import EpisodeHistory
+from fricenv.envs.scenario import RESET_OPTION_KEYS, V0_DEFAULT
 from fricenv.plants import quarter_car as qc
 from fricenv.plants.tire import MagicFormula
 
@@ -31,8 +33,10 @@ class BrakingEnv(gym.Env):
     ECU: every 10 ms it commands the brake torque, seeing only what an ECU sees (wheel speed, wheel deceleration,
     its own last command and the longitudinal acceleration, all noisy). Friction follows the Magic Formula of the
     road, which may change during the stop (e.g. dry -> ice at 15 m). The goal is the shortest stop without locking
-    the wheel. The physics run in substeps (default 2 ms) of the L-stable integrator of
-    :func:`fricenv.plants.quarter_car.step`, which handles wheel lock.
+    the wheel. The physics run in substeps (default 2 ms) of the L-stable Rosenbrock (ROS2) step of
+    :func:`fricenv.plants.rosenbrock.ros2_substep`, which handles wheel lock; a step of this env runs a control
+    step's substeps in one call of :func:`fricenv.envs.episode.car_substeps_compiled` (that ROS2 substep compiled
+    by numba, with the substep refinement of :func:`fricenv.plants.quarter_car.step`).
 
     ## Action Space
 
@@ -155,19 +159,19 @@ class BrakingEnv(gym.Env):
         self,
         render_mode: str | None = None,
         road: str | MagicFormula = "dry",
-        v0: float | tuple[float, float] = core.V0_DEFAULT,
+        v0: float | tuple[float, float] = V0_DEFAULT,
         change_distance: float | tuple[float, float] | None = None,
         action_mode: str = "torque",
         observation: str = "default",
-        t_max: float = core.T_MAX,
-        torque_rate_max: float = core.TORQUE_RATE_MAX,
-        v_stop: float = core.V_STOP,
-        time_limit: float = core.TIME_LIMIT,
-        physics_dt: float = core.PHYSICS_DT,
-        lock_penalty: float = core.LOCK_PENALTY,
-        decel_noise_std: float = core.DECEL_NOISE_STD,
-        ax_noise_std: float = core.AX_NOISE_STD,
-        omega_noise_var: float = core.OMEGA_NOISE_VAR,
+        t_max: float = cfg.T_MAX,
+        torque_rate_max: float = cfg.TORQUE_RATE_MAX,
+        v_stop: float = cfg.V_STOP,
+        time_limit: float = cfg.TIME_LIMIT,
+        physics_dt: float = cfg.PHYSICS_DT,
+        lock_penalty: float = cfg.LOCK_PENALTY,
+        decel_noise_std: float = cfg.DECEL_NOISE_STD,
+        ax_noise_std: float = cfg.AX_NOISE_STD,
+        omega_noise_var: float = cfg.OMEGA_NOISE_VAR,
         params: qc.QuarterCarParams = qc.PAPER_PARAMS,
         effects: Any = None,
         effects_randomization: Mapping[str, Any] | None = None,
@@ -176,13 +180,13 @@ class BrakingEnv(gym.Env):
             raise ValueError(f"unknown render_mode {render_mode!r}; valid: "
                              f"{', '.join(self.metadata['render_modes'])} or None")
         self.render_mode = render_mode
-        self.config = core.BrakingConfig(
+        self.config = cfg.BrakingConfig(
             physics_dt=physics_dt, t_max=t_max, torque_rate_max=torque_rate_max, v_stop=v_stop,
             time_limit=time_limit, omega_noise_var=omega_noise_var, decel_noise_std=decel_noise_std,
             ax_noise_std=ax_noise_std, lock_penalty=lock_penalty, action_mode=action_mode,
             observation=observation, params=params)
         plant = effect_plant_or_none(1, self.config, effects, effects_randomization)
-        self.sim = core.BrakingSim(1, self.config, road=road, v0=v0, change_distance=change_distance,
+        self.sim = BrakingSim(1, self.config, road=road, v0=v0, change_distance=change_distance,
                                    scalar=plant is None, plant=plant)
         self.dt = self.config.dt
         self.observation_fields = self.sim.layout
@@ -200,7 +204,7 @@ class BrakingEnv(gym.Env):
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         super().reset(seed=seed)
         if options is not None and not isinstance(options, dict):
-            raise ValueError(f"options must be a dict with keys from {core.RESET_OPTION_KEYS}, "
+            raise ValueError(f"options must be a dict with keys from {RESET_OPTION_KEYS}, "
                              f"got {type(options).__name__}")
         obs = self.sim.reset_cars([0], [self.np_random], options)
         if self.render_mode is not None:
@@ -213,8 +217,7 @@ class BrakingEnv(gym.Env):
     def step(self, action):
         if self.sim.scenarios[0] is None:
             raise gym.error.ResetNeeded("call reset() before step()")
-        a = check_action(action, (1,))
-        obs, reward, terminated, truncated = self.sim.step(a)
+        obs, reward, terminated, truncated = self.sim.advance(check_action(action, (1,)))
         term, trunc = terminated.item(0), truncated.item(0)
         if self.render_mode is not None:
             self._history.record(self.sim)
@@ -235,7 +238,7 @@ class BrakingEnv(gym.Env):
     # ------------------------------------------------------------------ helpers
     def decode_observation(self, obs) -> dict[str, float]:
         """Physical values (units of :attr:`observation_fields`) of an observation, by name."""
-        return core.decode_observation(self.observation_fields, obs)
+        return cfg.decode_observation(self.observation_fields, obs)
 
     @property
     def road(self) -> MagicFormula | None:

@@ -1,18 +1,17 @@
 """Batched braking simulation: ``n`` quarter cars stepped in one numpy call (no Gymnasium).
 
-:class:`BrakingSim` is the whole of the ``fricenv/Braking-v0`` environment except the Gymnasium shell: scenario
-(road, friction change, initial speed) from :mod:`fricenv.envs.braking_core`, and the episode of
-:mod:`fricenv.envs.episode` (brake actuator, physics substeps of a :class:`~fricenv.plants.braking_plant.
-BrakingPlant`, ECU measurement, wheel-lock detection, reward, termination and truncation, episode figures). Every
+:class:`BrakingSim` is the whole of the ``fricenv/Braking-v0`` environment except the Gymnasium shell: the scenario
+(road, friction change, initial speed) of :mod:`fricenv.envs.scenario`, and the episode (brake actuator, physics
+substeps of a :class:`~fricenv.plants.braking_plant.BrakingPlant`, ECU measurement, wheel-lock detection, reward,
+termination and truncation, episode figures) built from the functions of :mod:`fricenv.envs.episode`. Every
 per-step quantity is an array over the ``n`` cars; the batched step has no Python loop over cars, so a vector env
 can step 1024 cars at once, and :meth:`BrakingSim.reset_cars` resets any subset of cars (for per-env autoreset).
 
 Randomness. Each car owns a ``numpy.random.Generator``. At reset the car's scenario draws (random road, initial
 speed, change distance) come from it first, then the plant's per-episode draws (effect parameters of an
-effect-randomised plant; none for the nominal plant), then its measurement noise is drawn from it in blocks of
-:data:`~fricenv.envs.braking_core.NOISE_BLOCK` control steps (standard normals, one column per noisy channel) and
-consumed by index. A car therefore sees the same noise whether it is simulated alone or in a batch, and whatever
-the other cars do.
+effect-randomised plant; none for the nominal plant), then its measurement noise (:class:`~fricenv.envs.episode.
+NoiseBlocks`). A car therefore sees the same noise whether it is simulated alone or in a batch, and whatever the
+other cars do.
 """
 
 from __future__ import annotations
@@ -23,27 +22,26 @@ from typing import Any
 
 import numpy as np
 
-from fricenv.envs.braking_core import (
-    N_NOISE,
-    NOISE_BLOCK,
-    REACH_SPEED_SLACK,
-    RESET_OPTION_KEYS,
-    V0_DEFAULT,
-    BrakingConfig,
-    Scenario,
-    _as_index_array,
-    limit_distance,
-    observation_layout,
-    resolve_scenario,
+from fricenv.envs.actions import check_action
+from fricenv.envs.config import N_NOISE, REACH_SPEED_SLACK, BrakingConfig, observation_layout
+from fricenv.envs.episode import (
+    NoiseBlocks,
+    brake_torque,
+    car_substeps_compiled,
+    clip_float,
+    lock_count,
+    measure,
+    step_reward,
+    stop_crossing,
 )
-from fricenv.envs.episode import EpisodeSteps, brake_torque, measure
-from fricenv.plants.braking_plant import BatchPlant, BrakingPlant, ScalarPlant
+from fricenv.envs.scenario import RESET_OPTION_KEYS, V0_DEFAULT, Scenario, limit_distance, resolve_scenario
+from fricenv.plants.braking_plant import BatchPlant, BrakingPlant
 from fricenv.plants.tire import MagicFormula
 
 __all__ = ["BrakingSim"]
 
 
-class BrakingSim(EpisodeSteps):
+class BrakingSim:
     """``n`` quarter cars braking, each with its own scenario, noise generator and episode clock.
 
     Typical use::
@@ -55,21 +53,21 @@ class BrakingSim(EpisodeSteps):
     Arrays returned by :meth:`observe` and :meth:`step` are internal buffers, valid until the next call: copy
     them to keep them.
 
-    Plant. By default the nominal quarter car: :class:`~fricenv.plants.braking_plant.BatchPlant` (the ROS2
-    substep of :func:`fricenv.plants.quarter_car.step` with shared subexpressions, equal to it to 1e-12), or with
-    ``scalar=True`` (one car only) :class:`~fricenv.plants.braking_plant.ScalarPlant`, every step in Python floats,
-    several times faster for one car than numpy on 1-element arrays and equal to the batched path to about 1e-12
-    (``BrakingEnv`` uses it). ``plant=`` takes any other :class:`~fricenv.plants.braking_plant.BrakingPlant`, e.g.
-    :class:`fricenv.envs.effect_plant.EffectPlant` (the quarter car with unmodelled effects). Per-car state
-    (``v``, ``omega``, ``slip``, ``mu``, ``x``, ``t``, ``torque``, ``locked``, ``lock_seen``, ``stop_distance``,
-    ``limit``, ...) is public, read-only by convention.
+    Plant. By default the nominal quarter car, :class:`~fricenv.plants.braking_plant.BatchPlant` (the ROS2 substep
+    of :mod:`fricenv.plants.rosenbrock`, compiled). With ``scalar=True`` (one nominal car) a control step's
+    substeps run in one compiled call (:func:`fricenv.envs.episode.car_substeps_compiled`) and the rest of the step
+    in Python floats, several times faster for one car than numpy on 1-element arrays and equal to the batched path
+    to about 1e-12 (``BrakingEnv`` uses it). ``plant=`` takes any other
+    :class:`~fricenv.plants.braking_plant.BrakingPlant`, e.g. :class:`fricenv.envs.effect_plant.EffectPlant` (the
+    quarter car with unmodelled effects). Per-car state (``v``, ``omega``, ``slip``, ``mu``, ``x``, ``t``,
+    ``torque``, ``locked``, ``lock_seen``, ``stop_distance``, ``limit``, ...) is public, read-only by convention.
 
     :param n: number of cars.
     :param config: constants shared by all cars.
     :param road: default road spec for every car (see :func:`resolve_scenario`), overridable per reset.
     :param v0: default initial speed [m/s] or (low, high) range.
     :param change_distance: default friction-change distance [m] or range; None: 15 m (random-change: 5..30 m).
-    :param scalar: step the single car in Python floats (requires ``n == 1`` and no ``plant``).
+    :param scalar: step the single car in floats (requires ``n == 1`` and no ``plant``).
     :param plant: the plant of the ``n`` cars (default: the nominal one).
     """
 
@@ -95,7 +93,7 @@ class BrakingSim(EpisodeSteps):
         self._h = c.dt / c.substeps
         self._p = c.params
         self.plant = self._make_plant(plant)
-        self._road_rows: dict[MagicFormula, tuple[float, float, float, float]] = {}
+        self._road_rows: dict[MagicFormula, tuple[float, ...]] = {}  # (B, C, E, theta, mu(1)) per road
         self._reach_slack = REACH_SPEED_SLACK
         self._substeps, self._max_steps, self._lock_steps = c.substeps, c.max_steps, c.lock_steps
         # Observation scales with the torque entry's times t_max (the value scaled is T_b itself); scalar path:
@@ -105,7 +103,6 @@ class BrakingSim(EpisodeSteps):
         self._scale_t = self._scale * torque_scale
         self._obs64 = np.zeros((self.n, len(self.layout)))
         self._obs_consts = tuple(zip(self._scale_t.tolist(), self._low.tolist(), self._high.tolist()))
-        self._noise_sd = tuple(self._noise_std.tolist())
         n = self.n
         z = lambda: np.zeros(n)
         # Physical state and scenario, per car.
@@ -129,13 +126,8 @@ class BrakingSim(EpisodeSteps):
         self.stop_distance = np.full(n, np.nan)
         self.stop_time = np.full(n, np.nan)
         self.meas = np.zeros((n, N_NOISE))  # measured wheel speed, wheel decel, a_x
-        # Noise blocks, per car.
-        self.rngs: list[np.random.Generator | None] = [None] * n
-        self._noise = np.zeros((n, NOISE_BLOCK, N_NOISE))
-        self._noise_idx = np.zeros(n, dtype=np.intp)
-        self._noise_rows = self._noise.reshape(n * NOISE_BLOCK, N_NOISE)  # a view of the blocks
-        self._row_base = np.arange(n) * NOISE_BLOCK
-        self._arange = np.arange(n)
+        self.noise = NoiseBlocks(n, self._noise_std)
+        self.rngs = self.noise.rngs  # each car's generator
         # Output buffers.
         self._obs = np.zeros((n, len(self.layout)), dtype=np.float32)
         self.reward = z()
@@ -163,7 +155,15 @@ class BrakingSim(EpisodeSteps):
             per_car = list(options)
             if len(per_car) != len(idx):
                 raise ValueError(f"need one options dict per reset car: {len(idx)} cars, {len(per_car)} dicts")
-        c = self.config
+        self._draw_scenarios(idx, rngs, per_car)
+        self._start_episodes(idx)
+        if self.scalar or len(idx) == self.n:
+            return self.observe()
+        return self._observe_rows(idx)
+
+    def _draw_scenarios(self, idx: np.ndarray, rngs, per_car: list) -> None:
+        """Each reset car's generator, scenario, plant draws and noise block, in that order (see the module
+        docstring), and the per-car scenario arrays."""
         rows: list[tuple] = []  # per reset car: (B, C, E, theta) of road a and b, peaks, change distance, v0
         for k, i in enumerate(idx):
             opts = per_car[k]
@@ -174,24 +174,26 @@ class BrakingSim(EpisodeSteps):
                 spec = {**self.defaults, **opts}
             else:
                 spec = self.defaults
-            if rngs is not None:
-                self.rngs[i] = rngs[k]
-            elif self.rngs[i] is None:
-                self.rngs[i] = np.random.default_rng()
-            rng = self.rngs[i]
-            sc = resolve_scenario(spec["road"], spec["v0"], spec["change_distance"], c.v_stop, rng)
+            rng = rngs[k] if rngs is not None else self.rngs[i]
+            rng = np.random.default_rng() if rng is None else rng
+            self.rngs[i] = rng
+            sc = resolve_scenario(spec["road"], spec["v0"], spec["change_distance"], self.config.v_stop, rng)
             self.scenarios[i] = sc
             self.names[i] = sc.name
             self.plant.new_episode(int(i), rng)
-            rows.append((*self._road_row(sc.road_a), *self._road_row(sc.road_b), sc.road_a.mu_max,
+            rows.append((*self._road_constants(sc.road_a)[:4], *self._road_constants(sc.road_b)[:4], sc.road_a.mu_max,
                          sc.road_b.mu_max, sc.change_distance, sc.v0))
-            self._noise[i] = rng.standard_normal((NOISE_BLOCK, N_NOISE))
+            self.noise.start(int(i), rng)
         if rows:  # one write per array instead of one per car
             table = np.array(rows, dtype=float)
             self.road_a[idx], self.road_b[idx] = table[:, 0:4], table[:, 4:8]
             self.mu_peak_a[idx], self.mu_peak_b[idx] = table[:, 8], table[:, 9]
             self.change_distance[idx], self.v0[idx] = table[:, 10], table[:, 11]
-        self._noise_idx[idx] = 0
+
+    def _start_episodes(self, idx: np.ndarray) -> None:
+        """Cars ``idx`` at the start of their drawn scenario: free rolling at ``v0``, clocks and figures cleared,
+        the first measurement taken."""
+        c = self.config
         self.limit[idx] = limit_distance(self.v0[idx], c.v_stop, self.mu_peak_a[idx], self.mu_peak_b[idx],
                                          self.change_distance[idx], self._p.g)
         self.road[idx] = self.road_a[idx]
@@ -202,59 +204,23 @@ class BrakingSim(EpisodeSteps):
         self.v[idx] = self.v0[idx]
         self.omega[idx] = self.v0[idx] / self.plant.r_eff[idx]  # free rolling
         self.plant.reset(idx, self.v[idx], self.omega[idx])
-        self.x[idx] = 0.0
-        self.t[idx] = 0
-        self.torque[idx] = 0.0
-        self.slip[idx] = 0.0
-        self.mu[idx] = 0.0
-        self.lock_count[idx] = 0
-        self.locked[idx] = False
-        self.lock_seen[idx] = False
-        self.stopped[idx] = False
+        for name in ("x", "torque", "slip", "mu", "reward"):
+            getattr(self, name)[idx] = 0.0
+        for name in ("t", "lock_count", "locked", "lock_seen", "stopped", "terminated", "truncated"):
+            getattr(self, name)[idx] = 0
         self.stop_distance[idx] = np.nan
         self.stop_time[idx] = np.nan
-        self.reward[idx] = 0.0
-        self.terminated[idx] = False
-        self.truncated[idx] = False
-        noise = self._take_noise(idx)
+        if self.scalar:
+            self._set_car_roads()
+        noise = self.noise.take(idx)
         w, v = self.omega[idx], self.v[idx]  # at rest in the ECU's view: no previous sample, no decelerations
         for j, m in enumerate(measure(w, w, v, v, noise[:, 0], noise[:, 1], noise[:, 2], self._p.r, c.dt)):
             self.meas[idx, j] = m
-        if self.scalar or len(idx) == self.n:
-            return self.observe()
-        return self._observe_rows(idx)
-
-    def _take_noise(self, idx: np.ndarray | None = None) -> np.ndarray:
-        """The next noise row (scaled) of the given cars (all if None); refills exhausted blocks."""
-        if idx is None:  # every car: gather one row per car from the flat (n * NOISE_BLOCK, N_NOISE) view
-            pos = self._noise_idx
-            out = np.take(self._noise_rows, self._row_base + pos, axis=0)
-            out *= self._noise_std
-            pos += 1
-            if pos.max() >= NOISE_BLOCK:
-                for i in np.flatnonzero(pos >= NOISE_BLOCK):  # once every NOISE_BLOCK steps per car
-                    self._refill_noise(i)
-                    pos[i] = 0
-            return out
-        pos = self._noise_idx[idx]
-        out = self._noise[idx, pos] * self._noise_std
-        pos += 1
-        self._noise_idx[idx] = pos
-        full = pos >= NOISE_BLOCK
-        if full.any():
-            for i in idx[full]:  # once every NOISE_BLOCK steps per car
-                self._refill_noise(i)
-                self._noise_idx[i] = 0
-        return out
-
-    def _refill_noise(self, i: int) -> None:
-        """A new block of standard normals for car ``i`` from its generator."""
-        self._noise[i] = self.rngs[i].standard_normal((NOISE_BLOCK, N_NOISE))
 
     def _make_plant(self, plant: BrakingPlant | None) -> BrakingPlant:
-        """The given plant (checked), or the nominal one: :class:`ScalarPlant` if scalar, else :class:`BatchPlant`."""
+        """The given plant (checked), or the nominal one (:class:`BatchPlant`)."""
         if plant is None:
-            return ScalarPlant(self._h, self._p) if self.scalar else BatchPlant(self.n, self._h, self._p)
+            return BatchPlant(self.n, self._h, self._p)
         if not isinstance(plant, BrakingPlant):
             raise TypeError(f"plant must implement fricenv.plants.braking_plant.BrakingPlant, got "
                             f"{type(plant).__name__}")
@@ -262,34 +228,172 @@ class BrakingSim(EpisodeSteps):
             raise ValueError(f"plant has n={plant.n}, h={plant.h}; this sim needs n={self.n}, h={self._h}")
         return plant
 
-    def _road_row(self, road: MagicFormula) -> tuple[float, float, float, float]:
-        """(B, C, E, theta) of a road as floats, cached per road."""
+    def _road_constants(self, road: MagicFormula) -> tuple[float, ...]:
+        """(B, C, E, theta, mu(1)) of a road as floats, cached per road (the compiled substeps' road)."""
         row = self._road_rows.get(road)
         if row is None:
-            row = self._road_rows[road] = tuple(road.as_array().tolist())
+            row = self._road_rows[road] = (*road.as_array().tolist(), float(road.mu_locked))
         return row
 
-
     # ------------------------------------------------------------------ step
-    def command_to_torque(self, action: np.ndarray) -> np.ndarray:
-        """Brake torque [N m] after applying the (already clipped) normalized commands."""
-        return brake_torque(action, self.torque, self.config)
-
     def step(self, action, resetting=None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Advance every car by one control step.
 
-        :param action: normalized commands, shape (n,) (or (n, 1)); NaN raises ValueError, values outside
-            [-1, 1] are clipped.
+        :param action: normalized commands, shape (n,) (or (n, 1)); NaN, inf, a wrong shape or a non-numeric
+            action raise ValueError (:func:`fricenv.envs.actions.check_action`), values outside [-1, 1] are
+            clipped.
         :param resetting: cars (indices or mask) that the caller resets right after this step and whose results
             it discards (a vector env's next-step autoreset). They are advanced like the others, but draw nothing
             from their generators, so their next episode is the one a single env would draw.
         :return: (observation (n, obs_dim) float32, reward (n,), terminated (n,), truncated (n,)) buffers.
         """
+        return self.advance(check_action(action, (self.n,), "(one command per car)", column=True), resetting)
+
+    def advance(self, action: np.ndarray, resetting=None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`step` with an action the caller checked already (:func:`~fricenv.envs.actions.check_action`'s
+        result, shape (n,)): the one check of an env's step is its own."""
         if resetting is not None:
             # Rewind their noise cursor: no block refill (a generator draw) can happen in this step, and the
             # reset redraws the block anyway.
-            self._noise_idx[_as_index_array(resetting, self.n)] = 0
-        return self._step_scalar(action) if self.scalar else self._step_batch(action)
+            self.noise.pos[_as_index_array(resetting, self.n)] = 0
+        if self.scalar:
+            return self._step_scalar(float(action.item(0)))
+        return self._step_batch(np.clip(np.asarray(action, dtype=float), -1.0, 1.0))
+
+    def _step_batch(self, action) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`step` of ``n`` cars on arrays (``action`` checked and clipped)."""
+        a = action
+        c, p, plant = self.config, self._p, self.plant
+        self.torque = brake_torque(a, self.torque, c)
+        plant.set_torque(self.torque)
+        v_start, w_start = self.v, self.omega
+        energy, travel = self._substeps_batch()
+        v, w = self.v, self.omega = plant.v.copy(), plant.omega.copy()
+        self.t += 1
+        self.slip = plant.slip()
+        self.mu = plant.friction(self.slip)
+        self.lock_count = lock_count(self.lock_count, w, v, plant.r_eff, c)
+        self.locked = self.lock_count > c.lock_steps
+        self.lock_seen |= self.locked
+        noise = self.noise.take()
+        self.meas[:, 0], self.meas[:, 1], self.meas[:, 2] = measure(
+            w, w_start, v, v_start, noise[:, 0], noise[:, 1], noise[:, 2], p.r, c.dt)
+        self.reward = step_reward(energy, travel, self.limit, self.locked, c.lock_penalty)
+        self.terminated = self.stopped.copy()
+        self.truncated = (self.t >= self._max_steps) & ~self.terminated
+        return self.observe(), self.reward, self.terminated, self.truncated
+
+    def _substeps_batch(self) -> tuple[np.ndarray, np.ndarray]:
+        """The physics substeps of one control step: distance, stop crossing, road switch, braking energy.
+
+        Substep sums (scaled once at the end): ssum = sum of (v_k + v_k+1), so x = x0 + h/2 ssum (trapezoid: the
+        speed is nearly linear over a substep); esum = sum of (v_k^2 - v_k+1^2) and tsum = sum of (v_k + v_k+1)
+        while above v_stop, so the braking energy is esum / (2 g mu_peak) and the travel h/2 tsum.
+
+        :return: (energy, travel) [m] of the step per car.
+        """
+        c, plant, n, v_stop = self.config, self.plant, self.n, self.config.v_stop
+        half_h = 0.5 * self._h
+        v, x0 = self.v, self.x
+        ssum, esum, tsum, energy = np.zeros(n), np.zeros(n), np.zeros(n), np.zeros(n)
+        inv_2g_mu = 1.0 / (2.0 * self._p.g * self.mu_peak)
+        # Road switches are checked only if some car can reach its change point in this step.
+        check_switch = float((self._next_change - x0).min()) <= c.dt * (float(v.max()) + self._reach_slack)
+        v_above = v.min() > v_stop  # every car above the stop speed at the start of the substep
+        for sub in range(c.substeps):
+            v_new = plant.substep()[0]
+            s = v + v_new
+            d = (v - v_new) * s  # v_k^2 - v_k+1^2
+            new_above = v_new.min() > v_stop
+            if not (v_above and new_above):  # some car at or below the stop speed: mask it, locate crossings
+                active = v > v_stop
+                d *= active
+                s_act = s * active
+                cross = np.flatnonzero(active & (v_new <= v_stop))
+                if cross.size:
+                    d[cross], s_act[cross] = self._stop_in_substep(cross, sub, v, v_new, s, x0 + half_h * ssum)
+                s_tot = s_act
+            else:
+                s_tot = s
+            esum += d
+            tsum += s_tot
+            ssum += s
+            v, v_above = v_new, new_above
+            if check_switch:
+                switch = np.flatnonzero(x0 + half_h * ssum >= self._next_change)
+                if switch.size:
+                    energy[switch] += esum[switch] * inv_2g_mu[switch]  # close the energy segment on road a
+                    esum[switch] = 0.0
+                    self._switch_road(switch)
+                    inv_2g_mu = 1.0 / (2.0 * self._p.g * self.mu_peak)
+        energy += esum * inv_2g_mu  # sum of (v^2 drop) / (2 g mu_peak) over substeps [m]
+        self.x = x0 + ssum * half_h
+        return energy, tsum * half_h
+
+    def _stop_in_substep(self, cross, sub: int, v, v_new, s, x_start) -> tuple[np.ndarray, np.ndarray]:
+        """Record the stop of the cars ``cross`` that fall through ``v_stop`` in substep ``sub`` (first time only);
+        return their ``v^2`` drop and speed sum down to ``v_stop``."""
+        v_stop = self.config.v_stop
+        vc, vn = v[cross], v_new[cross]
+        frac, tfrac = stop_crossing(vc, vn, v_stop)
+        first = ~self.stopped[cross]  # cars stopping for the first time this episode
+        idx = cross[first]
+        self.stop_distance[idx] = (x_start[cross] + frac * (0.5 * self._h * s[cross]))[first]
+        self.stop_time[idx] = ((self.t[cross] + (sub + tfrac) / self.config.substeps) * self.config.dt)[first]
+        self.stopped[cross] = True
+        return vc * vc - v_stop * v_stop, frac * s[cross]
+
+    def _switch_road(self, idx) -> None:
+        """Cars ``idx`` pass their friction-change point: road b from now on."""
+        self.road[idx] = self.road_b[idx]
+        if self.scalar:  # the road's constants are at hand: the car's road after the change, from now on
+            self._car_roads[0] = self._car_roads[1]
+            self._inv_2g_mu = (self._inv_2g_mu[1], self._inv_2g_mu[1])
+            self.plant.set_road_constants(idx, self._car_roads[1])
+        else:
+            self.plant.set_road(idx, self.road[idx])
+        self.mu_peak[idx] = self.mu_peak_b[idx]
+        self.switched[idx] = True
+        self._next_change[idx] = np.inf
+
+    def _set_car_roads(self) -> None:
+        """The one car's road constants and ``1 / (2 g mu_max)`` before and after its change point (scalar path)."""
+        sc, g = self.scenarios[0], self._p.g
+        self._car_roads = np.array([self._road_constants(sc.road_a), self._road_constants(sc.road_b)])
+        self._inv_2g_mu = (1.0 / (2.0 * g * sc.road_a.mu_max), 1.0 / (2.0 * g * sc.road_b.mu_max))
+
+    def _step_scalar(self, a: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`step` of the one nominal car: its substeps in one compiled call, the rest in floats."""
+        c, p, plant = self.config, self._p, self.plant
+        Tb = brake_torque(clip_float(a, -1.0, 1.0), self.torque.item(0), c, clip_float)
+        v_start, w_start = self.v.item(0), self.omega.item(0)
+        stopped_before = self.stopped.item(0)
+        inv_a, inv_b = self._inv_2g_mu
+        v, w, x, energy, travel, stopped, stop_x, stop_sub, switched, slip, mu = car_substeps_compiled(
+            v_start, w_start, self.x.item(0), Tb, self._car_roads, self._next_change.item(0), stopped_before,
+            self._substeps, self._h, c.v_stop, inv_a, inv_b, p.r, p.m, p.J, p.Fz)
+        plant.v[0], plant.omega[0] = v, w
+        if switched:
+            self._switch_road([0])
+        if stopped and not stopped_before:  # the first stop of the episode, in this step
+            self.stop_distance[0] = stop_x
+            self.stop_time[0] = (self.t.item(0) + stop_sub / self._substeps) * c.dt
+        self.v[0], self.omega[0], self.torque[0], self.x[0], self.stopped[0] = v, w, Tb, x, stopped
+        self.t[0] = steps = self.t.item(0) + 1
+        self.slip[0], self.mu[0] = slip, mu
+        count = lock_count(self.lock_count.item(0), w, v, plant.r_eff.item(0), c)
+        self.lock_count[0] = count
+        locked = count > self._lock_steps
+        self.locked[0] = locked
+        if locked:
+            self.lock_seen[0] = True
+        n0, n1, n2 = self.noise.take_one()
+        m0, m1, m2 = measure(w, w_start, v, v_start, n0, n1, n2, p.r, c.dt)
+        self.meas[0, 0], self.meas[0, 1], self.meas[0, 2] = m0, m1, m2
+        self.reward[0] = step_reward(energy, travel, self.limit.item(0), locked, c.lock_penalty)
+        self.terminated[0] = stopped
+        self.truncated[0] = steps >= self._max_steps and not stopped
+        return self._observe_scalar(m0, m1, Tb, m2, v, slip, mu), self.reward, self.terminated, self.truncated
 
     def accel(self) -> np.ndarray:
         """True longitudinal acceleration [m/s^2] of every car now (the plant's, as an accelerometer reads it)."""
@@ -343,12 +447,6 @@ class BrakingSim(EpisodeSteps):
         """Stopping distance / physical-limit distance (NaN until a car stops)."""
         return self.stop_distance / self.limit
 
-    def info_arrays(self) -> dict[str, Any]:
-        """Per-step truth of every car as arrays (for a vector env's info dict); ``road`` is a list of names."""
-        return {"v": self.v.copy(), "slip": self.slip.copy(), "mu": self.mu.copy(), "distance": self.x.copy(),
-                "road": list(self.names), "torque": self.torque.copy(), "locked": self.locked.copy(),
-                "time": self.t * self.config.dt}
-
     def car_info(self, i: int, final: bool = False) -> dict[str, Any]:
         """The info dict of car ``i``: truth every step, episode figures when ``final``."""
         info = {
@@ -381,3 +479,17 @@ class BrakingSim(EpisodeSteps):
             "v0": float(self.v0[i]),
         }
 
+
+def _as_index_array(cars, n: int) -> np.ndarray:
+    """Car indices from a boolean mask of length n, an index sequence, or None (all cars)."""
+    if cars is None:
+        return np.arange(n)
+    arr = np.asarray(cars)
+    if arr.dtype == bool:
+        if arr.shape != (n,):
+            raise ValueError(f"car mask must have shape ({n},), got {arr.shape}")
+        return np.flatnonzero(arr)
+    arr = np.atleast_1d(arr).astype(np.intp, copy=False)
+    if arr.size and (arr.min() < 0 or arr.max() >= n):
+        raise ValueError(f"car indices must be in [0, {n}), got {arr.tolist()}")
+    return arr

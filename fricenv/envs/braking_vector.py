@@ -1,7 +1,7 @@
 """Native vector env for ``fricenv/Braking-v0``: all sub-envs step in one batched plant call.
 
 ``gymnasium.make_vec("fricenv/Braking-v0", num_envs=N, vectorization_mode="vector_entry_point")`` builds a
-:class:`BrakingVectorEnv`: one :class:`fricenv.envs.braking_core.BrakingSim` over ``N`` quarter cars instead of ``N``
+:class:`BrakingVectorEnv`: one :class:`fricenv.envs.braking_sim.BrakingSim` over ``N`` quarter cars instead of ``N``
 Python env objects, so a step costs one set of numpy calls over ``N`` cars.
 
 Equivalence with single envs. Sub-env ``i`` is the same process as a single ``BrakingEnv`` with the same arguments:
@@ -50,14 +50,16 @@ from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from fricenv.envs import braking_core as core
+from fricenv.envs import config as cfg
+from fricenv.envs.braking_sim import BrakingSim
 from fricenv.envs.effect_plant import effect_plant_or_none
+from fricenv.envs.scenario import RESET_OPTION_KEYS, V0_DEFAULT, resolve_scenario
 from fricenv.plants.tire import MagicFormula
 
 __all__ = ["CONFIG_KWARGS", "FINAL_INFO_KEYS", "STEP_INFO_KEYS", "BrakingVectorEnv"]
 
 # Keyword arguments that go to BrakingConfig (the same names as BrakingEnv's); dt is fixed by the env.
-CONFIG_KWARGS = tuple(f.name for f in dataclasses.fields(core.BrakingConfig) if f.name != "dt")
+CONFIG_KWARGS = tuple(f.name for f in dataclasses.fields(cfg.BrakingConfig) if f.name != "dt")
 STEP_INFO_KEYS = ("v", "slip", "mu", "distance", "road", "torque", "locked", "time")
 FINAL_INFO_KEYS = ("stopping_distance", "limit_distance", "ratio", "lock_seen", "stopped", "v0")
 STOP_KEYS = ("stopping_distance", "ratio")  # present (mask True) only for sub-envs that stopped
@@ -94,7 +96,7 @@ class BrakingVectorEnv(VectorEnv):
     metadata: ClassVar[dict[str, Any]] = {"render_modes": [], "autoreset_mode": AutoresetMode.NEXT_STEP}
 
     def __init__(self, num_envs: int = 1, *, road: str | MagicFormula | Sequence = "dry",
-                 v0: float | tuple[float, float] = core.V0_DEFAULT,
+                 v0: float | tuple[float, float] = V0_DEFAULT,
                  change_distance: float | tuple[float, float] | None = None,
                  autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
                  max_episode_steps: int | None = None, render_mode: str | None = None, effects: Any = None,
@@ -119,18 +121,18 @@ class BrakingVectorEnv(VectorEnv):
             if not isinstance(max_episode_steps, (int, np.integer)) or max_episode_steps < 1:
                 raise ValueError(f"max_episode_steps must be an int >= 1 or None, got {max_episode_steps!r}")
             # The registration's limit (6000 steps = the default 60 s) never lengthens a shorter time_limit.
-            limit = int(max_episode_steps) * core.CONTROL_DT
+            limit = int(max_episode_steps) * cfg.CONTROL_DT
             config_kwargs["time_limit"] = min(config_kwargs.get("time_limit", limit), limit)
         self.num_envs = n = int(num_envs)
-        self.config = core.BrakingConfig(**config_kwargs)
+        self.config = cfg.BrakingConfig(**config_kwargs)
         self._env_roads = self._per_env_roads(road, "road")
         first_road = self._env_roads[0] if self._env_roads is not None else road
         plant = effect_plant_or_none(n, self.config, effects, effects_randomization)
-        self.sim = core.BrakingSim(n, self.config, road=first_road, v0=v0, change_distance=change_distance,
+        self.sim = BrakingSim(n, self.config, road=first_road, v0=v0, change_distance=change_distance,
                                    scalar=n == 1 and plant is None, plant=plant)  # one car: the Python-float path
         if self._env_roads is not None:  # validate every per-env road now, not at the first reset
             for spec in self._env_roads:
-                core.resolve_scenario(spec, v0, change_distance, self.config.v_stop, np.random.default_rng(0))
+                resolve_scenario(spec, v0, change_distance, self.config.v_stop, np.random.default_rng(0))
         self.render_mode = None
         self.metadata = {**type(self).metadata, "autoreset_mode": self.autoreset_mode}
         self.dt = self.config.dt
@@ -218,7 +220,7 @@ class BrakingVectorEnv(VectorEnv):
         """
         n = self.num_envs
         if options is not None and not isinstance(options, dict):
-            raise ValueError(f"options must be a dict with keys from {core.RESET_OPTION_KEYS + (RESET_MASK_KEY,)}, "
+            raise ValueError(f"options must be a dict with keys from {RESET_OPTION_KEYS + (RESET_MASK_KEY,)}, "
                              f"got {type(options).__name__}")
         if seed is None:
             seeds = [None] * n
@@ -261,17 +263,12 @@ class BrakingVectorEnv(VectorEnv):
         """
         if not self._was_reset:
             raise RuntimeError("call reset() before step()")
-        a = np.asarray(actions)
-        if a.dtype.kind not in "fiu":
-            raise ValueError(f"actions must be numeric, got dtype {a.dtype}")
         n, s = self.num_envs, self.sim
-        if a.shape not in ((n, 1), (n,)):
-            raise ValueError(f"actions must have shape ({n}, 1) (one command per sub-env), got {a.shape}")
         mode = self.autoreset_mode
         pending = np.flatnonzero(self._autoreset) if mode is AutoresetMode.NEXT_STEP else None
         # Cars pending a next-step autoreset are advanced with the rest (one batched call) and their result is
         # thrown away; `resetting` keeps that step from drawing on their generators.
-        obs = s.step(a.reshape(n), resetting=pending if pending is not None and pending.size else None)[0]
+        obs = s.step(actions, resetting=pending if pending is not None and pending.size else None)[0]
         reward = s.reward.copy()
         terminated = s.terminated.copy()
         truncated = s.truncated.copy()

@@ -113,7 +113,7 @@ def effect_plant_or_none(n: int, config, effects=None, effects_randomization=Non
     exactly the plain env) when both give no effect, else an :class:`EffectPlant`.
 
     :param n: number of cars.
-    :param config: the env's :class:`~fricenv.envs.braking_core.BrakingConfig`.
+    :param config: the env's :class:`~fricenv.envs.config.BrakingConfig`.
     :param effects: see :func:`fricenv.envs.effect_spec.resolve_effects`.
     :param effects_randomization: see :func:`fricenv.envs.effect_spec.parse_randomization`.
     :raises fricenv.envs.effect_spec.EffectSpecError: unknown or malformed effects.

@@ -2,23 +2,22 @@
 the substep), the wheel-lock counter, the ECU measurement, the reward, written once.
 
 The model is a handful of pure functions below (:func:`brake_torque`, :func:`stop_crossing`, :func:`lock_count`,
-:func:`measure`, :func:`step_reward`): plain arithmetic, so the same function serves Python floats (one car) and
-arrays over ``n`` cars. :class:`EpisodeSteps` is the control step of :class:`fricenv.envs.braking_sim.BrakingSim`
-built from them, in two drivers that differ only in control flow:
-
-* :meth:`EpisodeSteps._step_batch`: ``n`` cars on any :class:`~fricenv.plants.braking_plant.BrakingPlant`
-  (the nominal :class:`~fricenv.plants.braking_plant.BatchPlant` or the effect-carrying
-  :class:`~fricenv.envs.effect_plant.EffectPlant`), arrays, no Python loop over cars;
-* :meth:`EpisodeSteps._step_scalar`: one car on :class:`~fricenv.plants.braking_plant.ScalarPlant` in Python
-  floats (``Braking-v0``; numpy's per-call cost on 1-element arrays is larger than the arithmetic).
-
-Both give the same episode to about 1e-12 (``math`` and numpy round transcendentals differently; tested).
+:func:`measure`, :func:`step_reward`, :func:`car_substeps`): plain arithmetic, so the same function serves floats
+(one car) and arrays over ``n`` cars. :class:`fricenv.envs.braking_sim.BrakingSim` steps its cars with them, in two
+drivers that differ only in control flow: ``n`` cars on any :class:`~fricenv.plants.braking_plant.BrakingPlant`
+as arrays, and the single nominal car (``Braking-v0``) through :func:`car_substeps_compiled`, the physics substeps
+of one control step compiled by numba from :func:`car_substeps` and the ROS2 substep of
+:mod:`fricenv.plants.rosenbrock`. Both give the same episode to about 1e-12 (tested).
 
 Measurement model (an ABS ECU), per control step of ``dt``: wheel speed ``omega + e`` (variance
 ``OMEGA_NOISE_VAR``, Sui & Johansen Section V); wheel deceleration ``-r (omega_k - omega_{k-1}) / dt + e`` with the
 nominal radius ``r`` (the ECU does not know an effective radius); longitudinal acceleration
 ``(v_k - v_{k-1}) / dt + e``. Wheel lock: ``omega r_eff < lock_speed_ratio v`` above ``v_stop`` for more than
 ``lock_time`` (the plant's effective rolling radius: the physical test).
+
+Measurement noise (:class:`NoiseBlocks`): each car's standard normals come from its own generator,
+:data:`~fricenv.envs.config.NOISE_BLOCK` control steps at a time, and are consumed by index. A car therefore sees
+the same noise whether it is simulated alone or in a batch, and whatever the other cars do.
 """
 
 from __future__ import annotations
@@ -27,12 +26,18 @@ import math
 
 import numpy as np
 
-__all__ = ["TINY", "EpisodeSteps", "brake_torque", "lock_count", "measure", "step_reward", "stop_crossing"]
+from fricenv.envs.config import N_NOISE, NOISE_BLOCK
+from fricenv.plants.compiled import compile_formula, guard_cache, jit, substep_refined
+from fricenv.plants.tire import longitudinal_slip, magic_formula
+
+__all__ = ["TINY", "NoiseBlocks", "brake_torque", "car_substeps", "car_substeps_compiled", "clip_float", "lock_count", "measure",
+           "step_reward", "stop_crossing"]
 
 TINY = 1e-300  # guard of the crossing interpolations
 
 
-def _clip_float(x: float, lo: float, hi: float) -> float:
+def clip_float(x: float, lo: float, hi: float) -> float:
+    """``x`` clipped to [lo, hi], in floats."""
     return lo if x < lo else (hi if x > hi else x)  # noqa: FURB136 (no builtin calls in the hot path)
 
 
@@ -42,7 +47,7 @@ def brake_torque(a, torque_prev, config, clip=np.clip):
 
     :param a: command in [-1, 1] (float or array).
     :param torque_prev: the torque of the previous control step [N m].
-    :param config: the :class:`~fricenv.envs.braking_core.BrakingConfig`.
+    :param config: the :class:`~fricenv.envs.config.BrakingConfig`.
     :param clip: ``np.clip`` for arrays, a float clip for floats.
     """
     if config.action_mode == "torque":
@@ -50,15 +55,15 @@ def brake_torque(a, torque_prev, config, clip=np.clip):
     return clip(torque_prev + a * (config.torque_rate_max * config.dt), 0.0, config.t_max)
 
 
-def stop_crossing(v, v_new, v_stop: float, maximum=np.maximum):
+def stop_crossing(v, v_new, v_stop: float):
     """Shares of a substep's distance and time before the speed falls from ``v`` through ``v_stop`` to ``v_new``.
 
     At constant deceleration over the substep ``v^2`` is linear in distance and ``v`` in time.
 
     :return: (distance share, time share), each in [0, 1].
     """
-    return ((v * v - v_stop * v_stop) / maximum(v * v - v_new * v_new, TINY),
-            (v - v_stop) / maximum(v - v_new, TINY))
+    return ((v * v - v_stop * v_stop) / np.maximum(v * v - v_new * v_new, TINY),
+            (v - v_stop) / np.maximum(v - v_new, TINY))
 
 
 def lock_count(count, w, v, r_eff, config):
@@ -79,191 +84,114 @@ def step_reward(energy, travel, limit, locked, lock_penalty: float):
     return (energy - travel) / limit - lock_penalty * locked
 
 
-class EpisodeSteps:
-    """The control step of :class:`~fricenv.envs.braking_sim.BrakingSim` (a mixin: it uses the sim's state)."""
+class NoiseBlocks:
+    """Blocks of standard normals per car (one column per noisy channel), scaled by ``std`` when taken.
 
-    def _check_action(self, action) -> np.ndarray:
-        a = np.asarray(action, dtype=float)
-        if a.shape != (self.n,):
-            if a.shape == (self.n, 1):
-                a = a[:, 0]
-            else:
-                raise ValueError(f"action must have shape ({self.n},) (one command per car), got {a.shape}")
-        if not np.all(np.isfinite(a)):
-            raise ValueError(f"action contains NaN or inf: {a[~np.isfinite(a)][:5].tolist()}")
-        return np.clip(a, -1.0, 1.0)
+    :param n: number of cars.
+    :param std: standard deviation of each channel (wheel speed, wheel deceleration, a_x).
+    """
 
-    def _step_batch(self, action) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """:meth:`step` of ``n`` cars on arrays."""
-        a = self._check_action(action)
-        c, p, plant = self.config, self._p, self.plant
-        self.torque = brake_torque(a, self.torque, c)
-        plant.set_torque(self.torque)
-        v_start, w_start = self.v, self.omega
-        energy, travel = self._substeps_batch()
-        v, w = self.v, self.omega = plant.v.copy(), plant.omega.copy()
-        self.t += 1
-        self.slip = plant.slip()
-        self.mu = plant.friction(self.slip)
-        self.lock_count = lock_count(self.lock_count, w, v, plant.r_eff, c)
-        self.locked = self.lock_count > c.lock_steps
-        self.lock_seen |= self.locked
-        noise = self._take_noise()
-        self.meas[:, 0], self.meas[:, 1], self.meas[:, 2] = measure(
-            w, w_start, v, v_start, noise[:, 0], noise[:, 1], noise[:, 2], p.r, c.dt)
-        self.reward = step_reward(energy, travel, self.limit, self.locked, c.lock_penalty)
-        self.terminated = self.stopped.copy()
-        self.truncated = (self.t >= self._max_steps) & ~self.terminated
-        return self.observe(), self.reward, self.terminated, self.truncated
+    def __init__(self, n: int, std: np.ndarray):
+        self.std = np.asarray(std, dtype=float)
+        self.sd = tuple(self.std.tolist())
+        self.blocks = np.zeros((n, NOISE_BLOCK, N_NOISE))
+        self.pos = np.zeros(n, dtype=np.intp)
+        self._rows = self.blocks.reshape(n * NOISE_BLOCK, N_NOISE)  # a view of the blocks
+        self._row_base = np.arange(n) * NOISE_BLOCK
+        self.rngs: list[np.random.Generator | None] = [None] * n
 
-    def _substeps_batch(self) -> tuple[np.ndarray, np.ndarray]:
-        """The physics substeps of one control step: distance, stop crossing, road switch, braking energy.
+    def start(self, i: int, rng: np.random.Generator) -> None:
+        """Car ``i`` starts an episode on generator ``rng``: a fresh block, read from its first row."""
+        self.rngs[i] = rng
+        self.refill(i)
 
-        Substep sums (scaled once at the end): ssum = sum of (v_k + v_k+1), so x = x0 + h/2 ssum (trapezoid: the
-        speed is nearly linear over a substep); esum = sum of (v_k^2 - v_k+1^2) and tsum = sum of (v_k + v_k+1)
-        while above v_stop, so the braking energy is esum / (2 g mu_peak) and the travel h/2 tsum.
+    def refill(self, i: int) -> None:
+        """A new block of standard normals for car ``i`` from its generator, read from its first row."""
+        self.blocks[i] = self.rngs[i].standard_normal((NOISE_BLOCK, N_NOISE))
+        self.pos[i] = 0
 
-        :return: (energy, travel) [m] of the step per car.
-        """
-        c, plant, n, v_stop = self.config, self.plant, self.n, self.config.v_stop
-        half_h = 0.5 * self._h
-        v, x0 = self.v, self.x
-        ssum, esum, tsum, energy = np.zeros(n), np.zeros(n), np.zeros(n), np.zeros(n)
-        inv_2g_mu = 1.0 / (2.0 * self._p.g * self.mu_peak)
-        # Road switches are checked only if some car can reach its change point in this step.
-        check_switch = float((self._next_change - x0).min()) <= c.dt * (float(v.max()) + self._reach_slack)
-        v_above = v.min() > v_stop  # every car above the stop speed at the start of the substep
-        for sub in range(c.substeps):
-            v_new = plant.substep()[0]
-            s = v + v_new
-            d = (v - v_new) * s  # v_k^2 - v_k+1^2
-            new_above = v_new.min() > v_stop
-            if not (v_above and new_above):  # some car at or below the stop speed: mask it, locate crossings
-                active = v > v_stop
-                d *= active
-                s_act = s * active
-                cross = np.flatnonzero(active & (v_new <= v_stop))
-                if cross.size:
-                    d[cross], s_act[cross] = self._stop_in_substep(cross, sub, v, v_new, s, x0 + half_h * ssum)
-                s_tot = s_act
-            else:
-                s_tot = s
-            esum += d
-            tsum += s_tot
-            ssum += s
-            v, v_above = v_new, new_above
-            if check_switch:
-                switch = np.flatnonzero(x0 + half_h * ssum >= self._next_change)
-                if switch.size:
-                    energy[switch] += esum[switch] * inv_2g_mu[switch]  # close the energy segment on road a
-                    esum[switch] = 0.0
-                    self._switch_road(switch)
-                    inv_2g_mu = 1.0 / (2.0 * self._p.g * self.mu_peak)
-        energy += esum * inv_2g_mu  # sum of (v^2 drop) / (2 g mu_peak) over substeps [m]
-        self.x = x0 + ssum * half_h
-        return energy, tsum * half_h
+    def take(self, idx: np.ndarray | None = None) -> np.ndarray:
+        """The next scaled noise row of the cars ``idx`` (all if None), (len, N_NOISE); refills exhausted blocks."""
+        if idx is None:  # every car: gather one row per car from the flat (n * NOISE_BLOCK, N_NOISE) view
+            pos = self.pos
+            out = np.take(self._rows, self._row_base + pos, axis=0)
+            pos += 1
+        else:
+            pos = self.pos[idx]
+            out = self.blocks[idx, pos]
+            pos += 1
+            self.pos[idx] = pos
+        out *= self.std
+        if pos.max() >= NOISE_BLOCK:
+            for i in np.flatnonzero(self.pos >= NOISE_BLOCK):  # once every NOISE_BLOCK steps per car
+                self.refill(i)
+        return out
 
-    def _stop_in_substep(self, cross, sub: int, v, v_new, s, x_start) -> tuple[np.ndarray, np.ndarray]:
-        """Record the stop of the cars ``cross`` that fall through ``v_stop`` in substep ``sub`` (first time only);
-        return their ``v^2`` drop and speed sum down to ``v_stop``."""
-        v_stop = self.config.v_stop
-        vc, vn = v[cross], v_new[cross]
-        frac, tfrac = stop_crossing(vc, vn, v_stop)
-        first = ~self.stopped[cross]  # cars stopping for the first time this episode
-        idx = cross[first]
-        self.stop_distance[idx] = (x_start[cross] + frac * (0.5 * self._h * s[cross]))[first]
-        self.stop_time[idx] = ((self.t[cross] + (sub + tfrac) / self.config.substeps) * self.config.dt)[first]
-        self.stopped[cross] = True
-        return vc * vc - v_stop * v_stop, frac * s[cross]
-
-    def _switch_road(self, idx) -> None:
-        """Cars ``idx`` pass their friction-change point: road b from now on."""
-        self.road[idx] = self.road_b[idx]
-        self.plant.set_road(idx, self.road[idx])
-        self.mu_peak[idx] = self.mu_peak_b[idx]
-        self.switched[idx] = True
-        self._next_change[idx] = np.inf
-
-    def _step_scalar(self, action) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """:meth:`step` of one car on :class:`~fricenv.plants.braking_plant.ScalarPlant`, in Python floats."""
-        a = np.asarray(action, dtype=float)
-        if a.shape not in ((1,), (1, 1)):
-            raise ValueError(f"action must have shape (1,) (one command per car), got {a.shape}")
-        a = a.item(0)
-        if not math.isfinite(a):
-            raise ValueError(f"action contains NaN or inf: {[a]}")
-        c, p, plant = self.config, self._p, self.plant
-        Tb = brake_torque(_clip_float(a, -1.0, 1.0), self.torque.item(0), c, _clip_float)
-        plant.set_torque(Tb)
-        v_start, w_start = plant.v, plant.omega
-        energy, travel = self._substeps_scalar()
-        v, w = plant.v, plant.omega
-        self.v[0], self.omega[0], self.torque[0] = v, w, Tb
-        self.t[0] = steps = self.t.item(0) + 1
-        slip = plant.slip()
-        self.slip[0], self.mu[0] = slip, plant.friction(slip)
-        count = lock_count(self.lock_count.item(0), w, v, plant.r_eff.item(0), c)
-        self.lock_count[0] = count
-        locked = count > self._lock_steps
-        self.locked[0] = locked
-        if locked:
-            self.lock_seen[0] = True
-        n0, n1, n2 = self._take_noise_scalar()
-        m0, m1, m2 = measure(w, w_start, v, v_start, n0, n1, n2, p.r, c.dt)
-        self.meas[0, 0], self.meas[0, 1], self.meas[0, 2] = m0, m1, m2
-        stopped = self.stopped.item(0)
-        self.reward[0] = step_reward(energy, travel, self.limit.item(0), locked, c.lock_penalty)
-        self.terminated[0] = stopped
-        self.truncated[0] = steps >= self._max_steps and not stopped
-        return self._observe_scalar(m0, m1, Tb, m2, v, slip, self.mu.item(0)), self.reward, \
-            self.terminated, self.truncated
-
-    def _substeps_scalar(self) -> tuple[float, float]:
-        """:meth:`_substeps_batch` of the one car in floats; returns (energy, travel) [m]."""
-        c, plant, v_stop, half_h = self.config, self.plant, self.config.v_stop, 0.5 * self._h
-        advance = plant.advance  # the substep as a pure function: the state stays local until the end
-        v, w = plant.v, plant.omega
-        x = self.x.item(0)
-        energy = travel = 0.0
-        stopped = self.stopped.item(0)
-        change = self._next_change.item(0)
-        inv_2g_mu = 1.0 / (2.0 * self._p.g * self.mu_peak.item(0))
-        for sub in range(self._substeps):
-            v_new, w = advance(v, w)
-            dx = half_h * (v + v_new)
-            if v > v_stop:
-                if v_new <= v_stop:
-                    frac, tfrac = stop_crossing(v, v_new, v_stop, max)
-                    if not stopped:
-                        self.stop_distance[0] = x + frac * dx
-                        self.stop_time[0] = (self.t.item(0) + (sub + tfrac) / self._substeps) * c.dt
-                    stopped = True
-                    energy += (v * v - v_stop * v_stop) * inv_2g_mu
-                    travel += frac * dx
-                else:
-                    energy += (v - v_new) * (v + v_new) * inv_2g_mu
-                    travel += dx
-            x += dx
-            v = v_new
-            if x >= change:
-                self._switch_road([0])
-                advance = plant.advance
-                change = np.inf
-                inv_2g_mu = 1.0 / (2.0 * self._p.g * self.mu_peak.item(0))
-        plant.v, plant.omega = v, w
-        self.x[0] = x
-        self.stopped[0] = stopped
-        return energy, travel
-
-    def _take_noise_scalar(self) -> tuple[float, float, float]:
-        """The next scaled noise row of the one car (the block scheme of ``_take_noise``), as floats."""
-        pos = self._noise_idx.item(0)
-        noise, k = self._noise, pos * 3  # flat index of the row in car 0's block
-        s0, s1, s2 = self._noise_sd
-        row = (noise.item(k) * s0, noise.item(k + 1) * s1, noise.item(k + 2) * s2)
-        pos += 1
-        if pos >= noise.shape[1]:
-            self._refill_noise(0)
-            pos = 0
-        self._noise_idx[0] = pos
+    def take_one(self) -> tuple[float, float, float]:
+        """The next scaled noise row of car 0, as floats (the single env's path)."""
+        pos = int(self.pos[0])
+        blocks, k = self.blocks, pos * N_NOISE  # flat index of the row in car 0's block
+        s0, s1, s2 = self.sd
+        row = (blocks.item(k) * s0, blocks.item(k + 1) * s1, blocks.item(k + 2) * s2)
+        if pos + 1 >= NOISE_BLOCK:
+            self.refill(0)
+        else:
+            self.pos[0] = pos + 1
         return row
+
+
+def car_substeps(v, w, x, Tb, roads, change, stopped, substeps, h, v_stop, inv_2g_mu, inv_2g_mu_b, r, m, J, Fz):
+    """The physics substeps of one control step of one nominal car, with the distance, the stop located inside its
+    substep and the friction change (the batched driver's accounting, on floats).
+
+    :param v: speed [m/s]; :param w: wheel speed [rad/s]; :param x: distance [m] at the start of the step.
+    :param Tb: brake torque [N m] over the step.
+    :param roads: (2, 5) array, rows (B, C, E, theta, mu(1)) of the road in use and of the road after the change
+        point.
+    :param change: distance of the change point [m] (inf once passed); :param stopped: the car has stopped before.
+    :param substeps: physics substeps per control step; :param h: substep [s]; :param v_stop: stop speed [m/s].
+    :param inv_2g_mu: ``1 / (2 g mu_max)`` of the road in use; :param inv_2g_mu_b: the same after the change.
+    :param r: wheel radius [m]; :param m: mass [kg]; :param J: wheel inertia [kg m^2]; :param Fz: tire load [N].
+    :return: (v, omega, x, energy [m], travel [m], stopped, stop distance (NaN if not this step), stop substep
+        position in [0, substeps] (NaN if not this step), switched, slip, mu) at the end of the step.
+    """
+    B, C, E, theta, mu1 = roads[0, 0], roads[0, 1], roads[0, 2], roads[0, 3], roads[0, 4]
+    half_h = 0.5 * h
+    energy = travel = 0.0
+    stop_x = stop_sub = math.nan
+    switched = False
+    for sub in range(substeps):
+        v_new, w = substep_refined(v, w, Tb, B, C, E, theta, mu1, h, r, m, J, Fz)
+        dx = half_h * (v + v_new)
+        if v > v_stop:
+            if v_new <= v_stop:
+                frac, tfrac = stop_crossing(v, v_new, v_stop)
+                if not stopped:
+                    stop_x, stop_sub = x + frac * dx, sub + tfrac
+                stopped = True
+                energy += (v * v - v_stop * v_stop) * inv_2g_mu
+                travel += frac * dx
+            else:
+                energy += (v - v_new) * (v + v_new) * inv_2g_mu
+                travel += dx
+        x += dx
+        v = v_new
+        if x >= change:
+            B, C, E, theta, mu1 = roads[1, 0], roads[1, 1], roads[1, 2], roads[1, 3], roads[1, 4]
+            change, inv_2g_mu, switched = math.inf, inv_2g_mu_b, True
+    lam = longitudinal_slip(v, w, r)
+    return v, w, x, energy, travel, stopped, stop_x, stop_sub, switched, lam, magic_formula(lam, B, C, E, theta)
+
+
+_car_substeps = compile_formula(car_substeps)
+
+
+@jit
+def car_substeps_compiled(v, w, x, Tb, roads, change, stopped, substeps, h, v_stop, inv_2g_mu, inv_2g_mu_b, r, m,
+                          J, Fz):
+    """:func:`car_substeps` compiled (numba, cached on disk)."""
+    return _car_substeps(v, w, x, Tb, roads, change, stopped, substeps, h, v_stop, inv_2g_mu, inv_2g_mu_b, r, m, J,
+                         Fz)
+
+
+guard_cache(globals(), ("fricenv.envs.episode",))

@@ -67,7 +67,7 @@ from gymnasium.vector.utils import batch_space
 
 from estimators.base import Estimate, Estimator, Health
 from estimators.registry import OBSERVATION_ESTIMATORS, check_name, get_estimator
-from fricenv.envs.braking_core import ObsField
+from fricenv.envs.config import ObsField
 from fricenv.plants.quarter_car import QuarterCarParams
 
 __all__ = [

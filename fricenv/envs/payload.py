@@ -14,7 +14,7 @@ from gymnasium import spaces
 
 from estimators.fms_rls import FmsRLS
 from fricenv.envs.actions import check_action
-from fricenv.envs.braking_core import ObsField, decode_observation
+from fricenv.envs.config import ObsField, decode_observation
 from fricenv.plants import payload as pl
 
 __all__ = ["CALIBRATIONS", "ESTIMATOR_OPTIONS", "RESET_OPTION_KEYS", "PayloadExcitationEnv"]

@@ -1,4 +1,4 @@
-"""Log files of the sim-to-real gap tool (DESIGN.md, "Log file"): the one reader and writer.
+"""Log files of the sim-to-real gap tool (docs/contracts.md, section 1): the one reader and writer.
 
 CSV in SI units: optional leading ``#`` lines, one header row, then rows. Quarter car: required ``t`` [s],
 ``T_b`` [N m] (commanded torque), ``omega`` [rad/s]; optional ``v`` [m/s], ``a_x`` [m/s^2]. Payload: ``t``,
@@ -334,7 +334,7 @@ def read_log(path: str | os.PathLike, plant: str = "quarter-car",
     here: an error stops the reading, a warning is issued as a :class:`LogCheckWarning` and kept in ``log.warnings``
     (with those a written log carries as ``warning:`` comment lines).
 
-    :param path: CSV file in the DESIGN.md format, or any export that ``column_map`` describes.
+    :param path: CSV file in the docs/contracts.md format, or any export that ``column_map`` describes.
     :param plant: ``"quarter-car"`` or ``"payload"``.
     :param column_map: a column map (file or :class:`fricenv.logs.logmap.ColumnMap`; docs/contracts.md,
         "Column map").
@@ -438,7 +438,7 @@ def _stated_filters(path: Path, comments: tuple[str, ...], cols: dict) -> dict[s
 
 
 def write_log(path: str | os.PathLike, log: QuarterCarLog | PayloadLog, comments: tuple[str, ...] = ()) -> None:
-    """Write a log atomically in the DESIGN.md format, every value at full precision (the shortest decimal that
+    """Write a log atomically in the docs/contracts.md format, every value at full precision (the shortest decimal that
     reads back to the same float); optional columns that are ``None`` are left out, a missing sample is written
     ``nan``, a torque from pressure is marked by the :data:`TORQUE_FROM_PRESSURE` line, a stated sensor filter by its
     ``sensor_filter:`` line, a time offset by its ``t_offset_s:`` line, a drive torque as throttle by

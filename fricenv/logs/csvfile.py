@@ -24,7 +24,7 @@ _NUMBER = re.compile(r"^\s*[+-]?((\d+\.?\d*|\.\d+)([eE][+-]?\d+)?|nan|inf|infini
 
 
 class LogFormatError(InvalidInputError):
-    """A log file that does not follow the DESIGN.md contract (a ``ValueError``; one line naming the file)."""
+    """A log file that does not follow the docs/contracts.md contract (a ``ValueError``; one line naming the file)."""
 
 
 def read_text(path: Path) -> str:

@@ -16,8 +16,9 @@ holds the wheel like static friction, i.e. the wheel stays locked while ``T_b >=
 
 The wheel equation is stiff at low speed: the slip time constant is about
 ``v / (F_z mu'(lambda) (r^2/J + 1/m))``, 0.3 ms at 2 m/s on dry asphalt. :func:`step` therefore uses an
-L-stable Rosenbrock method (ROS2, Verwer et al. 1999) with an exact Jacobian, which stays accurate and stable for
-substeps far longer than that time constant. It is checked against scipy's Radau in the tests.
+L-stable Rosenbrock method (ROS2, Verwer et al. 1999) with an exact Jacobian
+(:func:`fricenv.plants.rosenbrock.ros2_substep`), which stays accurate and stable for substeps far longer than that
+time constant. It is checked against scipy's Radau in the tests.
 """
 
 from __future__ import annotations
@@ -27,6 +28,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from fricenv.plants import sui_johansen as sj
+from fricenv.plants.rosenbrock import (
+    REFINE_MIN_STEP,
+    REFINE_PARTS,
+    ROS2_GAMMA,
+    braking_invariant_broken,
+    ros2_substep,
+)
 from fricenv.plants.tire import (
     MagicFormula,
     longitudinal_slip,
@@ -47,17 +55,11 @@ __all__ = [
     "road_array",
     "slip",
     "slip_form_derivatives",
+    "slip_ode",
     "step",
     "tire_force",
 ]
 
-# ROS2 constant: gamma = 1 + 1/sqrt(2) makes the method L-stable and of order 2.
-ROS2_GAMMA = 1.0 + 1.0 / np.sqrt(2.0)
-_ROS2_GAMMA = ROS2_GAMMA  # old private name
-REFINE_PARTS = 8  # a substep that breaks the braking invariant is redone in this many parts ...
-REFINE_MIN_STEP = 5e-4  # ... recursively, while the step is longer than this [s] (one level from 2 ms: deeper
-# levels cost up to 512 steps per substep in stiff fits and changed no tested result)
-INVARIANT_TOL = 1e-9  # relative tolerance of the invariant check (rounding at free rolling)
 
 
 @dataclass(frozen=True)
@@ -131,42 +133,38 @@ def _jacobian_from(dF_dv, dF_dw, p: QuarterCarParams):
 
 
 def slip_form_derivatives(v, lam, Tb, road, p: QuarterCarParams = PAPER_PARAMS):
-    """Wheel-slip dynamics, eq. (6), valid for braking (v > 0, omega >= 0): returns (v', lambda').
+    """Wheel-slip dynamics, eq. (6), valid for braking (v > 0, omega >= 0): returns (v', lambda') of
+    :func:`slip_ode` for a road array."""
+    road = np.asarray(road, dtype=float)
+    return slip_ode(v, lam, Tb, road[..., 0], road[..., 1], road[..., 2], road[..., 3], p.r, p.m, p.J, p.Fz)
+
+
+def slip_ode(v, lam, Tb, B, C, E, theta, r, m, J, Fz):
+    """Wheel-slip dynamics, eq. (6), in plain math (the estimators' CasADi model is built from it):
 
         v'      = -F_z mu(lambda) / m                                              (6a)
         lambda' = -(1/v) ((1 - lambda)/m + r^2/J) F_z mu(lambda) + (1/v)(r/J) T_b   (6b)
+
+    :return: (v', lambda').
     """
-    road = np.asarray(road, dtype=float)
-    Fx = p.Fz * magic_formula(lam, road[..., 0], road[..., 1], road[..., 2], road[..., 3])
-    vdot = -Fx / p.m
-    lamdot = (-((1.0 - lam) / p.m + p.r**2 / p.J) * Fx + p.r / p.J * Tb) / v
+    Fx = Fz * magic_formula(lam, B, C, E, theta)
+    vdot = -Fx / m
+    lamdot = (-((1.0 - lam) / m + r**2 / J) * Fx + r / J * Tb) / v
     return vdot, lamdot
-
-
-def _ros2_matrix(a11, a12, a21, a22, h_gamma):
-    """``I - h gamma A`` for batched 2x2 A, with its determinant: (m11, m12, m21, m22, det)."""
-    m11, m12 = 1.0 - h_gamma * a11, -h_gamma * a12
-    m21, m22 = -h_gamma * a21, 1.0 - h_gamma * a22
-    return m11, m12, m21, m22, m11 * m22 - m12 * m21
-
-
-def _solve_w(m, b1, b2):
-    """Solve ``M k = b`` for the batched 2x2 ``m`` of :func:`_ros2_matrix`, by Cramer's rule (no inverse formed)."""
-    m11, m12, m21, m22, det = m
-    return (m22 * b1 - m12 * b2) / det, (m11 * b2 - m21 * b1) / det
 
 
 def step(v, omega, Tb, road, dt: float, p: QuarterCarParams = PAPER_PARAMS, substeps: int = 1):
     """Advance the batch by ``dt`` seconds under a brake torque held constant (zero-order hold).
 
-    Each of the ``substeps`` physics steps is one ROS2 step:
+    Each of the ``substeps`` physics steps is one ROS2 step (:func:`fricenv.plants.rosenbrock.ros2_substep`):
 
         (I - gamma h A) k1 = f(x)
         (I - gamma h A) k2 = f(x + h k1) - 2 k1
         x+ = x + h (3/2 k1 + 1/2 k2)
 
     followed by the lock constraint ``omega >= 0`` (the static brake holds a wheel that would turn backwards) and
-    ``v >= 0`` (the car does not reverse under braking).
+    ``v >= 0`` (the car does not reverse under braking); a substep that breaks the braking invariant is redone in
+    finer parts (:func:`refine_where_unphysical`).
 
     :param v: vehicle speed [m/s], shape (n,).
     :param omega: wheel speed [rad/s], shape (n,).
@@ -181,33 +179,14 @@ def step(v, omega, Tb, road, dt: float, p: QuarterCarParams = PAPER_PARAMS, subs
         raise ValueError(f"substeps must be >= 1, got {substeps}")
     road = np.asarray(road, dtype=float)
     h = dt / substeps
-    hg = h * ROS2_GAMMA
     v = np.asarray(v, dtype=float)
     omega = np.asarray(omega, dtype=float)
+    B, C, E, theta = road[..., 0], road[..., 1], road[..., 2], road[..., 3]
+    mu1 = magic_formula(1.0, B, C, E, theta)
     for _ in range(substeps):
-        # f(x) from the force the Jacobian needs anyway: eq. (1)
-        Fx, dF_dv, dF_dw = _force_and_partials(v, omega, road, p)
-        m = _ros2_matrix(*_jacobian_from(dF_dv, dF_dw, p), hg)
-        k1v, k1w = _solve_w(m, -Fx / p.m, (p.r * Fx - Tb) / p.J)
-        f2v, f2w = derivatives(v + h * k1v, np.maximum(omega + h * k1w, 0.0), Tb, road, p)
-        k2v, k2w = _solve_w(m, f2v - 2.0 * k1v, f2w - 2.0 * k1w)
-        v_new = v + h * (1.5 * k1v + 0.5 * k2v)
-        w_new = omega + h * (1.5 * k1w + 0.5 * k2w)
-        v_new, w_new = _lock_event(v, omega, v_new, w_new, road, h, p)
+        v_new, w_new, _ = ros2_substep(v, omega, Tb, B, C, E, theta, mu1, h, p.r, p.m, p.J, p.Fz)
         v, omega = refine_where_unphysical(v, omega, v_new, w_new, Tb, road, h, p)
     return v, omega
-
-
-def braking_invariant_broken(v0, w0, v1, w1, Tb, r: float):
-    """Where a step from (v0, w0) to (v1, w1) broke the braking invariant of eq. (1).
-
-    With ``T_b >= 0`` and a wheel no faster than the car (``omega r <= v``), the tire force is >= 0 all along:
-    the wheel cannot overtake the car and the car cannot speed up. A linearly implicit step can break this when
-    it linearises across the friction peak while the slip dynamics are much faster than the step (low speed,
-    brake released past the peak): it overshoots to traction slip and pushes the car forward.
-    """
-    tol = INVARIANT_TOL * (1.0 + v0)
-    return (Tb >= 0.0) & (w0 * r <= v0) & ((w1 * r > v1 + tol) | (v1 > v0 + tol))
 
 
 def refine_where_unphysical(v0, w0, v1, w1, Tb, road, h: float, p: QuarterCarParams = PAPER_PARAMS):
@@ -228,23 +207,6 @@ def refine_where_unphysical(v0, w0, v1, w1, Tb, road, h: float, p: QuarterCarPar
     v1, w1 = np.array(v1, dtype=float), np.array(w1, dtype=float)
     v1[bad], w1[bad] = v_fine, w_fine
     return v1, w1
-
-
-def _lock_event(v, omega, v_new, w_new, road, h, p: QuarterCarParams):
-    """Apply the lock constraint to a substep from (v, omega) to (v_new, w_new).
-
-    A wheel that would turn backwards locks where omega crosses zero (located by linear interpolation); for the
-    rest of the substep the car slides at mu(1). Without locating the crossing, the lock-up transient costs a
-    first-order error that dominates the stopping-distance error at 2 ms substeps.
-    """
-    crossing = w_new < 0.0
-    if crossing.any():
-        frac = np.where(crossing, omega / np.maximum(omega - w_new, 1e-300), 1.0)
-        v_lock = v + frac * (v_new - v)
-        mu_slide = magic_formula(1.0, road[..., 0], road[..., 1], road[..., 2], road[..., 3])
-        v_new = np.where(crossing, v_lock - (1.0 - frac) * h * p.Fz * mu_slide / p.m, v_new)
-        w_new = np.maximum(w_new, 0.0)
-    return np.maximum(v_new, 0.0), w_new
 
 
 def physical_limit_distance(v0, v_stop, mu_max, p: QuarterCarParams = PAPER_PARAMS):

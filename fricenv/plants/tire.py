@@ -1,6 +1,9 @@
 """Tire-road friction: the Magic Formula and the road presets.
 
-This module is the single home of the Magic Formula (Sui & Johansen, eq. (2)); every other module imports it.
+This module is the single home of the Magic Formula (Sui & Johansen, eq. (2)) and of the slip; every other module
+imports them. They are plain arithmetic over the ``np`` namespace, so numba compiles the same functions for the fast
+paths (:mod:`fricenv.plants.compiled`) and the estimators build their CasADi models from them
+(:mod:`fricenv.plants.namespace`).
 
     mu(lambda) = theta * sin(C * atan(B*lambda - E*(B*lambda - atan(B*lambda))))
 
@@ -26,6 +29,7 @@ __all__ = [
     "WET",
     "MagicFormula",
     "UnknownRoadError",
+    "ecu_slip",
     "get_road",
     "longitudinal_slip",
     "magic_formula",
@@ -87,6 +91,19 @@ def longitudinal_slip(v, omega, r, speed_floor: float = SLIP_SPEED_FLOOR):
     """
     wr = omega * r
     return (v - wr) / np.maximum(np.maximum(v, wr), speed_floor)
+
+
+def ecu_slip(omega, v_ref, r, speed_floor: float = SLIP_SPEED_FLOOR):
+    """Braking slip as an ABS ECU estimates it: ``1 - omega r / max(v_ref, speed_floor)``, from a (measured or
+    filtered) wheel speed and the ECU's reference speed in place of the unknown vehicle speed.
+
+    :param omega: wheel speed [rad/s].
+    :param v_ref: the ECU's reference (estimated vehicle) speed [m/s].
+    :param r: wheel radius [m].
+    :param speed_floor: smallest reference speed in the denominator [m/s].
+    :return: slip estimate [-] (floats or arrays).
+    """
+    return 1.0 - omega * r / np.maximum(v_ref, speed_floor)
 
 
 def slip_and_partials(v, omega, r, speed_floor: float = SLIP_SPEED_FLOOR):

@@ -30,10 +30,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from fricenv.plants import li_du_li as ldl
+from fricenv.plants.tire import longitudinal_slip
 
 __all__ = ["TABLE_I", "TwoAxleParams", "axle_loads", "derivatives", "dugoff_force", "slip", "step"]
 
-SLIP_SPEED_FLOOR = 0.1  # [m/s] smallest slip denominator (as in fricenv.plants.tire)
 SLIP_MIN = 1e-9  # |S| below this: the Dugoff force is C_s S (f = 1)
 SLIP_MAX = 0.999  # |S| is clipped here so that 1 - |S| > 0
 
@@ -73,9 +73,9 @@ def axle_loads(p: TwoAxleParams = TABLE_I) -> tuple[float, float]:
 
 
 def slip(v, omega, p: TwoAxleParams = TABLE_I):
-    """Eq. (3): S = (omega R - v) / max(v, omega R), positive in traction."""
-    wr = omega * p.R_w
-    return (wr - v) / np.maximum(np.maximum(v, wr), SLIP_SPEED_FLOOR)
+    """Eq. (3): S = (omega R - v) / max(v, omega R), positive in traction: :func:`fricenv.plants.tire.
+    longitudinal_slip` with Li, Du & Li's sign."""
+    return -longitudinal_slip(v, omega, p.R_w)
 
 
 def dugoff_force(S, Fz, u, mu, p: TwoAxleParams = TABLE_I):

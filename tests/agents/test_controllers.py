@@ -1,4 +1,4 @@
-"""Classical ABS controllers against the physical limit and each other (issue 2, section 7)."""
+"""Classical ABS controllers against the physical limit and each other."""
 
 import numpy as np
 import pytest
@@ -16,7 +16,8 @@ from agents.controllers import (
     slip_reference,
 )
 from fricenv.envs.braking import BrakingEnv
-from fricenv.envs.braking_core import BrakingConfig, BrakingSim
+from fricenv.envs.braking_sim import BrakingSim
+from fricenv.envs.config import BrakingConfig
 from fricenv.plants.tire import DRY, ICE, SNOW, WET
 
 

@@ -1,4 +1,4 @@
-"""Policy-level sim-to-real gap (issue 6, item 4): closed loop on the effect simulator, the three distances, the CLI."""
+"""Policy-level sim-to-real gap: closed loop on the effect simulator, the three distances, the CLI."""
 
 from __future__ import annotations
 

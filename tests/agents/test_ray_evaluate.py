@@ -1,4 +1,4 @@
-"""``fricenv evaluate`` / ``compare`` on Ray (issue 18 item 3): the same episodes give the same rows from the local
+"""``fricenv evaluate`` / ``compare`` on Ray: the same episodes give the same rows from the local
 process pool, in this process and on a local Ray instance (2 CPUs, started and shut down by the test)."""
 
 from __future__ import annotations

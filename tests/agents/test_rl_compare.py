@@ -1,4 +1,4 @@
-"""`fricenv compare --train-seeds`: every row trained on each seed, the JSON rows and training list of issue 17."""
+"""`fricenv compare --train-seeds`: every row trained on each seed, the JSON rows and the training list."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Reproducible training and the memory baselines (frame stack, RecurrentPPO) of issue 17, on short runs."""
+"""Reproducible training and the memory baselines (frame stack, RecurrentPPO), on short runs."""
 
 from __future__ import annotations
 

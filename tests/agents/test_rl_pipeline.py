@@ -1,4 +1,4 @@
-"""The estimator + slip-controller pipeline stops on every road and both friction jumps, without a lock (issue 17)."""
+"""The estimator + slip-controller pipeline stops on every road and both friction jumps, without a lock."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import pytest
 
 from agents.evaluation import SCENARIOS, parse_policy, run_episode
 
-PIPELINE_RATIO_MAX = 1.3  # issue 17's bound for the classical pipeline
+PIPELINE_RATIO_MAX = 1.3  # the bound for the classical pipeline
 
 
 @pytest.mark.slow

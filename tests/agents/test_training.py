@@ -114,7 +114,7 @@ def test_run_episode_figures_match_the_env():
     spec = parse_policy("oracle-slip")
     res = run_episode(spec, Scenario("dry", 20.0), seed=0)
     assert res["stopped"] and not res["lock"]
-    assert 1.0 < res["ratio"] < 1.02  # oracle slip controller: ~1.006 on dry (issue 2)
+    assert 1.0 < res["ratio"] < 1.02  # oracle slip controller: ~1.006 on dry
     assert res["slip_err"] < 0.05
 
 
@@ -175,10 +175,10 @@ def test_payload_excitation_policy_trains_with_and_without_S_hat(tmp_path, estim
 def test_ppo_with_ekf_rls_estimates_brakes_near_the_limit(tmp_path):
     """PPO + EKF/RLS with the committed hyperparameters (log torque map, lock-onset penalty), 500k steps on
     training seed 0: dry and ice at 20 m/s over evaluation seeds 0 and 1, each within 5 % of the physical limit and
-    no wheel lock (part of issue 17's target; wet and the friction jumps are not asserted here).
+    no wheel lock (part of the policies' target; wet and the friction jumps are not asserted here).
 
-    Passed in session 9 (2026-11-24, 317 s on the loaded 2-core machine); with the previous hyperparameters
-    (linear torque map, no onset penalty) it locked the wheel on ice in both episodes.
+    Takes about 5 min on a loaded 2-core machine; with a linear torque map and no onset penalty it locks the
+    wheel on ice in both episodes.
     """
     train(tmp_path, estimator="ekf-rls", steps=500_000, seed=0, progress_bar=False, checkpoint_every=0)
     rows = evaluate([str(tmp_path)], scenarios=[Scenario("dry", 20.0), Scenario("ice", 20.0)], seeds=2,

@@ -1,4 +1,4 @@
-"""The training-side fixes of issue 17: the policy's log torque map, the lock-onset penalty, the small LSTM."""
+"""The training signal: the policy's log torque map, the lock-onset penalty, the small LSTM."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ import pytest
 from agents.action_map import LOG_RANGE, ActionMapError, check_action_map, log_torque
 from agents.lock_shaping import LockOnsetPenaltyVecEnv
 from agents.training import PPOConfig, RecurrentPPOConfig, load_policy, make_training_model, train
-from fricenv.envs.braking_core import T_MAX
+from fricenv.envs.config import T_MAX
 from fricenv.plants import quarter_car as qc
 from fricenv.plants.tire import ICE
 

@@ -1,4 +1,4 @@
-"""The CLI's one error path: every bad input of issue 16 gives exit code 2, one line on stderr, no traceback, and no
+"""The CLI's one error path: every bad input gives exit code 2, one line on stderr, no traceback, and no
 output file; paths are checked before the work starts; a bug keeps its traceback."""
 
 import errno
@@ -44,7 +44,7 @@ def _no_diagnosis(monkeypatch):
 
 
 def _bad_input_cases(tmp_path, log):
-    """(argv, text the one-line message must hold) for every bad-input case of issue 16, item 2."""
+    """(argv, text the one-line message must hold) for every bad-input case."""
     a_file = tmp_path / "a_file.txt"
     a_file.write_text("keep\n")
     bad_json = tmp_path / "bad.json"
@@ -153,7 +153,8 @@ def test_a_bug_keeps_its_traceback(monkeypatch, exc):
     (InvalidInputError("--x must be > 0"), "fricenv fake: error: --x must be > 0"),
     (OSError(errno.ENOSPC, "No space left on device", "/data/out.csv"),
      "fricenv fake: error: /data/out.csv: No space left on device"),
-    (SystemExit("fricenv fake: --steps must be >= 1\n(really)"), "fricenv fake: --steps must be >= 1 (really)"),
+    (SystemExit("fricenv fake: --steps must be >= 1\n(really)"), "fricenv fake: error: --steps must be >= 1 (really)"),
+    (SystemExit("--seeds must be >= 1"), "fricenv fake: error: --seeds must be >= 1"),
 ])
 def test_user_errors_from_anywhere_are_one_line(monkeypatch, capsys, exc, expected):
     def run(args):

@@ -1,5 +1,5 @@
 """The CLI's progress sink: a tqdm bar on stderr per fricenv.progress task, installed by main unless --quiet or
-stdout is not a terminal."""
+stdout is not a terminal (then plain stage lines, fricenv.progress.LineSink)."""
 
 import io
 import sys
@@ -53,8 +53,27 @@ def test_loop_helper_reports_each_item_through_the_sink():
 
 def test_sink_choice():
     assert progress_sink(quiet=True, stdout_is_terminal=True) is None
-    assert progress_sink(quiet=False, stdout_is_terminal=False) is None
+    assert progress_sink(quiet=True, stdout_is_terminal=False) is None
+    assert isinstance(progress_sink(quiet=False, stdout_is_terminal=False), progress.LineSink)
     assert isinstance(progress_sink(quiet=False, stdout_is_terminal=True), TqdmSink)
+
+
+def test_line_sink_writes_stage_and_throttled_progress_lines(monkeypatch):
+    clock = [0.0]
+    monkeypatch.setattr(progress.time, "monotonic", lambda: clock[0])
+    out = io.StringIO()
+    sink = progress.LineSink("fricenv paper x", out, interval=10.0)
+    with progress.use_sink(sink):
+        with progress.task("episodes", total=5) as advance:
+            for _ in range(5):
+                clock[0] += 4.0
+                with progress.task("inner"):  # nested: no start or end line of its own
+                    pass
+                advance()
+    lines = out.getvalue().splitlines()
+    assert lines[0] == "fricenv paper x: episodes: started (5 steps)"
+    assert lines[1:-1] == ["fricenv paper x: episodes: 3/5 (12 s)"]  # one line per 10 s, not one per step
+    assert lines[-1] == "fricenv paper x: episodes: done 5/5 in 20 s"
 
 
 class _Terminal(io.StringIO):
@@ -62,12 +81,12 @@ class _Terminal(io.StringIO):
         return True
 
 
-@pytest.mark.parametrize("argv, terminal, shown", [
-    (["fake"], True, True),
-    (["--quiet", "fake"], True, False),
-    (["fake"], False, False),
+@pytest.mark.parametrize("argv, terminal, shown, lines", [
+    (["fake"], True, True, True),
+    (["--quiet", "fake"], True, False, False),
+    (["fake"], False, False, True),  # piped: no bars, but stage lines on stderr
 ])
-def test_main_installs_the_sink_for_a_command(monkeypatch, capsys, argv, terminal, shown):
+def test_main_installs_the_sink_for_a_command(monkeypatch, capsys, argv, terminal, shown, lines):
     seen = {}
 
     def run(args):
@@ -81,4 +100,4 @@ def test_main_installs_the_sink_for_a_command(monkeypatch, capsys, argv, termina
         monkeypatch.setattr(sys, "stdout", _Terminal())
     assert main(argv) == 0
     assert seen["show_progress"] is shown
-    assert ("work" in capsys.readouterr().err) is shown
+    assert ("work" in capsys.readouterr().err) is lines

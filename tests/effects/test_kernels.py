@@ -10,8 +10,8 @@ import pytest
 from fricenv.effects import kernels, registry
 from fricenv.effects.quarter_car import EffectSimulator, ModelBatch
 from fricenv.effects.relaxation import relaxation_step
+from fricenv.plants import compiled, rosenbrock
 from fricenv.plants import quarter_car as qc
-from fricenv.plants import quarter_car_fast as qcf
 from fricenv.plants.tire import DRY, WET, magic_formula
 
 P = qc.PAPER_PARAMS
@@ -56,9 +56,9 @@ def _starts(batch, seed):
     n = len(batch)
     v0 = rng.uniform(3.0, 30.0, n)
     # low speed: stiff, and lock-ups. Not a car that stops within the window: near v = 0 the plant amplifies
-    # rounding (a wheel stopped there spins up again under the floored slip), and the reference's Cramer solve and
-    # the kernel's closed form (quarter_car_fast), equal to 1e-15 per substep, drift apart to ~1e-9 in ten samples;
-    # the single-substep test below covers those states
+    # rounding (a wheel stopped there spins up again under the floored slip), and numpy's and the compiled
+    # transcendentals, equal to 1e-15 per substep, drift apart to ~1e-9 in ten samples; the single-substep test
+    # below covers those states
     v0[: n // 8] = rng.uniform(3.0, 4.0, n // 8)
     w0 = v0 / batch.r_eff * (1.0 - rng.uniform(-0.05, 1.0, n))
     return rng.integers(0, N_LOG - H, n), v0, w0
@@ -109,8 +109,7 @@ def test_compiled_windows_take_the_lag_state_and_transient_slip_given():
 def _scalar_step(v, w, Tb, road, h, r):
     B, C, E, th = road
     s1 = float(magic_formula(1.0, B, C, E, 1.0))
-    return kernels._plant_substep(v, w, Tb, B, C, E, th, s1, h, kernels._substep_constants(h, r, P.m, P.J), P.m,
-                                  P.J, P.Fz)
+    return compiled.substep_refined(v, w, Tb, B, C, E, th, th * s1, h, r, P.m, P.J, P.Fz)
 
 
 def test_compiled_substep_equals_quarter_car_step_with_lock_ups_and_refinements():
@@ -125,8 +124,9 @@ def test_compiled_substep_equals_quarter_car_step_with_lock_ups_and_refinements(
     out = np.array([_scalar_step(v[i], w[i], Tb[i], road[i], h, P.r) for i in range(n)])
     np.testing.assert_allclose(out[:, 0], ref_v, rtol=RTOL, atol=RTOL)
     np.testing.assert_allclose(out[:, 1], ref_w, rtol=RTOL, atol=RTOL)
-    k = qcf.substep_constants(h, P)
-    broken = [qcf.ros2_core(v[i], w[i], Tb[i], qcf.scalar_road(*road[i], h, P), k)[2] for i in range(n)]
+    B, C, E, th = road.T
+    broken = rosenbrock.ros2_substep(v, w, Tb, B, C, E, th, magic_formula(1.0, B, C, E, th), h, P.r, P.m, P.J,
+                                     P.Fz)[2]
     assert sum(broken) >= 10, "the states should include substeps the reference refines"
     assert np.any(ref_w == 0.0), "the states should include lock-ups"
 

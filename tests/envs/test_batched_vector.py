@@ -1,4 +1,4 @@
-"""The native vector env with a batched estimator equals single envs wrapped in EstimatorObservation (issue 17)."""
+"""The native vector env with a batched estimator equals single envs wrapped in EstimatorObservation."""
 
 from __future__ import annotations
 

@@ -10,7 +10,9 @@ from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
 import fricenv  # noqa: F401  (registers the envs)
 from fricenv.envs.braking import BrakingEnv
-from fricenv.envs.braking_core import BrakingConfig, BrakingSim, limit_distance, observation_layout
+from fricenv.envs.braking_sim import BrakingSim
+from fricenv.envs.config import BrakingConfig, observation_layout
+from fricenv.envs.scenario import limit_distance
 from fricenv.plants import quarter_car as qc
 from fricenv.plants.tire import DRY, ICE, ROADS
 from tests.reference import stopping_distance_radau

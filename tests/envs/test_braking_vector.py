@@ -1,7 +1,7 @@
-"""Native vector env, SB3 adapter and fast substep kernels of fricenv/Braking-v0 (issue 7).
+"""Native vector env, SB3 adapter and compiled substeps of fricenv/Braking-v0.
 
 Equivalence is the point: the vector env must be N single envs (same seeds, same trajectories, across autoresets),
-and the fast kernels must be the reference ROS2 substep of ``quarter_car.step``.
+and the compiled substeps must be the numpy ROS2 substep of ``quarter_car.step``.
 """
 
 from __future__ import annotations
@@ -13,17 +13,19 @@ from gymnasium.vector import AutoresetMode
 
 import fricenv  # noqa: F401  (registers the envs)
 from fricenv.envs.braking import BrakingEnv
-from fricenv.envs.braking_core import BrakingConfig, BrakingSim
-from fricenv.envs.braking_kernels import Ros2Batch, make_scalar_substep, ros2_substep_scalar, scalar_road
+from fricenv.envs.braking_sim import BrakingSim
 from fricenv.envs.braking_vector import BrakingVectorEnv
+from fricenv.envs.config import BrakingConfig
+from fricenv.plants import compiled
 from fricenv.plants import quarter_car as qc
+from fricenv.plants.braking_plant import BatchPlant
 from fricenv.plants.tire import ROADS
 
 # Short stops so that a few hundred steps cover several episodes (autoresets) per sub-env.
 SHORT_V0 = (4.0, 7.0)
 ROADS_PER_ENV = ["dry", "ice", "random", "wet->snow"]
 OBS_TOL = 1e-5  # float32 observations of the scalar (single env) and batched (vector env) paths
-STATE_TOL = 1e-12  # float64 truth of the two paths, relative (math and numpy round transcendentals differently)
+STATE_TOL = 1e-12  # float64 truth of the two paths, relative (compiled and numpy transcendentals may round apart)
 
 
 def _random_states(n: int, seed: int):
@@ -39,31 +41,34 @@ def _random_states(n: int, seed: int):
     return v, w, Tb, roads
 
 
-def test_fast_substeps_equal_reference_ros2():
+def test_compiled_substeps_equal_the_numpy_reference():
+    """The env's compiled substep (all cars, and one car) against :func:`quarter_car.step` on numpy arrays."""
     v, w, Tb, roads = _random_states(3000, 1)
     h = 0.002
     ref_v, ref_w = qc.step(v, w, Tb, roads, h, qc.PAPER_PARAMS, 1)
     assert np.sum((ref_w == 0.0) & (w > 0.0)) > 20  # the lock event is exercised
-    kernel = Ros2Batch(len(v), h)
-    kernel.set_road(slice(None), roads)
-    kernel.set_torque(Tb)
-    bv, bw = kernel.substep(v, w)
+    plant = BatchPlant(len(v), h)
+    plant.set_road(slice(None), roads)
+    plant.set_torque(Tb)
+    plant.reset(slice(None), v, w)
+    bv, bw = plant.substep()
     scale_v, scale_w = np.maximum(1.0, np.abs(ref_v)), np.maximum(1.0, np.abs(ref_w))
     assert np.max(np.abs(bv - ref_v) / scale_v) < 1e-12
     assert np.max(np.abs(bw - ref_w) / scale_w) < 1e-12
-    # locked wheels cross omega = 0 in every substep: the whole-array branch of the lock event
+    # locked wheels cross omega = 0 in every substep
     locked = np.zeros_like(w)
     ref_lv, ref_lw = qc.step(v, locked, np.full_like(v, 3000.0), roads, h, qc.PAPER_PARAMS, 1)
-    kernel.set_torque(np.full_like(v, 3000.0))
-    lv, lw = kernel.substep(v, locked)
+    plant.set_torque(np.full_like(v, 3000.0))
+    plant.reset(slice(None), v, locked)
+    lv, lw = plant.substep()
     assert np.max(np.abs(lv - ref_lv) / np.maximum(1.0, np.abs(ref_lv))) < 1e-12
     assert np.max(np.abs(lw - ref_lw) / np.maximum(1.0, np.abs(ref_lw))) < 1e-12
     assert np.mean(lw == 0.0) > 0.9  # most stayed locked (crossed zero again)
-    substep = make_scalar_substep(h)
-    sv = np.array([substep(v[i], w[i], Tb[i], scalar_road(*roads[i], h)) for i in range(len(v))])
-    assert np.max(np.abs(sv[:, 0] - ref_v) / scale_v) < 1e-12
-    assert np.max(np.abs(sv[:, 1] - ref_w) / scale_w) < 1e-12
-    assert ros2_substep_scalar(v[7], w[7], Tb[7], *roads[7], h) == tuple(sv[7])
+    p = qc.PAPER_PARAMS
+    one = np.array([compiled.substep_refined(v[i], w[i], Tb[i], *roads[i], plant.road[i, 4], h, p.r, p.m, p.J, p.Fz)
+                    for i in range(len(v))])
+    assert np.max(np.abs(one[:, 0] - ref_v) / scale_v) < 1e-12
+    assert np.max(np.abs(one[:, 1] - ref_w) / scale_w) < 1e-12
 
 
 def test_scalar_core_path_equals_batched_path():

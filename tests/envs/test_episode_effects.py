@@ -1,4 +1,4 @@
-"""One episode over three plants, and the corrected simulator as an env (issue 14, items 1-2)."""
+"""One episode over three plants, and the corrected simulator as an env."""
 
 from __future__ import annotations
 
@@ -10,12 +10,12 @@ import pytest
 
 import fricenv  # noqa: F401  (registers the envs)
 from fricenv.effects.quarter_car import make_effect
-from fricenv.envs.braking_core import BrakingConfig
 from fricenv.envs.braking_sim import BrakingSim
+from fricenv.envs.config import BrakingConfig
 from fricenv.envs.effect_plant import EffectPlant
 from fricenv.envs.effect_spec import EffectSpecError, parse_effect_args, resolve_effects
 from fricenv.plants import quarter_car as qc
-from fricenv.plants.braking_plant import BatchPlant, BrakingPlant, ScalarPlant
+from fricenv.plants.braking_plant import BatchPlant, BrakingPlant
 from fricenv.plants.tire import ROADS
 
 TOL = 1e-12  # relative (scale max(1, |x|)): math and numpy round transcendentals differently
@@ -59,7 +59,7 @@ def test_effect_plant_without_effects_equals_braking_v0(road, mode):
 
 def test_empty_effects_is_the_plain_env_exactly():
     plain, empty = gym.make("fricenv/Braking-v0"), gym.make("fricenv/Braking-v0", effects=[])
-    assert isinstance(empty.unwrapped.sim.plant, ScalarPlant)
+    assert empty.unwrapped.sim.scalar and isinstance(empty.unwrapped.sim.plant, BatchPlant)
     for env in (plain, empty):
         env.reset(seed=3)
     for _ in range(300):
@@ -72,19 +72,18 @@ def test_empty_effects_is_the_plain_env_exactly():
     assert t1 and t2 and i1["stopping_distance"] == i2["stopping_distance"]
 
 
-def test_plants_implement_the_protocol_and_scalar_fast_path_equals_the_plant_functions():
+def test_plants_implement_the_protocol_and_equal_the_plant_functions():
     p = qc.PAPER_PARAMS
-    assert isinstance(ScalarPlant(0.002), BrakingPlant) and isinstance(BatchPlant(2, 0.002), BrakingPlant)
-    assert isinstance(EffectPlant(1, 0.002), BrakingPlant)
+    assert isinstance(BatchPlant(2, 0.002), BrakingPlant) and isinstance(EffectPlant(1, 0.002), BrakingPlant)
     rng = np.random.default_rng(0)
     for _ in range(50):
         road = list(ROADS.values())[rng.integers(4)]
         v, w = rng.uniform(0.0, 30.0), rng.uniform(0.0, 100.0)
-        sp = ScalarPlant(0.002)
-        sp.set_road([0], road.as_array())
-        sp.reset([0], v, w)
-        assert sp.slip() == pytest.approx(float(qc.slip(v, w, p)), rel=TOL, abs=TOL)
-        assert sp.tire_force() == pytest.approx(float(qc.tire_force(v, w, road.as_array(), p)), rel=TOL, abs=TOL)
+        bp = BatchPlant(1, 0.002)
+        bp.set_road([0], road.as_array())
+        bp.reset([0], v, w)
+        assert bp.slip()[0] == pytest.approx(float(qc.slip(v, w, p)), rel=TOL, abs=TOL)
+        assert bp.tire_force()[0] == pytest.approx(float(qc.tire_force(v, w, road.as_array(), p)), rel=TOL, abs=TOL)
 
 
 def _stop(env: gym.Env, seed: int, action: float = 0.0) -> dict:
@@ -125,7 +124,7 @@ def test_report_path_effects_list_verdict_and_none(tmp_path):
     assert env.unwrapped.sim.plant.fixed == (make_effect("drag", c0=10.0, c2=0.5), make_effect("brake_gain", gain=0.9))
     for verdict in ("none", "unexplained"):
         path.write_text(json.dumps({"verdict": verdict, "params": {}}))
-        assert isinstance(gym.make("fricenv/Braking-v0", effects=path).unwrapped.sim.plant, ScalarPlant)
+        assert gym.make("fricenv/Braking-v0", effects=path).unwrapped.sim.scalar
     with pytest.raises(EffectSpecError, match="cannot read"):
         resolve_effects(tmp_path / "missing.json")
 

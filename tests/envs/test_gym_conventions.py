@@ -1,4 +1,4 @@
-"""Gymnasium and SB3 conventions on every registered ``fricenv/`` id (issue 16, item 4)."""
+"""Gymnasium and SB3 conventions on every registered ``fricenv/`` id."""
 
 from __future__ import annotations
 

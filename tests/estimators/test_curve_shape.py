@@ -1,9 +1,9 @@
-"""The EKF/RLS estimator places the peak slip of every road preset, and follows friction jumps (issue 17, item 3).
+"""The EKF/RLS estimator places the peak slip of every road preset, and follows friction jumps.
 
 Logs: the quarter-car plant (:func:`fricenv.plants.quarter_car.step`, 1 ms substeps) braked from 25 m/s by a slip
 hysteresis excitation common to every road (torque up at ``UP`` times the road's peak torque per second until the
 true slip passes ``BAND[1]``, down at ``DOWN`` times it until it is below ``BAND[0]``), measured as the braking env
-measures (:mod:`fricenv.envs.braking_core`): wheel speed with noise of variance 0.2 (rad/s)^2, a_x the speed
+measures (:mod:`fricenv.envs.config`): wheel speed with noise of variance 0.2 (rad/s)^2, a_x the speed
 difference over the sample plus N(0, 0.1^2). The shape fit was tuned on noise seeds 1-20; these tests use the
 validation seed ``VALIDATION_SEED`` and ``RESET_ERROR_SEED`` (not used in tuning). The truth is the road's own curve
 (:attr:`fricenv.plants.tire.MagicFormula.peak_slip`).

@@ -90,7 +90,7 @@ def test_one_big_spike_was_fatal_without_the_gate(make):
     _, rms_plain = _run(make(outlier_gate=None), pc, omega)
     out, rms = _run(make(), pc, omega)
     _, rms_clean = _run(make(), pc, pc.log.omega)
-    assert rms_plain > 1.0  # measured 4-5 m/s: the issue's symptom
+    assert rms_plain > 1.0  # measured 4-5 m/s: the ungated estimator's failure
     assert rms < 1.5 * rms_clean
     assert list(np.flatnonzero(out["health"] == Health.OUTLIER)) == [40]
 
@@ -177,10 +177,10 @@ def test_rejected_sample_gives_the_prediction_and_the_filter_goes_on_from_it():
 
 
 @pytest.mark.parametrize("estimator", STUDY_ESTIMATORS)
-def test_issue16_target_on_unseen_seeds(estimator):
+def test_spike_targets_on_unseen_seeds(estimator):
     """Spikes x0.5 to x10 on 1 % of the samples: rms speed error within 1.5x of the clean run in every run,
     OUTLIER on >= 95 % of the spiked samples, < 1 % false marks (seeds 7 and 8; tuned on 0-2). About 25 s in all;
-    kept in the default suite because it is the issue's target."""
+    kept in the default suite because it is the gate's target."""
     rows = study(estimator, seeds=[7, 8])
     assert [r.factor for r in rows] == [0.5, 2.0, 5.0, 10.0]
     for r in rows:

@@ -93,7 +93,7 @@ def test_force_spikes_no_longer_wreck_s(run20, make, factor):
     E_clean, h_clean = _feed(make(FMS_GATE), run20, run20.w_hat)
     E_plain, _ = _feed(make(None), run20, W)
     E_gated, h = _feed(make(FMS_GATE), run20, W)
-    assert E_plain > 10 * E_clean  # the symptom (measured 31 / 0.23 and 0.040 / 0.0024)
+    assert E_plain > 10 * E_clean  # the ungated estimator's failure (measured 31 / 0.23 and 0.040 / 0.0024)
     assert E_gated < 1.1 * E_clean
     assert list(np.flatnonzero(h == Health.OUTLIER)) == list(SPIKES // BLOCK)
     assert not np.any(h_clean == Health.OUTLIER)

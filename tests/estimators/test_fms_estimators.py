@@ -201,7 +201,7 @@ def test_observer_config_errors():
 
 @pytest.mark.slow
 def test_rls_stated_noise_median_over_seeds_meets_targets():
-    # issue 4 targets: median over seeds E <= 5e-3 at 20 s and <= 1e-3 at 100 s (measured: 2.3e-3 and 8.6e-4)
+    # the paper's targets: median over seeds E <= 5e-3 at 20 s and <= 1e-3 at 100 s (measured: 2.3e-3 and 8.6e-4)
     e20, e100 = [], []
     for seed in range(5):
         tr = pl.simulate(100.0, rng=np.random.default_rng(seed))

@@ -1,6 +1,6 @@
 """The wheel-speed gate's friction-jump rule (:mod:`estimators.jump`): a wheel that locks after dry -> ice restarts
-the gate after two samples, where the gate without the rule discarded ten (issue 17: the dry->ice locks of PPO +
-EKF/RLS).
+the gate after two samples, where the gate without the rule discarded ten (the cause of
+the dry->ice locks of PPO + EKF/RLS policies).
 
 Logs: the quarter-car plant (1 ms substeps) braked at a torque held at ``SHARE`` of dry's peak torque (ramped in
 over 0.1 s), the road turning from dry to ice at ``JUMP_AT``, measured as the braking env measures (wheel speed

@@ -1,4 +1,4 @@
-"""Several effects at once: the forward selection (issue 15 item 3) names both effects of a two-effect log with
+"""Several effects at once: the forward selection names both effects of a two-effect log with
 their parameters, and adds nothing to a one-effect log; its pool, its joint-fit starts and its confounding rule."""
 
 from __future__ import annotations
@@ -129,7 +129,7 @@ def test_an_effect_with_the_sets_signature_is_reported_confounded():
 
 
 def test_joint_fits_are_screened_from_their_best_start_and_refitted_only_near_the_test(monkeypatch):
-    """Issue 18: every joint model is fitted from its best start first (``fit_starts=1``); only one past half the
+    """Every joint model is fitted from its best start first (``fit_starts=1``); only one past half the
     addition threshold over the set, or one that would call its candidate confounded, is fitted again from all
     starts, and that refit is what the selection sees."""
     z_set = {"drag+a": 3.0, "drag+b": 1.0, "drag+c": 1.0}  # paired z of each joint model over the set

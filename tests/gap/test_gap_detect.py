@@ -1,4 +1,4 @@
-"""Issue 15 item 4: what size an effect needs to show above a log's noise (:mod:`fricenv.gap.quarter_car.detectability`), and
+"""What size an effect needs to show above a log's noise (:mod:`fricenv.gap.quarter_car.detectability`), and
 the payload F/T filter's lag read from its noise (:func:`fricenv.gap.signals.filters.filter_lag`)."""
 
 from __future__ import annotations

@@ -223,7 +223,7 @@ def test_non_increasing_time_names_line_and_column(good_csv, tmp_path):
 
 
 def test_nan_torque_names_line_and_column_and_nan_omega_is_a_missing_sample(good_csv, tmp_path):
-    """Issue 15: a NaN in a measured channel is a missing sample; in ``t`` or ``T_b`` it is an error naming the line."""
+    """A NaN in a measured channel is a missing sample; in ``t`` or ``T_b`` it is an error naming the line."""
     def nan_in(col):
         def edit(lines, h):
             cells = lines[h + 5].split(",")

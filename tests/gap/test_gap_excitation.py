@@ -1,4 +1,4 @@
-"""Issue 15 item 4: what a log excites. An ABS log cycles the brake torque many times, and every apply and every
+"""What a log excites. An ABS log cycles the brake torque many times, and every apply and every
 release is a transient that shows an actuator effect; a 2 s ABS log is enough to test (and find) a brake lag."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Issue 15 item 2: a low-passed ``v`` / ``a_x`` (an IMU driver's filter) read from the log itself and realigned by
+"""A low-passed ``v`` / ``a_x`` (an IMU driver's filter) read from the log itself and realigned by
 the filter's lag (:func:`fricenv.gap.signals.filters.shared_lag`, :func:`fricenv.gap.quarter_car.windows.prepare`), and an unfiltered
 log left as it was."""
 
@@ -182,8 +182,8 @@ def _true_set_z(case, tmp) -> float:
 @pytest.mark.slow
 def test_true_two_effect_set_is_significant_on_a_filtered_log_only_once_realigned(tmp_path, monkeypatch):
     """A real-like export (IMU filter 5 Hz on v and a_x, 50 Hz) with a brake gain and drag: the true set started at
-    the truth passes the significance rule once the channels are realigned, and did not without (tuning log of
-    issue 15, tests.independent_sim --real --combos seed 1801, log 5)."""
+    the truth passes the significance rule once the channels are realigned, and did not without (a tuning
+    log: the independent simulator's real-like two-effect draw, seed 1801, log 5)."""
     from fricenv.gap.quarter_car import windows
     from tests.independent_sim import draw_cases
 

@@ -1,4 +1,4 @@
-"""Fleet diagnosis (issue 18 item 2): every log of a folder or glob, one report folder each, fleet.json rows in file
+"""Fleet diagnosis: every log of a folder or glob, one report folder each, fleet.json rows in file
 order, a bad log as an error row, resumable after a kill (SIGTERM), --force, and the CLI's fleet options."""
 
 from __future__ import annotations

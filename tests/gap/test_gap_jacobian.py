@@ -1,4 +1,4 @@
-"""Issue 18: the projected (variable-projection) Jacobian of the windowed residuals, :func:`window_jacobian`.
+"""The projected (variable-projection) Jacobian of the windowed residuals, :func:`window_jacobian`.
 
 Checked against an independent reference: central differences of the residuals with the window start states fitted
 to convergence (ten Gauss-Newton iterations instead of two), which is the total derivative the projection stands

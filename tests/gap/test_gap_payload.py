@@ -1,4 +1,4 @@
-"""Payload gap diagnosis (issue 6, item 6): each payload effect identified on held-out data with its parameter
+"""Payload gap diagnosis: each payload effect identified on held-out data with its parameter
 within 15 %, a nominal log gives ``none``, the known S comes from ``--params``, the report contract, corrupted logs.
 
 Logs are 8 s at 1 ms from the stand-in :func:`fricenv.effects.payload.simulate_payload_with_effects` (paper noise);
@@ -285,7 +285,7 @@ def test_payload_validate_small_run_gets_every_category_right():
 
 
 def test_reported_parameters_come_from_every_block_after_the_held_out_verdict():
-    """Issue 15: the held-out blocks choose the model, then its parameters are estimated from all scored blocks
+    """The held-out blocks choose the model, then its parameters are estimated from all scored blocks
     (twice the data); the gaps stay held-out. Over 16 offset logs the RMS error of the reported offsets is below
     0.85 times that of the training-block fit of the same model (twice the data: sqrt(1/2) = 0.71 expected; 0.70
     measured)."""

@@ -1,4 +1,4 @@
-"""Issue 15: the payload diagnosis on real-like rig logs: a 30 Hz camera held between frames (its frame clock), a
+"""The payload diagnosis on real-like rig logs: a 30 Hz camera held between frames (its frame clock), a
 low-passed force-moment sensor (flagged, its noise from the spectral density, its lag fitted), tracking glitches."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Issue 15 items 2-4: sensor conditioning (missing, outliers, quantisation, filtering), the soft window cap, the
+"""Sensor conditioning (missing, outliers, quantisation, filtering), the soft window cap, the
 rate-adapted prediction window, short logs, the effects' testability rules and the report's ``effects``."""
 
 from __future__ import annotations
@@ -246,7 +246,7 @@ def test_forward_selection_stops_at_three_and_tries_expected_first(monkeypatch):
 
 
 def test_a_short_25hz_log_gives_a_result_with_what_it_cannot_test():
-    """The 1.4 s, 35-row segment of issue 15 used to crash ("argmin of an empty sequence")."""
+    """A 1.4 s, 35-row segment of a real-like log used to crash ("argmin of an empty sequence")."""
     from fricenv.gap.quarter_car.diagnose import diagnose
     from fricenv.gap.quarter_car.simulate import simulate_log
     from fricenv.plants.tire import ROADS

@@ -1,4 +1,4 @@
-"""Issue 15 item 2: a sensor filter the column map states (a data sheet's IMU filter) is undone as stated
+"""A sensor filter the column map states (a data sheet's IMU filter) is undone as stated
 (:mod:`fricenv.gap.signals.stated_filter`), instead of the filter the diagnosis would read from the noise roll-off."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Odd logs (tests/odd_logs.py): each gets a verdict or a one-line error naming its file, never a crash (issue 15)."""
+"""Odd logs (tests/odd_logs.py): each gets a verdict or a one-line error naming its file, never a crash."""
 
 import numpy as np
 import pytest

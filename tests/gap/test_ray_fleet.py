@@ -1,4 +1,4 @@
-"""Ray as the engine beyond one machine (issue 18 item 3): the same tasks and the same fleet rows on Ray as in the
+"""Ray as the engine beyond one machine: the same tasks and the same fleet rows on Ray as in the
 local process pool, and no Ray instance left running by a run that started one."""
 
 from __future__ import annotations

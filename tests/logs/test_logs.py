@@ -1,4 +1,4 @@
-"""The log contract of DESIGN.md: round trip, and a clear error naming file, line and column."""
+"""The log contract (docs/contracts.md): round trip, and a clear error naming file, line and column."""
 
 import numpy as np
 import pytest

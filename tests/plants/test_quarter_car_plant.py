@@ -166,14 +166,16 @@ def test_brake_release_past_peak_at_low_speed_is_physical(road, lam, v0):
 
 @pytest.mark.parametrize("road, lam, v0", RELEASE_PAST_PEAK, ids=lambda x: getattr(x, "name", x))
 def test_env_kernels_equal_the_plant_on_refined_steps(road, lam, v0):
-    from fricenv.plants.quarter_car_fast import Ros2Batch, make_scalar_substep, scalar_road
+    from fricenv.plants import compiled
+    from fricenv.plants.braking_plant import BatchPlant
 
     w0 = v0 * (1 - lam) / P.r
     ref = qc.step(np.array([v0]), np.array([w0]), np.zeros(1), road.as_array(), 0.002, P, substeps=1)
-    scalar = make_scalar_substep(0.002, P)(v0, w0, 0.0, scalar_road(*road.as_array(), 0.002, P))
-    batch = Ros2Batch(1, 0.002, P)
+    scalar = compiled.substep_refined(v0, w0, 0.0, *road.as_array(), road.mu_locked, 0.002, P.r, P.m, P.J, P.Fz)
+    batch = BatchPlant(1, 0.002, P)
     batch.set_road(slice(None), road.as_array())
     batch.set_torque(np.zeros(1))
-    vb, wb = batch.substep(np.array([v0]), np.array([w0]))
+    batch.reset(slice(None), v0, w0)
+    vb, wb = batch.substep()
     np.testing.assert_allclose([scalar[0], vb[0]], ref[0][0], rtol=1e-12)
     np.testing.assert_allclose([scalar[1], wb[0]], ref[1][0], rtol=1e-10)

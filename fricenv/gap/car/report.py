@@ -19,7 +19,7 @@ MAX_SKIPPED_LINES = 20  # skipped stretches listed in report.md (all are in repo
 
 
 def report_dict(dg: SessionDiagnosis, plant: str = "quarter-car") -> dict:
-    """The report.json object: the DESIGN.md keys for the pooled diagnosis (``gap_before``/``gap_after`` held out
+    """The report.json object: the docs/contracts.md keys for the pooled diagnosis (``gap_before``/``gap_after`` held out
     by event or block), the session's detail in ``where``."""
     return to_jsonable({"plant": plant, "verdict": dg.verdict, "gap_before": dg.gap_before,
                         "gap_after": dg.gap_after, "params": dg.params, "where": dg.where,

@@ -43,7 +43,7 @@ def effects_of(dg) -> list[dict]:
 
 
 def report_dict(dg, plant: str = "quarter-car") -> dict:
-    """The report.json object, exactly the DESIGN.md schema (extra detail lives inside ``where``)."""
+    """The report.json object, exactly the docs/contracts.md schema (extra detail lives inside ``where``)."""
     cands = [{"effect": c.effect, "params": c.effect_params(), "gap_after": c.gap, "score": _score(c, dg.gap_before)}
              for c in dg.candidates]
     return to_jsonable({"plant": plant, "verdict": dg.verdict, "gap_before": dg.gap_before,

@@ -7,7 +7,7 @@ __all__ = ["decide_verdict"]
 
 def decide_verdict(significant: list, fits: list, explains, joint_wins: bool, gap_is_real: bool) \
         -> tuple[str, object, list]:
-    """The verdict rule shared by every plant's diagnosis (DESIGN.md: none / an effect / unexplained).
+    """The verdict rule shared by every plant's diagnosis (docs/contracts.md: none / an effect / unexplained).
 
     The best significant candidate that explains the gap on its own is the verdict; if none does, the best one is
     the verdict when fitting it together with the second one does (two effects at once: the larger is the verdict,

@@ -25,12 +25,12 @@ class DiagnoseConfig:
     max_nfev: int = 30  # least-squares iterations per start [-]
     # Relative step size at which a least-squares run stops (scipy's ``xtol``). Past the optimum the trust region
     # shrinks by 4x per rejected step; scipy's default 1e-8 spent about half of a run's simulations there, moving
-    # parameters by less than their last reported digit (issue 18) [-]
+    # parameters by less than their last reported digit [-]
     fit_xtol: float = 1e-5
     # Jacobian of the least-squares fits: "projected" differentiates each window at its fitted start states and
     # projects out what those states absorb (variable projection; one simulation per parameter, compiled diagnosis
     # only), "difference" takes forward differences of the nuisance-fitted residuals (a Gauss-Newton fit per
-    # perturbed parameter set: the path before issue 18, and the numpy path's)
+    # perturbed parameter set: the numpy path's, and a reference for the projected one)
     fit_jacobian: str = "projected"
     # Least-squares runs per candidate fit, from the best starts with distinct roads: a run started in the nominal
     # road's basin can stop there (a non-smooth point of the windowed residuals) far from the effect's optimum [-]
@@ -49,7 +49,7 @@ class DiagnoseConfig:
     drift_z: float = 3.0  # paired z of the early/late refit over the constant model for a drift (one test) [-]
     candidates: tuple[str, ...] = tuple(EFFECTS)  # effects to try
     # Prediction windows simulated by the compiled (numba) kernel; False runs the numpy EffectSimulator path (the
-    # path before issue 18, kept to time the speed-up and to check the kernel against it)
+    # reference path, kept to time the speed-up and to check the kernel against it)
     compiled: bool = True
 
     def check(self) -> None:

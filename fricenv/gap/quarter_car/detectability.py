@@ -1,4 +1,4 @@
-"""How large an effect must be to show above the noise of a quarter-car log (issue 15 item 4): a power analysis of
+"""How large an effect must be to show above the noise of a quarter-car log: a power analysis of
 the diagnosis' own significance test, from the log itself, decided before any candidate is fitted.
 
 For an effect at a probe size ``q`` (a parameter vector off the value that switches it off), the calibrated nominal

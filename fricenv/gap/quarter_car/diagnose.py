@@ -1,4 +1,4 @@
-"""Sim-to-real gap diagnosis of a quarter-car braking log (issue 6): where the gap lies, which effect, how far it shrinks.
+"""Sim-to-real gap diagnosis of a quarter-car braking log: where the gap lies, which effect, how far it shrinks.
 
 Method (every error measure is computed on data not used for fitting):
 

@@ -1,4 +1,4 @@
-"""What a quarter-car log excites (issue 15 item 3): the :class:`fricenv.effects.registry.Excitation` of a log and
+"""What a quarter-car log excites: the :class:`fricenv.effects.registry.Excitation` of a log and
 the candidates it cannot test, by each effect's registry rule and by the size it would need to show above the noise
 (:mod:`fricenv.gap.quarter_car.detectability`), so that a verdict of ``none`` is not read as "no effect" where the log could not
 have shown one."""

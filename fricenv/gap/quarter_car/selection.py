@@ -1,4 +1,4 @@
-"""Forward selection of several effects at once (issue 15 item 3).
+"""Forward selection of several effects at once.
 
 After the best single effect (the verdict), the next candidate is added while the joint model beats the current set
 significantly on held-out data, up to ``MAX_EFFECTS``:
@@ -95,7 +95,7 @@ def _extend(ctx: FitContext, nominal: CandidateFit, current: CandidateFit, extra
     """The current set plus each of ``extra``, fitted per fold and cross-fitted; a set in ``known`` (frozenset of
     effect names -> cross-fitted model) is not refitted.
 
-    Screened (issue 18): each joint model is first fitted from its best start alone (and from the registry's start
+    Screened: each joint model is first fitted from its best start alone (and from the registry's start
     list where that fit ends worse than the set, :func:`_restart`). Only one past ``SCREEN_SHARE`` of the addition
     threshold over the set, or that would make its candidate :func:`confounded` with the set, is fitted again from
     all ``cfg.fit_starts`` starts of the list that won, which gives exactly the unscreened fit (the best start's run

@@ -1,7 +1,7 @@
 """The gap tool's "real" stand-in: a quarter car with chosen effects, a test driver and a log writer.
 
 The stand-in is :class:`fricenv.effects.quarter_car.EffectSimulator` (the same code as the diagnosis' augmented
-simulators). Logs follow DESIGN.md: ``t, T_b, omega[, v][, a_x]``; ``T_b`` is the commanded torque, before any
+simulators). Logs follow docs/contracts.md: ``t, T_b, omega[, v][, a_x]``; ``T_b`` is the commanded torque, before any
 actuator effect; every log starts with a short free-rolling stretch; the wheel speed carries white noise of the
 paper's variance (:data:`fricenv.plants.sui_johansen.OMEGA_NOISE_VAR`), ``v`` and ``a_x`` small white noise.
 
@@ -29,7 +29,7 @@ from fricenv.effects.quarter_car import (
 from fricenv.logs import QuarterCarLog, write_log
 from fricenv.plants import quarter_car as qc
 from fricenv.plants import sui_johansen as sj
-from fricenv.plants.tire import MagicFormula
+from fricenv.plants.tire import MagicFormula, ecu_slip
 from fricenv.utils import as_generator
 
 __all__ = ["DRIVERS", "NoiseSpec", "make_driver", "simulate_log", "write_simulated_log"]
@@ -88,7 +88,7 @@ def _abs_driver(road: MagicFormula, p: qc.QuarterCarParams, v0: float, free_step
         s["v_ref"] = max(s["w"] * p.r, s["v_ref"] - decel * dt)
         if k < free_steps:
             return 0.0
-        slip_est = 1.0 - s["w"] * p.r / max(s["v_ref"], 0.1)
+        slip_est = ecu_slip(s["w"], s["v_ref"], p.r)
         if s["mode"] == "apply":
             rate = _ABS_RATE_UP if s["cycles"] == 0 else _ABS_RATE_UP_CYCLE * s["T_peak"] / 0.1
             s["T"] += rate * dt

@@ -1,4 +1,4 @@
-"""Validation of the gap diagnosis on withheld effects (issue 6, item 5).
+"""Validation of the gap diagnosis on withheld effects.
 
 Random logs are drawn from the real stand-in: each library effect at a realistic size, logs with no effect, and logs
 with a physically real effect that is NOT in the library (temperature brake fade, or friction that falls with the
@@ -140,7 +140,7 @@ def true_model_fit(effects: dict[str, dict], road: dict, d):
     """The true model scored on the prepared log ``d`` (no fit): the true road and every effect at its true
     parameters, held out on every window as the candidates are (for the oracles of the summaries).
 
-    :param effects: effect name -> its true parameters (DESIGN.md names, SI units), in the model's order.
+    :param effects: effect name -> its true parameters (registry names, SI units), in the model's order.
     :param road: the true road, keys ``B, C, E, theta``.
     """
     from fricenv.gap.quarter_car.diagnose import ROAD_NAMES, param_names, score
@@ -163,7 +163,7 @@ def true_model_oracle(effect: str, params: dict, road: dict, dg, cfg: DiagnoseCo
       (:func:`fricenv.gap.quarter_car.verdict.explains`)? If not, a fit of the right effect leaves the log ``unexplained`` too
       (lock-ups that no model times, a noise level read too low).
 
-    :param effect: library effect name; :param params: its true parameters (DESIGN.md names, SI units).
+    :param effect: library effect name; :param params: its true parameters (registry names, SI units).
     :param road: the true road, keys ``B, C, E, theta``; :param dg: the log's :class:`Diagnosis`.
     :return: (detectable, explains).
     """

@@ -1,5 +1,5 @@
 """The verdict rule: which candidates are significant, which explain the gap, whether the gap is real, and the
-verdict shared by every plant's diagnosis (DESIGN.md: none / an effect / unexplained)."""
+verdict shared by every plant's diagnosis (docs/contracts.md: none / an effect / unexplained)."""
 
 from __future__ import annotations
 

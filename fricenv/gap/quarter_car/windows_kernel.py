@@ -5,13 +5,13 @@ element by element, instead of one numpy round trip per iteration.
 
 The same arithmetic as the numpy loop in :mod:`fricenv.gap.quarter_car.windows` (the same replicas, steps, clips and bounds,
 the normal equations summed in numpy's einsum order, the same LAPACK solve), so equal to it bit for bit on this
-platform's numpy build (``tests/gap/test_gap_speed3_kernel.py``; elsewhere einsum's SIMD width may differ, and with
+platform's numpy build (``tests/gap/test_gap_window_fit_kernel.py``; elsewhere einsum's SIMD width may differ, and with
 it the last bit of a one-state sum). A fit's path through a least-squares run can amplify a last-bit difference
 into a visibly different optimum, so the diagnosis' results depend on this equality. The windows are simulated by
 :func:`fricenv.effects.kernels._trajectory`, the compiled ``EffectSimulator``. Imported only when a compiled
 diagnosis runs, so ``import fricenv`` does not load numba.
 
-:func:`sensitivities` (issue 18) runs the same fit for one parameter set and then the least-squares fits' Jacobian
+:func:`sensitivities` runs the same fit for one parameter set and then the least-squares fits' Jacobian
 with respect to the parameters by variable projection: one simulation per parameter from the fitted start states,
 what those states absorb projected out (``tests/gap/test_gap_jacobian.py``).
 """

@@ -78,7 +78,7 @@ def _response(f: np.ndarray, fc: float, order: int, fs: float, digital: bool) ->
 
 def filter_lag(x: np.ndarray, fs: float, f_lo: float, f_use: float, min_cutoff: float = 0.0,
                families: tuple[bool, ...] = (False,)) -> dict | None:
-    """The lag of a low-pass sensor filter, from the roll-off of the channel's noise (issue 15: a filtered
+    """The lag of a low-pass sensor filter, from the roll-off of the channel's noise (a filtered
     force-moment sensor shifts the wrench against the pose like a vision delay, which the motion cannot tell apart;
     a filtered ``v`` or ``a_x`` lags the torque like a brake delay).
 
@@ -162,7 +162,7 @@ def lag_against(y: np.ndarray, ref: np.ndarray, fs: float, band: tuple[float, fl
 def shared_lag(conds: dict[str, ChannelCondition], fs: float, f_lo: float, f_use: float,
                bounds: dict[str, float] | None = None, deconvolve: tuple[str, ...] = ()) \
         -> dict[str, ChannelCondition]:
-    """Channels low-passed by a sensor filter, read from their noise roll-off and realigned (issue 15: an IMU
+    """Channels low-passed by a sensor filter, read from their noise roll-off and realigned (an IMU
     driver's filter on ``v`` and ``a_x`` delays them against the torque by tens of milliseconds, a model error that
     inflates the noise level read from the model's residual until real effects drown, and imitates a brake delay).
 

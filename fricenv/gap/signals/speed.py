@@ -27,30 +27,22 @@ import numpy as np
 
 from fricenv.effects import registry
 from fricenv.effects.quarter_car import ModelBatch
+from fricenv.gap.signals.speed_step import IMPLICIT, slip_lag_decay, speed_update
 from fricenv.plants import quarter_car as qc
 from fricenv.plants.tire import magic_formula_and_dslip, slip_and_partials
 
 __all__ = ["affine_scan", "filtered_transient_slip", "reconstruct_speed", "reconstruct_speed_sequential",
-           "slip_lag_decay"]
+           "slip_lag_decay", "speed_update"]
 
 NEWTON_ITERS = 20  # Newton iterations on the trajectory before the sequential finish
 NEWTON_TOL = 1e-11  # largest accepted step residual [m/s] (transient slip: the same number, unitless)
 FD_STEP = 1e-7  # finite-difference step of the step Jacobians [m/s], [-]
 
 
-IMPLICIT = 0.5  # weight of the step's end in the linearly implicit step (1/2: trapezoidal, second order) [-]
-
-
 def step_wheel_speed(omega: np.ndarray) -> np.ndarray:
     """The wheel speed over each sample step, the mean of its two samples (the last step keeps its sample)."""
     w = np.asarray(omega, dtype=float)
     return np.r_[0.5 * (w[:-1] + w[1:]), w[-1:]] if w.size > 1 else w.copy()
-
-
-def slip_lag_decay(v, dt_over_sigma):
-    """Factor by which the transient slip's lag behind the slip decays over one sample, ``exp(-v dt / sigma)``
-    (first-order relaxation, ``(sigma / v) lambda_t' = lambda - lambda_t``, with the speed held over the sample)."""
-    return np.exp(-np.maximum(v, 0.0) * dt_over_sigma)
 
 
 @dataclass(frozen=True)
@@ -103,9 +95,7 @@ class _SpeedModel:
             lt = lam
             mu, dmu = magic_formula_and_dslip(lam, *self.shape, self.theta[:, k])
             dmu_dv = dmu * dlam_dv
-        f = -(p.Fz * mu + self.c0 + self.c2 * v * v) / p.m
-        dfdv = -(p.Fz * dmu_dv + 2.0 * self.c2 * v) / p.m
-        return np.maximum(v + dt * f / (1.0 - IMPLICIT * dt * np.minimum(dfdv, 0.0)), 0.0), lt
+        return speed_update(v, mu, dmu_dv, self.c0, self.c2, p.Fz, p.m, dt, IMPLICIT), lt
 
 
 def _initial_speed(batch: ModelBatch, omega: np.ndarray, free_end: int) -> np.ndarray:

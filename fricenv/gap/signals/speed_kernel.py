@@ -13,14 +13,15 @@ import numba
 import numpy as np
 
 from fricenv.effects.kernels import _compile, _guard_cache
-from fricenv.gap.signals import speed
+from fricenv.gap.signals import speed_step
 from fricenv.plants.tire import SLIP_SPEED_FLOOR, magic_formula_and_dslip, slip_and_partials
 
 __all__ = ["sequential_speed"]
 
 _slip_partials = _compile(slip_and_partials)
 _mu_dslip = _compile(magic_formula_and_dslip)
-_lag_decay = _compile(speed.slip_lag_decay)
+_lag_decay = _compile(speed_step.slip_lag_decay)
+_speed_update = _compile(speed_step.speed_update)
 
 
 @numba.njit(cache=True, error_model="numpy")
@@ -41,9 +42,7 @@ def _recursion(omega, r, c0, c2, B, C, E, theta, relax, dt_over_sigma, Fz, m, dt
                 lt = lam
                 mu, dmu = _mu_dslip(lam, B[i], C[i], E[i], theta[i, k])
                 dmu_dv = dmu * dlam_dv
-            f = -(Fz * mu + c0[i] + c2[i] * v * v) / m
-            dfdv = -(Fz * dmu_dv + 2.0 * c2[i] * v) / m
-            v = max(v + dt * f / (1.0 - implicit * dt * min(dfdv, 0.0)), 0.0)
+            v = _speed_update(v, mu, dmu_dv, c0[i], c2[i], Fz, m, dt, implicit)
             out[i, k + 1] = v
     return out
 
@@ -63,7 +62,7 @@ def sequential_speed(model, v0: np.ndarray) -> np.ndarray:
     return _recursion(np.ascontiguousarray(model.omega, dtype=float), col(model.r), col(model.c0), col(model.c2),
                       B, C, E, theta, np.ascontiguousarray(np.broadcast_to(model.relax, (K, 1))[:, 0]),
                       col(model.dt_over_sigma), float(model.p.Fz), float(model.p.m), float(model.dt),
-                      speed.IMPLICIT, out)
+                      speed_step.IMPLICIT, out)
 
 
-_guard_cache(globals(), ("fricenv.gap.signals.speed",))  # the cache compiled in the slip, Magic Formula and lag formulas
+_guard_cache(globals(), ("fricenv.gap.signals.speed_step",))  # the cache compiled in the slip, Magic Formula and lag formulas

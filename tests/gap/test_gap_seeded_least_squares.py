@@ -1,5 +1,5 @@
-"""A least-squares run takes the residuals at its start from the start search of :func:`fricenv.gap.quarter_car.fitting.fit`
-instead of simulating them again (issue 18, fourth pass). Allowed only because a row of a batched
+"""A least-squares run takes the residuals at its start from the start search of
+:func:`fricenv.gap.quarter_car.fitting.fit` instead of simulating them again. Allowed only because a row of a batched
 ``window_residuals`` call equals the same parameter set evaluated alone, bit for bit (the windows are simulated
 element by element): the run's path, and so the fitted parameters, stay exactly those of an unseeded run."""
 

@@ -1,0 +1,76 @@
+"""The estimator robustness study: stops of the stand-in with a grid cell on, estimators over them, the matrix."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from agents.robustness import _run_single, run_estimator, simulate_stop, stop_metrics, study, summarize
+from fricenv.effects.grid import GridCell, cell_effects
+from fricenv.plants.quarter_car import PAPER_PARAMS
+from fricenv.plants.tire import DRY, longitudinal_slip
+
+
+def test_stop_truth_is_the_plant_state():
+    nominal = simulate_stop(GridCell("nominal"), "dry", "abs", seed=0)
+    p = PAPER_PARAMS
+    assert 20.0 <= nominal.v0 <= 32.0 and nominal.effects == []
+    # friction in use on the nominal plant: the road's curve at the true slip
+    np.testing.assert_allclose(nominal.mu, DRY.mu(nominal.slip), atol=1e-12)
+    # the speed follows m dv/dt = -F_z mu: the speed lost over the stop is the integral of the recorded friction
+    lost = nominal.v[0] - nominal.v[-1]
+    integral = 0.01 * p.Fz / p.m * np.sum(0.5 * (nominal.mu[1:] + nominal.mu[:-1]))
+    assert lost > 10.0 and integral == pytest.approx(lost, rel=0.01)
+    # the same draws for every cell of a (road, driver, seed): the speed and the free roll agree
+    lagged = simulate_stop(GridCell("brake_lag", "high"), "dry", "abs", seed=0)
+    assert lagged.v0 == nominal.v0 and lagged.brake_start == nominal.brake_start
+    assert lagged.effects == cell_effects(GridCell("brake_lag", "high"), "dry", nominal.v0)
+    bigger = simulate_stop(GridCell("radius_error", "high"), "dry", "open-loop", seed=1)
+    omega_true = bigger.v * (1 - bigger.slip) / (1.04 * p.r)  # slip measured with the plant's own radius
+    np.testing.assert_allclose(longitudinal_slip(bigger.v, omega_true, 1.04 * p.r), bigger.slip, atol=1e-12)
+
+
+@pytest.mark.slow
+def test_batched_estimators_equal_the_single_ones():
+    stops = [simulate_stop(GridCell(c, s), "wet", "abs", seed=2) for c, s in (("nominal", ""), ("drag", "high"))]
+    p = PAPER_PARAMS
+    keys = {"v": "v", "slip": "slip", "mu": "mu_utilized"}
+    batched = run_estimator("ekf-rls", stops)
+    for stop, b in zip(stops, batched):
+        single = _run_single("ekf-rls", stop, float(stop.omega[0]) * p.r, keys)
+        for q in ("v", "slip", "mu"):
+            np.testing.assert_allclose(b[q], single[q], atol=1e-9)
+        np.testing.assert_array_equal(b["health"], single["health"])
+
+
+def test_study_rows_and_summary():
+    cells = [GridCell("nominal"), GridCell("brake_gain", "high")]
+    rows = study(("ekf",), cells, roads=("wet",), drivers=("abs",), seeds=(0,), workers=1)
+    assert [(r["estimator"], r["cell"]) for r in rows] == [("ekf", "nominal"), ("ekf", "brake_gain:high")]
+    assert rows[0]["effects"] == [] and rows[1]["effects"] == [{"effect": "brake_gain", "params": {"gain": 1.25}}]
+    for r in rows:
+        assert sum(r["health"].values()) == pytest.approx(1.0)
+        assert 0.0 <= r["v_rms"] <= r["v_worst"] and np.isfinite([r["slip_rms"], r["mu_rms"]]).all()
+    matrix = summarize(rows)
+    assert [m["cell"] for m in matrix] == ["nominal", "brake_gain:high"] and matrix[0]["stops"] == 1
+    assert matrix[0]["v_rms"] == pytest.approx(rows[0]["v_rms"])
+    with pytest.raises(ValueError, match="runs no estimator"):
+        study(("oracle",), cells)
+
+
+def test_metrics_count_errors_after_the_settling_time():
+    stop = simulate_stop(GridCell("nominal"), "snow", "abs", seed=0)
+    exact = {"v": stop.v.copy(), "slip": stop.slip.copy(), "mu": stop.mu.copy(),
+             "health": np.zeros(len(stop.t), dtype=int)}
+    early = dict(exact, v=exact["v"] + np.where(np.arange(len(stop.t)) < stop.brake_start + 50, 3.0, 0.0))
+    m = stop_metrics(stop, early)
+    assert m["v_rms"] == 0.0 and m["v_worst"] == pytest.approx(3.0)  # the first 0.5 s of braking is not counted
+    assert m["health"]["ok"] == 1.0 and m["health"]["outlier"] == 0.0
+
+
+def test_paper_robustness_rejects_bad_options(capsys):
+    from fricenv.cli import main
+
+    assert main(["paper", "robustness", "--estimators", "ekf", "kalman"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("fricenv paper robustness: error: --estimators: unknown kalman; valid: ekf, mhe")
