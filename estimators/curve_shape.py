@@ -39,7 +39,7 @@ ice->dry are followed on every fresh and tuning seed (``python -m tests.shape_va
 
 The reported peak slip (S5). Between shapes whose peaks lie far apart the safest bank peak still loses much: a
 policy that brakes at dry's 0.19 on wet gets 92 % of wet's friction, and its slips never pass below wet's peak,
-so the data never tell wet from dry (measured, issue 17 session 10: a PPO + EKF/RLS policy of training seed 11 held
+so the data never tell wet from dry (measured: a PPO + EKF/RLS policy of training seed 11 held
 slip 0.18-0.22 on wet at 20 m/s for 2 s with the fit on dry, ratio 1.09). So the reported peak slip is, per set of
 plausible shapes, the slip that keeps most friction on the worst of them, ``argmax_S min_j g_j(S)``
 (:attr:`ShapeBank.minimax_slip`, one entry per set), when that keeps more than ``MINIMAX_GAIN`` (5 % of the peak
@@ -57,7 +57,7 @@ it. The fit sees one when the best pair's theta over the fast memory and over th
 (the friction in use above the road's peak friction, impossible on one road: after ice -> dry under a gentle
 policy the wheel spins up without a gate restart, the slips stay on dry's rising side, the fast and slow theta
 differ by less than ``jump_ratio``, and the fit held wet at a peak friction of 0.37 while 0.71 was in use, PPO +
-EKF/RLS training seed 0 at 20 m/s, issue 17 session 10). A jump seen by the caller (:meth:`ShapeFit.restart`, the
+EKF/RLS training seed 0 at 20 m/s). A jump seen by the caller (:meth:`ShapeFit.restart`, the
 EKF/RLS's gate restarting) does not zero the memory: on a wheel that locks after dry -> ice, data from slip 1 alone
 leave every shape plausible (dry->ice then placed on 0.12 of the samples, fresh seed 300). It withholds the
 peak friction (NaN: the caller's own, whose RLS restarted) until the fit's jump test restarts the memory from the

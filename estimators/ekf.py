@@ -18,12 +18,13 @@ from collections.abc import Callable
 import numpy as np
 
 from estimators.base import Estimate, Estimator, EstimatorConfigError, Health, check_dt
-from estimators.outliers import DEFAULT_GATE, GateParams, Verdict, check_gate, gate, nis
+from estimators.mismatch import WheelSpeedGuard
+from estimators.outliers import DEFAULT_GATE, GateParams, Verdict, check_gate
 from estimators.quarter_car_model import PARAM_NAMES, AugmentedModel
-from fricenv.plants.sui_johansen import OMEGA_NOISE_VAR
+from estimators.tuning import DEFAULT_EKF_TUNING, HORIZON, PAPER_TUNING, SLIP_PRIOR, V_PRIOR
 
-__all__ = ["DEFAULT_EKF_TUNING", "ExtendedKalmanFilter", "ParameterInformation", "QuarterCarEKF", "ekf_predict",
-           "ekf_update", "gate_wheel_speed", "innovation_covariance", "reinit_from_wheel_speed"]
+__all__ = ["DEFAULT_EKF_TUNING", "SLIP_PRIOR", "V_PRIOR", "ExtendedKalmanFilter", "ParameterInformation", "QuarterCarEKF",
+           "ekf_predict", "ekf_update", "innovation_covariance"]
 
 
 def _sym(P: np.ndarray) -> np.ndarray:
@@ -106,59 +107,6 @@ class ExtendedKalmanFilter:
         return ekf_update(x, P, np.atleast_1d(y), np.atleast_1d(yp), np.atleast_2d(H), self.R)
 
 
-# Default tuning of the quarter-car EKF (standard deviations).
-DEFAULT_EKF_TUNING = {
-    # initial prior spread, per state
-    "P0_std": {"v": 1.0, "slip": 0.05, "theta": 0.4, "B": 3.0, "C": 0.5, "E": 3.0},
-    # process noise per 10 ms sample: model error on v and slip, random walk on the parameters
-    "Q_std": {"v": 0.01, "slip": 0.01, "theta": 0.002, "B": 0.02, "C": 0.005, "E": 0.02},
-    "R": OMEGA_NOISE_VAR,  # wheel-speed noise variance [(rad/s)^2], Section IV
-}
-V_PRIOR = 19.0  # a priori initial speed [m/s], Section IV
-SLIP_PRIOR = 0.0  # a priori initial slip [-]
-
-
-def reinit_from_wheel_speed(model: AugmentedModel, x: np.ndarray, P: np.ndarray, P0: np.ndarray,
-                            omega: float) -> tuple[np.ndarray, np.ndarray]:
-    """Re-initialise the measured states from one wheel speed (the gate's re-initialisation, estimators.outliers).
-
-    One wheel speed cannot separate v from the slip (eq. (7)), and the filter's own slip is not to be trusted
-    after a run of rejections (a filter that followed a dropout to zero has its slip near 1, which would make
-    ``omega r / (1 - slip)`` ten times too fast): the slip goes back to its a priori value ``SLIP_PRIOR`` and v to
-    the value that makes eq. (7) hold, ``v = omega r / (1 - SLIP_PRIOR)``; the (v, slip) covariance goes back to
-    its initial block of ``P0`` and their correlations with the parameters are dropped.
-
-    :param model: the augmented model (for r).
-    :param x: current state, (n,).
-    :param P: current covariance, (n, n).
-    :param P0: initial covariance, (n, n).
-    :param omega: the measured wheel speed [rad/s].
-    :return: (x, P) re-initialised.
-    """
-    x = x.copy()
-    x[0] = max(float(omega) * model.p.r / (1.0 - SLIP_PRIOR), 0.0)
-    x[1] = SLIP_PRIOR
-    P = P.copy()
-    P[:2, :] = 0.0
-    P[:, :2] = 0.0
-    P[:2, :2] = P0[:2, :2]
-    return x, P
-
-
-def gate_wheel_speed(model: AugmentedModel, x: np.ndarray, P: np.ndarray, P0: np.ndarray, R: np.ndarray,
-                     y: np.ndarray, rejected: int, params: GateParams | None):
-    """The quarter-car filters' gate (:mod:`estimators.outliers`) on wheel speed ``y`` against the prior (x, P).
-
-    :return: (verdict, consecutive rejections after it, x, P), x and P re-initialised from y on ``REINIT``
-        (:func:`reinit_from_wheel_speed`); ``ACCEPT`` when ``params`` is None.
-    """
-    if params is None:
-        return Verdict.ACCEPT, 0, x, P
-    S = innovation_covariance(P, model.h_jacobian(x), R)[1]
-    verdict, rejected = gate(nis(y - model.h(x), S), rejected, params)
-    if verdict == Verdict.REINIT:
-        x, P = reinit_from_wheel_speed(model, x, P, P0, float(y[0]))
-    return verdict, rejected, x, P
 
 
 class ParameterInformation:
@@ -241,8 +189,6 @@ class QuarterCarEKF(Estimator):
     def __init__(self, estimated: tuple[str, ...] = ("theta",), dt: float = 0.01, P0_std: dict | None = None,
                  Q_std: dict | None = None, R: float = DEFAULT_EKF_TUNING["R"],
                  model: AugmentedModel | None = None, outlier_gate: GateParams | None = DEFAULT_GATE):
-        from estimators.mhe import HORIZON, PAPER_TUNING
-
         dt = check_dt(dt)
         try:
             self.model = model or AugmentedModel(estimated=tuple(estimated), dt=dt)
@@ -264,6 +210,7 @@ class QuarterCarEKF(Estimator):
         )
         self.lower, self.upper = self.model.lower(), self.model.upper()
         self.outlier_gate = check_gate(outlier_gate)
+        self.guard = WheelSpeedGuard(self.model, self.outlier_gate, float(np.sqrt(R)))
         group = "theta-only" if len(self.model.estimated) <= 1 else "all"
         self.information = ParameterInformation(slice(2, self.model.nx), HORIZON, PAPER_TUNING[group]["delta"])
         self.reset()
@@ -272,37 +219,59 @@ class QuarterCarEKF(Estimator):
         """Start from the a priori state (Section IV) with covariance P0."""
         self.x = self.model.nominal_state(v, slip, params)
         self.P = self.P0.copy()
-        self._rejected = 0
+        self.guard.reset()
+        self._brake_torque = 0.0  # torque held since the last sample [N m]
         self.information.reset()
         return self._estimate(self.x, Health.OK)
 
     def _estimate(self, x: np.ndarray, health: Health, info: dict | None = None) -> Estimate:
         return Estimate(self.model.values(x), health, info or {})
 
+    def correct(self, y: np.ndarray) -> tuple[Verdict, np.ndarray, np.ndarray, np.ndarray | None, float]:
+        """Gate wheel speed ``y`` on the prior (x, P) (:class:`estimators.mismatch.WheelSpeedGuard`) and update.
+
+        :return: (verdict, posterior mean (not yet clipped to the bounds), posterior covariance, innovation or None
+            for a rejected sample, the process-noise factor of a mismatch); the prior (x, P) is re-initialised on
+            ``REINIT`` and raised on ``MISMATCH``.
+        """
+        verdict, self.x, self.P, inflation = self.guard.check(self.x, self.P, self.P0, self.filter.R, self.filter.Q,
+                                                              y, self._brake_torque)
+        if verdict == Verdict.REJECT:
+            return verdict, self.x, self.P, None, inflation
+        x_post, P_post, innov = self.filter.update(self.x, self.P, y)
+        return verdict, x_post, P_post, innov, inflation
+
+    def propagate(self, x_post: np.ndarray, P_post: np.ndarray, brake_torque: float) -> bool:
+        """Time update from the posterior (clipped to the bounds) under the torque held to the next sample.
+
+        :return: False when the step is not finite: the prior is kept and its covariance restarts at P0.
+        """
+        self._brake_torque = float(brake_torque)
+        x_next, P_next = self.filter.predict(np.clip(x_post, self.lower, self.upper), P_post, self._brake_torque)
+        if not (np.all(np.isfinite(x_next)) and np.all(np.isfinite(P_next))):
+            self.P = self.P0.copy()
+            return False
+        self.x, self.P = np.clip(x_next, self.lower, self.upper), P_next
+        return True
+
     def update(self, measurement, u) -> Estimate:
         sample = self._validated_sample(measurement, u)
         if sample is None:
             return self._estimate(self.x, Health.INVALID_INPUT, {"reason": "NaN or wrong shape; sample skipped"})
         y, uu = sample
-        verdict, self._rejected, self.x, self.P = gate_wheel_speed(self.model, self.x, self.P, self.P0, self.filter.R,
-                                                                   y, self._rejected, self.outlier_gate)
-        if verdict == Verdict.REJECT:
-            x_post, P_post, innov = self.x, self.P, None
-        else:
-            x_post, P_post, innov = self.filter.update(self.x, self.P, y)
-            x_post = np.clip(x_post, self.lower, self.upper)
-        x_next, P_next = self.filter.predict(x_post, P_post, float(uu[0]))
-        if not (np.all(np.isfinite(x_next)) and np.all(np.isfinite(P_next))):
-            # keep the last good state; restart the covariance
-            self.P = self.P0.copy()
+        verdict, x_post, P_post, innov, inflation = self.correct(y)
+        P_prior = self.P
+        x_post = np.clip(x_post, self.lower, self.upper)
+        if not self.propagate(x_post, P_post, float(uu[0])):  # keep the last good state
             return self._estimate(self.x, Health.SOLVER_FAILED, {"reason": "non-finite EKF step"})
-        self.information.add(self.P, None if innov is None else P_post)
-        if verdict == Verdict.ACCEPT:
+        self.information.add(P_prior, None if innov is None else P_post)
+        if verdict in (Verdict.ACCEPT, Verdict.MISMATCH, Verdict.START):
             health = Health.OK if self.information.excited(P_post) else Health.NOT_EXCITED
         else:
             health = Health.OUTLIER if verdict == Verdict.REJECT else Health.REINITIALISED
-        self.x, self.P = np.clip(x_next, self.lower, self.upper), P_next
-        info = {"rejected_in_row": self._rejected} if innov is None else {"innovation": float(innov[0])}
+        info = {"rejected_in_row": self.guard.rejected} if innov is None else {"innovation": float(innov[0])}
+        if verdict == Verdict.MISMATCH:
+            info["mismatch"] = inflation
         return self._estimate(x_post, health, info)
 
     @property

@@ -37,9 +37,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from estimators.tuning import JUMP_MU_MAX  # largest friction coefficient a road may show in (J2) [-]
+
 __all__ = ["JUMP_MU_MAX", "jump_test"]
 
-JUMP_MU_MAX = 1.5  # largest friction coefficient a road may show in (J2) (the presets peak at 1.0) [-]
 
 
 def jump_test(rejected_before: int, armed: bool, prev_sign: float, omega_ref: float, omega: float, torque: float,

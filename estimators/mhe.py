@@ -50,10 +50,13 @@ Measured (``fricenv paper mhe --seeds 5``; seeds 3-7 to check): v within 0.6 % o
 in every case; arrival means from the MHE's own estimates were worse (they count the window's data twice). The
 paper's MHE is ``arrival="paper", model_error=None``; ``model_error=(std_v, std_slip)`` sets the process noise.
 
-Outliers (:mod:`estimators.outliers`): every wheel speed is gated on the alongside EKF's innovation (that EKF
-runs for every arrival option). A rejected sample stays in the window with zero weight (its row removed before the
-SVD) and the EKF skips it (``Health.OUTLIER``); the ``max_rejections + 1``-th in a row restarts the EKF from it
-(:func:`estimators.ekf.gate_wheel_speed`) and the window after it (``Health.REINITIALISED``).
+Outliers (:mod:`estimators.outliers`): the alongside EKF is the quarter-car EKF itself
+(:class:`estimators.ekf.QuarterCarEKF`, attribute ``arrival_filter``, with this MHE's noise); it runs for every
+arrival option and gates every wheel speed on its innovation. A rejected sample stays in the window with zero
+weight (its row removed before the SVD) and the EKF skips it (``Health.OUTLIER``); the ``max_rejections + 1``-th
+in a row restarts the EKF from the reference speed (:mod:`estimators.mismatch`) and the window after it
+(``Health.REINITIALISED``). A persistent innovation (a model error, :mod:`estimators.mismatch`) is no outlier: the
+EKF updates with it under raised process noise, and the window keeps it with its full weight.
 
 Solver: a few projected Levenberg-Marquardt iterations on a compiled CasADi SX function (window outputs, states,
 Jacobians; weights applied in numpy), warm-started from the a priori solution, bounds by an active set plus
@@ -69,40 +72,29 @@ import casadi as ca
 import numpy as np
 
 from estimators.base import Estimate, Estimator, EstimatorConfigError, Health, check_dt
-from estimators.ekf import DEFAULT_EKF_TUNING, SLIP_PRIOR, V_PRIOR, ekf_predict, ekf_update, gate_wheel_speed
-from estimators.outliers import DEFAULT_GATE, GateParams, Verdict, check_gate
-from estimators.quarter_car_model import PARAM_NAMES, AugmentedModel
-from fricenv.plants.sui_johansen import OMEGA_NOISE_STD  # [rad/s], Section IV
+from estimators.ekf import QuarterCarEKF
+from estimators.mhe_config import MHEConfig
+from estimators.outliers import Verdict
+from estimators.quarter_car_model import AugmentedModel
+from estimators.tuning import (
+    DEFAULT_ARRIVAL,
+    GATE_CHI2,
+    HORIZON,
+    PAPER_TUNING,
+    SLIP_PRIOR,
+    STATE_SCALES,
+    V_PRIOR,
+)
 
-__all__ = ["DEFAULT_ARRIVAL", "PAPER_TUNING", "STATE_SCALES", "RegularizedMHE"]
+__all__ = ["DEFAULT_ARRIVAL", "GATE_CHI2", "HORIZON", "PAPER_TUNING", "STATE_SCALES", "RegularizedMHE"]
 
-HORIZON = 10  # N, Section IV
-# Paper tuning, Section IV.A (theta only) and IV.B (theta, B, C, E).
-PAPER_TUNING = {
-    "theta-only": {"alpha": 0.01, "beta": 1.0, "delta": 0.1},
-    "all": {"alpha": 0.01, "beta": 1.0, "delta": 0.8},
-}
-# State scales D of the "scaled" reading (per group, as the paper tunes delta per group): the spread of the prior
-# per window state; chosen on cases 1-4 (seeds 0-2) for the RMS of v and slip after 0.5 s.
-STATE_SCALES = {
-    "theta-only": {"v": 0.3, "slip": 0.01, "theta": 0.04, "B": 2.0, "C": 0.4, "E": 2.0},
-    "all": {"v": 0.3, "slip": 0.03, "theta": 0.03, "B": 1.0, "C": 0.2, "E": 1.0},
-}
-MAX_ITER = 4  # Gauss-Newton iterations per update
-MAX_ITER_EKF_ARRIVAL = 2  # the same with the EKF arrival cost (a nearly quadratic problem: 2 suffice, measured)
 LM_DAMPING0 = 1e-6  # initial Levenberg-Marquardt damping (relative to diag(J^T J))
 LM_DAMPING_MAX = 1e6  # give up above this damping
 TOL_STEP = 1e-9  # stop when the relative cost decrease is below this
 SV_FLOOR = 1e-12  # relative singular value treated as exactly zero
 MAX_EVALS = 8  # model evaluations per update (bounds the worst-case time)
-GATE_CHI2 = 25.0  # EKF-consistency gate of the arrival="ekf" MHE: squared Mahalanobis distance (module docstring)
 PD_JITTER = 1e-12  # added to the arrival covariance before its Cholesky factor
 BOUND_TOL = 1e-9  # relative distance at which a bound counts as active
-WEIGHTINGS = ("literal", "scaled")
-ARRIVALS = ("paper", "ekf")
-# Default arrival cost per group (module docstring): the EKF arrival cost, with process noise in the window, for
-# both; the paper's prior terms and hard dynamics are arrival="paper", model_error=None.
-DEFAULT_ARRIVAL = {"theta-only": "ekf", "all": "ekf"}
 
 
 class RegularizedMHE(Estimator):
@@ -114,100 +106,46 @@ class RegularizedMHE(Estimator):
 
     :param estimated: parameters augmented to the state (subset of theta, B, C, E).
     :param dt: sample time [s].
-    :param horizon: N.
-    :param alpha: alpha of eq. (15)-(16).
-    :param beta: beta_i (one value for all i).
-    :param delta: SVD threshold delta; default 0.1 for theta alone, 0.8 otherwise (the paper's).
-    :param weighting: ``"scaled"`` or ``"literal"`` (see the module docstring).
-    :param arrival: ``"paper"`` (the prior terms beta_i ||(x_i - xbar_i)/D||^2 of (12a)) or ``"ekf"`` (arrival
-        cost from an EKF run alongside: ||x(t-N) - xbar||^2 in P^-1, beyond the paper); default per group,
-        :data:`DEFAULT_ARRIVAL` ("ekf"; "paper" for the literal weighting).
-    :param state_scales: per-state scales of the scaled reading (overrides ``STATE_SCALES``).
-    :param noise_std: wheel-speed noise standard deviation [rad/s].
-    :param max_iter: Gauss-Newton iterations per update (default 4, 2 with the EKF arrival cost).
-    :param model_error: process noise in the window (beyond the paper): ``"auto"`` (default: the EKF's model-error
-        standard deviations ``Q_std`` of v and slip when the arrival cost is "ekf", else None), a pair
-        (std_v [m/s], std_slip [-]) per sample, or None for the paper's hard dynamics (12b).
-    :param gate: with ``arrival="ekf"``: when the solution's x(t|t) is further than this squared Mahalanobis
-        distance from the alongside EKF's x(t|t) (in its covariance), the EKF's estimate is returned instead (info
-        ``gated``); None disables the gate (beyond the paper, module docstring).
+    :param config: the options (:class:`estimators.mhe_config.MHEConfig`: horizon, alpha, beta, delta,
+        weighting, arrival, state_scales, noise_std, max_iter, model_error, gate, outlier_gate), or give them as
+        keyword ``options``. ``arrival="paper"`` is the paper's prior terms beta_i ||(x_i - xbar_i)/D||^2 of (12a),
+        ``"ekf"`` the arrival cost of an EKF run alongside (||x(t-N) - xbar||^2 in P^-1, beyond the paper);
+        ``model_error`` the process noise in the window (``"auto"``: the EKF's Q_std of v and slip with the EKF
+        arrival cost, else none); ``gate`` returns the alongside EKF's estimate when the solution is further than
+        this squared Mahalanobis distance from it (info ``gated``); ``outlier_gate`` gates the wheel speed on the
+        alongside EKF's innovation (module docstring, "Outliers").
     :param model: a prebuilt :class:`AugmentedModel`.
-    :param outlier_gate: the wheel-speed gate on the alongside EKF's innovation (module docstring, "Outliers");
-        None trusts every sample.
     """
 
     measurement_columns = ("omega",)
     input_columns = ("T_b",)
     names = ("v", "slip", "theta", "B", "C", "E", "mu")
 
-    def __init__(self, estimated: tuple[str, ...] = ("theta",), dt: float = 0.01, horizon: int = HORIZON,
-                 alpha: float | None = None, beta: float | None = None, delta: float | None = None,
-                 weighting: str = "scaled", arrival: str | None = None, state_scales: dict | None = None,
-                 noise_std: float = OMEGA_NOISE_STD, max_iter: int | None = None,
-                 model_error: tuple[float, float] | str | None = "auto", gate: float | None = GATE_CHI2,
-                 model: AugmentedModel | None = None, outlier_gate: GateParams | None = DEFAULT_GATE):
+    def __init__(self, estimated: tuple[str, ...] = ("theta",), dt: float = 0.01, config: MHEConfig | None = None,
+                 model: AugmentedModel | None = None, **options):
         dt = check_dt(dt)
-        if weighting not in WEIGHTINGS:
-            raise EstimatorConfigError(f"weighting must be one of {WEIGHTINGS}, got {weighting!r}")
-        if arrival is not None and arrival not in ARRIVALS:
-            raise EstimatorConfigError(f"arrival must be one of {ARRIVALS} or None (per-group default), "
-                                       f"got {arrival!r}")
-        if int(horizon) != horizon or horizon < 1:
-            raise EstimatorConfigError(f"horizon must be an integer >= 1, got {horizon!r}")
+        if config is not None and options:
+            raise EstimatorConfigError(f"give either config or options, not both (options: {sorted(options)})")
+        config = config if config is not None else MHEConfig(**options)
         try:
             self.model = model or AugmentedModel(estimated=tuple(estimated), dt=dt)
         except ValueError as exc:
             raise EstimatorConfigError(str(exc)) from None
-        bad = [k for k in (state_scales or {}) if k not in ("v", "slip") + PARAM_NAMES]
-        if bad:
-            raise EstimatorConfigError(f"state_scales keys {bad} unknown; valid: v, slip, {', '.join(PARAM_NAMES)}")
         group = "theta-only" if len(self.model.estimated) <= 1 else "all"
-        tuning = PAPER_TUNING[group]
-        self.alpha = float(tuning["alpha"] if alpha is None else alpha)
-        self.beta = float(tuning["beta"] if beta is None else beta)
-        self.delta = float(tuning["delta"] if delta is None else delta)
-        for name, value, strict in (("alpha", self.alpha, True), ("beta", self.beta, False),
-                                    ("delta", self.delta, False), ("noise_std", noise_std, True)):
-            if not np.isfinite(value) or value < 0 or (strict and value == 0):
-                raise EstimatorConfigError(f"{name} must be finite and {'> 0' if strict else '>= 0'}, got {value!r}")
-        if arrival is None:  # the literal reading is a paper comparison: with the paper's prior terms
-            arrival = "paper" if weighting == "literal" else DEFAULT_ARRIVAL[group]
-        self.arrival = arrival
-        if max_iter is None:
-            max_iter = MAX_ITER_EKF_ARRIVAL if self.arrival == "ekf" else MAX_ITER
-        if int(max_iter) != max_iter or max_iter < 1:
-            raise EstimatorConfigError(f"max_iter must be an integer >= 1, got {max_iter!r}")
-        self.N = int(horizon)
-        self.weighting = weighting
-        self.noise_std = float(noise_std)
-        self.max_iter = int(max_iter)
-        ekf_q = DEFAULT_EKF_TUNING["Q_std"]
-        if isinstance(model_error, str):
-            if model_error != "auto":
-                raise EstimatorConfigError(
-                    f"model_error must be 'auto', None or (std_v, std_slip), got {model_error!r}")
-            model_error = (ekf_q["v"], ekf_q["slip"]) if self.arrival == "ekf" else None
-        if model_error is not None:
-            model_error = np.asarray(model_error, dtype=float)
-            if model_error.shape != (2,) or not np.all(np.isfinite(model_error) & (model_error > 0)):
-                raise EstimatorConfigError(f"model_error must be two positive std's (v, slip), got {model_error!r}")
-        if model_error is not None and self.arrival != "ekf":
-            raise EstimatorConfigError("model_error (process noise) needs arrival='ekf': the paper's prior terms "
-                                       "beta_i pin every window state to the a priori trajectory of eq. (11) and "
-                                       "fight the process noise (measured: the estimate diverges in case 1)")
-        self.model_error = model_error
-        if gate is not None and not (np.isfinite(gate) and gate > 0):
-            raise EstimatorConfigError(f"gate must be a positive squared distance or None, got {gate!r}")
-        self.gate = None if gate is None else float(gate)
-        self.outlier_gate = check_gate(outlier_gate)
-        scales = {**STATE_SCALES[group], **(state_scales or {})}
+        self.config = cfg = config.resolved(group)
+        self.alpha, self.beta, self.delta = cfg.alpha, cfg.beta, cfg.delta
+        self.arrival, self.N, self.weighting = cfg.arrival, cfg.horizon, cfg.weighting
+        self.noise_std, self.max_iter, self.gate = cfg.noise_std, cfg.max_iter, cfg.gate
+        self.model_error = None if cfg.model_error is None else np.asarray(cfg.model_error, dtype=float)
+        self.outlier_gate = cfg.outlier_gate
+        scales = {**STATE_SCALES[group], **(cfg.state_scales or {})}
         names = self.model.names
-        self.D = np.array([scales[n] for n in names]) if weighting == "scaled" else np.ones(len(names))
+        self.D = np.array([scales[n] for n in names]) if cfg.weighting == "scaled" else np.ones(len(names))
         self.lower, self.upper = self.model.lower(), self.model.upper()
-        ekf_p0 = DEFAULT_EKF_TUNING["P0_std"]
-        self._Q = np.diag([ekf_q[n] ** 2 for n in names])
-        self._P0 = np.diag([ekf_p0[n] ** 2 for n in names])
-        self._R = np.array([[self.noise_std**2]])
+        # the arrival-cost filter and outlier gate: the quarter-car EKF itself, with this MHE's noise
+        self.arrival_filter = QuarterCarEKF(self.model.estimated, dt, R=self.noise_std**2, model=self.model,
+                                            outlier_gate=self.outlier_gate)
+        self._Q, self._P0, self._R = self.arrival_filter.filter.Q, self.arrival_filter.P0, self.arrival_filter.filter.R
         self._build()
         self.reset()
 
@@ -279,10 +217,9 @@ class RegularizedMHE(Estimator):
         self._n_fail = 0
         self._X_prev: np.ndarray | None = None
         self._w_prev: np.ndarray | None = None
-        self._ekf_x, self._ekf_P = self.x_prior0.copy(), self._P0.copy()
+        self.arrival_filter.reset(v, slip, params)
         self._arr_hist: deque = deque(maxlen=self.N + 1)
         self._used: list[bool] = []  # per window sample: False if the gate rejected it
-        self._rejected = 0  # consecutive rejections (estimators.outliers)
         return self._estimate(self.x_prior0, Health.OK)
 
     def _estimate(self, x: np.ndarray, health: Health, info: dict | None = None) -> Estimate:
@@ -296,28 +233,24 @@ class RegularizedMHE(Estimator):
         verdict = self._take(y, float(uu[0]))
         est = self._window_estimate(float(uu[0]))
         self._ekf_predict(float(uu[0]))
-        if verdict == Verdict.ACCEPT:
+        if verdict in (Verdict.ACCEPT, Verdict.MISMATCH, Verdict.START):  # no outlier (estimators.mismatch)
             return est
         health = Health.OUTLIER if verdict == Verdict.REJECT else Health.REINITIALISED
         return Estimate(est.values, health, {**est.info, "window_health": est.health})
 
     def _take(self, y: np.ndarray, u: float) -> Verdict:
-        """Gate the sample on the alongside EKF's innovation, update that EKF and the window buffers."""
-        verdict, self._rejected, self._ekf_x, self._ekf_P = gate_wheel_speed(
-            self.model, self._ekf_x, self._ekf_P, self._P0, self._R, y, self._rejected, self.outlier_gate)
-        if verdict == Verdict.REINIT:  # the alongside EKF restarted from the sample: so does the window
+        """Gate the sample and update the arrival filter (the EKF's correction), append it to the window buffers."""
+        f = self.arrival_filter
+        verdict, x_post, P_post, _, _ = f.correct(y)
+        if verdict in (Verdict.REINIT, Verdict.START):  # the arrival filter restarted from the sample: so does the window
             self._y, self._u, self._used = [], [], []
             self._arr_hist.clear()
-            self.x_prior0, self._X_prev = self._ekf_x.copy(), None
+            self.x_prior0, self._X_prev = f.x.copy(), None
         self._y.append(float(y[0]))
         self._u.append(u)
         self._used.append(verdict != Verdict.REJECT)  # a rejected sample stays in the window with no weight
-        self._arr_hist.append((self._ekf_x, self._ekf_P))  # prior of x(t) given y(..t-1)
-        if verdict == Verdict.REJECT:
-            self._ekf_post = (self._ekf_x, self._ekf_P)
-        else:
-            hx, H = np.array([self.model.h(self._ekf_x)]), self.model.h_jacobian(self._ekf_x)
-            self._ekf_post = ekf_update(self._ekf_x, self._ekf_P, y, hx, H, self._R)[:2]
+        self._arr_hist.append((f.x, f.P))  # prior of x(t) given y(..t-1)
+        self._ekf_post = (x_post, P_post)
         return verdict
 
     def _window_estimate(self, u: float) -> Estimate:
@@ -377,14 +310,8 @@ class RegularizedMHE(Estimator):
         return self._estimate(self._last, health, info)
 
     def _ekf_predict(self, u: float) -> None:
-        """The alongside EKF's time update from x(t|t) to the prior of x(t+1) (arrival cost and outlier gate)."""
-        x_post, P_post = self._ekf_post
-        x_post = np.clip(x_post, self.lower, self.upper)
-        xn, F = self.model.f_and_jacobian(x_post, u)
-        if np.all(np.isfinite(xn)) and np.all(np.isfinite(F)):
-            self._ekf_x, self._ekf_P = ekf_predict(np.clip(xn, self.lower, self.upper), F, P_post, self._Q)
-        else:
-            self._ekf_x, self._ekf_P = self._ekf_x, self._P0.copy()
+        """The arrival filter's time update from x(t|t) to the prior of x(t+1)."""
+        self.arrival_filter.propagate(*self._ekf_post, u)
 
     # ------------------------------------------------------------------ weights and solver
     def _masked_weights(self, Phi: np.ndarray, used: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:

@@ -43,16 +43,17 @@ import numpy as np
 
 from estimators.base import EstimatorConfigError, Health
 from estimators.casadi_compiled import BatchCall, compiled, densified
-from estimators.ekf import SLIP_PRIOR, V_PRIOR
 from estimators.mhe import PD_JITTER, RegularizedMHE
 from estimators.mhe_solver import BatchedWindowSolver, sym
+from estimators.mismatch import WheelSpeedGuard
 from estimators.outliers import Verdict
+from estimators.tuning import SLIP_PRIOR, V_PRIOR
 from fricenv.plants.tire import magic_formula
 
 __all__ = ["BATCHED_MHE", "PARALLEL", "BatchedMHE", "mhe_builder"]
 
 PARALLEL = ("serial", "thread")  # Function.map modes offered
-MAX_THREADS = 2  # CasADi threads of the thread map (the machine budget of issue 17)
+MAX_THREADS = 2  # CasADi threads of the thread map (the machine budget: 2 cores)
 
 
 class BatchedMHE:
@@ -97,7 +98,9 @@ class BatchedMHE:
         n, nx, N1 = self.n, self.nx, self.N1
         self.ekf_x, self.ekf_P = np.zeros((n, nx)), np.zeros((n, nx, nx))
         self.post_x, self.post_P = np.zeros((n, nx)), np.zeros((n, nx, nx))
-        self.rejected = np.zeros(n, dtype=int)
+        guard = self.t.arrival_filter.guard
+        self.guards = [WheelSpeedGuard(guard.model, guard.params, guard.noise_std) for _ in range(n)]
+        self.torque_prev = np.zeros(n)  # brake torque held since the last sample, per sub-env [N m]
         self.y, self.u, self.used = np.zeros((n, N1)), np.zeros((n, N1)), np.ones((n, N1), dtype=bool)
         self.hist_x, self.hist_P = np.zeros((n, N1, nx)), np.zeros((n, N1, nx, nx))
         self.count = np.zeros(n, dtype=int)  # samples in the window buffer
@@ -123,7 +126,9 @@ class BatchedMHE:
         if v0 is not None:
             x0[:, 0] = np.asarray(v0, dtype=float)
         self.ekf_x[m], self.ekf_P[m], self.last[m] = x0[m], self.t._P0, x0[m]
-        self.rejected[m], self.count[m], self.has_prev[m] = 0, 0, False
+        self.count[m], self.has_prev[m], self.torque_prev[m] = 0, False, 0.0
+        for i in np.flatnonzero(m):
+            self.guards[i].reset()
         return self.values(), np.full(self.n, int(Health.OK))
 
     def update(self, omega, a_x, T_b) -> tuple[dict[str, np.ndarray], np.ndarray]:
@@ -141,6 +146,7 @@ class BatchedMHE:
         verdict = self._take(active, y, u)
         health = self._window_estimate(active)
         self._ekf_predict(active, u)
+        self.torque_prev[active] = u[active]
         health = np.select([~active, verdict == Verdict.REJECT, verdict == Verdict.REINIT],
                            [int(Health.INVALID_INPUT), int(Health.OUTLIER), int(Health.REINITIALISED)], health)
         return self.values(), health
@@ -154,32 +160,22 @@ class BatchedMHE:
         return x[:, 0] * (1.0 - x[:, 1]) / r, H
 
     def _gate(self, active: np.ndarray, y: np.ndarray) -> np.ndarray:
-        """The wheel-speed gate (estimators.ekf.gate_wheel_speed) on the EKF's prior; the verdicts (N,)."""
-        params, R = self.t.outlier_gate, self.t._R
-        if params is None:
-            self.rejected[active] = 0
-            return np.full(self.n, int(Verdict.ACCEPT))
-        hx, H = self._h_and_jacobian(self.ekf_x)
-        S = (H @ (self.ekf_P @ np.swapaxes(H, 1, 2)) + R)[:, 0, 0]
-        e = y - hx
-        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-            nis = np.where(S > 0, e * e / np.where(S > 0, S, 1.0), np.inf)
-        nis = np.where(np.isfinite(nis), nis, np.inf)
-        accept = nis <= params.bound
-        reinit = active & ~accept & (self.rejected >= params.max_rejections)
-        reject = active & ~accept & ~reinit
-        self.rejected = np.where(reject, self.rejected + 1, np.where(active, 0, self.rejected))
-        x, P, P0 = self.ekf_x, self.ekf_P, self.t._P0  # re-initialisation: estimators.ekf.reinit_from_wheel_speed
-        x[reinit, 0] = np.maximum(y[reinit] * self.t.model.p.r / (1.0 - SLIP_PRIOR), 0.0)
-        x[reinit, 1] = SLIP_PRIOR
-        P[reinit, :2, :], P[reinit, :, :2] = 0.0, 0.0
-        P[reinit, :2, :2] = P0[:2, :2]
-        return np.select([reject, reinit], [int(Verdict.REJECT), int(Verdict.REINIT)], int(Verdict.ACCEPT))
+        """The wheel-speed gate of the single MHE's arrival filter (:class:`estimators.mismatch.WheelSpeedGuard`,
+        one per sub-env, the same code) on the EKF's prior; re-initialises or raises (x, P) in place; verdicts (N,)."""
+        verdicts = np.full(self.n, int(Verdict.ACCEPT))
+        if self.t.outlier_gate is None:
+            return verdicts
+        P0, R, Q = self.t._P0, self.t._R, self.t._Q
+        for i in np.flatnonzero(active):
+            verdict, x, P, _ = self.guards[i].check(self.ekf_x[i], self.ekf_P[i], P0, R, Q, y[i:i + 1],
+                                                    float(self.torque_prev[i]))
+            self.ekf_x[i], self.ekf_P[i], verdicts[i] = x, P, int(verdict)
+        return verdicts
 
     def _take(self, active: np.ndarray, y: np.ndarray, u: np.ndarray) -> np.ndarray:
         """Gate, restart the windows of re-initialised sub-envs, append the sample, the EKF's update."""
         verdict = self._gate(active, y)
-        reinit = verdict == Verdict.REINIT
+        reinit = (verdict == Verdict.REINIT) | (verdict == Verdict.START)  # the window restarts
         self.count[reinit], self.has_prev[reinit] = 0, False
         full = active & (self.count == self.N1)  # the window slides: drop the oldest sample
         for buf in (self.y, self.u, self.used, self.hist_x, self.hist_P):
@@ -236,11 +232,12 @@ class BatchedMHE:
         self.w_prev[ok] = sol.z[good, nx:]
         self.last[ok] = sol.X[good, -1]
         health[ok] = np.where(sol.rank[good] == nx, int(Health.OK), int(Health.NOT_EXCITED))
-        if t.gate:
-            d = self.last - self.post_x
-            Pj = self.post_P + PD_JITTER * np.eye(nx)
+        if t.gate and ok.any():  # the EKF-consistency gate, on the solved windows only (as the single MHE)
+            k = np.flatnonzero(ok)
+            d = self.last[k] - self.post_x[k]
+            Pj = self.post_P[k] + PD_JITTER * np.eye(nx)
             d2 = (d[:, None, :] @ np.linalg.solve(Pj, d[:, :, None]))[:, 0, 0]
-            gated = ok & (d2 > t.gate)
+            gated = k[d2 > t.gate]
             self.last[gated] = np.clip(self.post_x[gated], t.lower, t.upper)
             self.has_prev[gated] = False
         for i in rows[sol.failed]:

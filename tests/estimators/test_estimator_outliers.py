@@ -1,7 +1,7 @@
 """The outlier gate (estimators/outliers.py) and the quarter-car estimators under spikes, dropouts and a stuck sensor.
 
 The gate's constants (p_false 1e-5, 10 rejections before a re-initialisation, the EKF/RLS wheel-gate random walk)
-were chosen looking at seeds 0-2 only (``python -m estimators.outliers --seeds 0 1 2``); the target test runs on
+were chosen looking at seeds 0-2 only (``python -m validation.estimator_spikes --seeds 0 1 2``); the target test runs on
 seeds 7 and 8.
 """
 
@@ -13,18 +13,10 @@ from estimators.base import EstimatorConfigError, Health, run
 from estimators.ekf import QuarterCarEKF
 from estimators.ekf_rls import QuarterCarEkfRls
 from estimators.mhe import RegularizedMHE
-from estimators.outliers import (
-    DEFAULT_GATE,
-    STUDY_ESTIMATORS,
-    GateParams,
-    Verdict,
-    gate,
-    nis,
-    spike_indices,
-    study,
-)
+from estimators.outliers import DEFAULT_GATE, GateParams, Verdict, gate, nis
 from estimators.scenarios import ekf_rls_scenario, mhe_case
 from fricenv.plants.sui_johansen import OMEGA_NOISE_VAR
+from validation.estimator_spikes import STUDY_ESTIMATORS, spike_indices, study
 
 BAD = (Health.OUTLIER, Health.REINITIALISED)
 
@@ -117,35 +109,39 @@ def test_dropout_up_to_max_rejections_marked_exactly(make, length):
     assert abs(out["v"][-1] - pc.v[-1]) < 3 * rms_clean  # final estimate within the clean run's band
 
 
-def test_long_dropout_reinitialises_and_recovers():
-    """25 zeros (> 10): 10 rejected, the 11th re-initialises (the filter then follows the zeros), and the true
-    signal is re-acquired by a second re-initialisation 10 samples after it returns."""
+def test_long_dropout_reinitialises_from_the_reference_and_recovers():
+    """25 zeros (> 10): 10 rejected, the 11th re-initialises from the reference speed (estimators.mismatch: the
+    speed stays within 2 m/s of the truth (measured 1.56 m/s; following the zeros put it 15 m/s off), a wheel at
+    zero is taken as locked), and the true signal returning is re-acquired within max_rejections samples."""
     pc = mhe_case(1, seed=6)
     omega = pc.log.omega.copy()
     omega[60:85] = 0.0
     out, _ = _run(QuarterCarEKF(), pc, omega)
     _, rms_clean = _run(QuarterCarEKF(), pc, pc.log.omega)
     h = out["health"]
-    assert list(np.flatnonzero(h == Health.REINITIALISED)) == [70, 95]
-    assert list(np.flatnonzero(h == Health.OUTLIER)) == list(range(60, 70)) + list(range(85, 95))
+    assert list(np.flatnonzero(h == Health.REINITIALISED)) == [70]
+    flagged = np.flatnonzero(h == Health.OUTLIER)
+    assert list(flagged[:10]) == list(range(60, 70))
+    assert np.all((flagged[10:] >= 85) & (flagged[10:] < 85 + DEFAULT_GATE.max_rejections))
+    assert np.max(np.abs(out["v"][60:110] - pc.v[60:110])) <= 2.0
     assert abs(out["v"][-1] - pc.v[-1]) < 3 * rms_clean
 
 
 @pytest.mark.parametrize("make", [QuarterCarEKF, RegularizedMHE], ids=["ekf", "mhe"])
-def test_stuck_sensor_marked_only_where_it_is_wrong(make):
-    """A wheel-speed sensor stuck for 30 samples during ABS cycles: the first samples are still near the truth
-    (undetectable, harmless), the rest is marked; after a re-initialisation the estimate recovers."""
+def test_stuck_sensor_is_a_persistent_innovation_and_the_speed_holds(make):
+    """A wheel-speed sensor stuck for 30 samples during ABS cycles reads a wheel a road can produce (its implied
+    tire torque is within the load's): a persistent innovation, not a run of outliers (estimators.mismatch). Nothing
+    is marked before the fault, at most a few isolated samples after it, the speed stays within 1.5 m/s of the
+    truth (measured 1.35-1.37 m/s) and recovers by the end."""
     pc = mhe_case(1, seed=3)
     omega = pc.log.omega.copy()
     omega[60:90] = omega[60]
     out, _ = _run(make(), pc, omega)
     _, rms_clean = _run(make(), pc, pc.log.omega)
     marked = np.flatnonzero(np.isin(out["health"], BAD))
-    err = np.abs(omega - pc.omega)
-    assert marked.min() >= 60 and err[marked.min()] > 2.0  # nothing marked before the fault, nor while close
-    assert np.all(err[60:marked.min()] < 3.0)
-    # true samples after the fault are marked only until the second re-initialisation (max_rejections + 1)
-    assert marked.max() <= 90 + DEFAULT_GATE.max_rejections
+    assert marked.min() >= 60
+    assert len(marked) <= 2 * DEFAULT_GATE.max_rejections and not np.any(np.diff(marked) == 1)  # never in a row
+    assert np.max(np.abs(out["v"][60:] - pc.v[60:])) <= 1.5
     assert abs(out["v"][-1] - pc.v[-1]) < 3 * rms_clean
 
 

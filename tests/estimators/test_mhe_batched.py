@@ -49,8 +49,8 @@ def _run_both(name: str, n: int, seed: int, batched: BatchedMHE | None = None, r
                 singles[i].reset(v=15.0 + i, slip=0.0)
             batched.reset(mask, 15.0 + np.arange(n))
         if k == CORRUPT_AT:  # the arrival covariance's Cholesky factor will fail: SOLVER_FAILED, then recovery
-            singles[1]._ekf_P = singles[1]._ekf_P.copy()
-            singles[1]._ekf_P[2, 2] *= -1.0
+            singles[1].arrival_filter.P = singles[1].arrival_filter.P.copy()
+            singles[1].arrival_filter.P[2, 2] *= -1.0
             batched.ekf_P[1, 2, 2] *= -1.0
         ests = [s.update([omega[k, i]], [torque[k, i]]) for i, s in enumerate(singles)]
         values, health = batched.update(omega[k], np.zeros(n), torque[k])

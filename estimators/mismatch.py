@@ -1,0 +1,155 @@
+"""A spike or a model that is off: the quarter-car filters' wheel-speed gate with a mismatch rule and a reference
+speed.
+
+The outlier gate (:mod:`estimators.outliers`) rejects a wheel speed whose NIS fails the chi-square bound. A spike
+is one such sample; a plant whose brake lags, whose gain, radius or drag differ from the model's gives a run of
+them, all of one sign, each a wheel speed a road can produce. Rejecting that run sample after sample blinds the
+filter until the re-initialisation, which then took the speed from a wheel that may sit in an ABS slip dip. Rules:
+
+(M1) **Persistent innovation.** A failing sample that follows a failing sample with an innovation of the same sign,
+     each implying a tire torque a road can produce from the last wheel speed the filter used (eq. (J2) of
+     :mod:`estimators.jump`, friction within ``JUMP_MU_MAX`` times the load), and whose innovation moved from the last sample's by no more
+     than the gate allows for the difference of two samples (``(e - e_prev)^2 <= 2 S bound``: a model error grows,
+     a spike jumps), and whose NIS is below ``MISMATCH_NIS_MAX`` bounds (a model error grows into the gate: the
+     brake-lag stops' failing samples have NIS 20-250; two x0.5 spikes in a row at 40 rad/s about 1900), is not an
+     outlier: the model is off. The filter raises its process noise on (v, slip) for this sample just enough that
+     the sample sits on the gate's bound,
+     ``H (P + c Q_vs) H^T + R = e^2 / bound``, and updates with it (``Verdict.MISMATCH``; the estimate's health
+     stays the filter's own, its info carries ``mismatch``, the factor c). An isolated spike passes no such test
+     (the sample after it agrees with the prediction); a spike of a tenth or ten times the speed, or a dropout to
+     zero at speed, implies a tire force many times the load: it stays an outlier and joins no run (the run goes
+     on from the last physical sample).
+(M2) **Reference speed.** As an ABS ECU builds its reference: the fastest plausible wheel, with bounded deceleration,
+     ``v_ref(k) = max(omega(k) r - margin, v_ref(k-1) - A_REF dt)``, the wheel term only for a sample the gate
+     used (a rejected sample is not plausible); while braking it is a lower bound of the car's speed that the wheel
+     touches whenever it rolls freely. A re-initialisation takes the speed from it, ``v = max(v_ref, omega r)``
+     (the filter's own speed after a run of rejections is not to be trusted), and the slip that makes eq. (7) hold
+     at that speed (a locked wheel or a dropout to zero: slip 1): never the speed of a wheel that may be slipping.
+(M3) **Start.** The state after a reset is a guess (19 m/s a priori): a first sample that fails against it is no
+     outlier; the filter starts from it as from a re-initialisation (``Verdict.START``) and keeps its own health.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from estimators.outliers import GateParams, Verdict, gate, nis
+from estimators.tuning import A_REF, JUMP_MU_MAX, MISMATCH_NIS_MAX, REF_MARGIN_STD, SLIP_PRIOR
+
+__all__ = ["WheelSpeedGuard"]
+
+
+@dataclass
+class _State:
+    rejected: int = 0  # failing samples in a row before this one
+    run: int = 0  # physical failing samples of one sign in a row (spikes excluded)
+    sign: float = 0.0  # sign of the run's innovations
+    omega_used: float = np.nan  # the last wheel speed the filter used [rad/s]
+    since: int = 1  # samples since it
+    v_ref: float = np.nan  # reference speed [m/s]
+    e_prev: float = np.nan  # the last sample's innovation [rad/s]
+
+
+class WheelSpeedGuard:
+    """The gate of the EKF and of the MHE's arrival filter on one wheel speed, with rules (M1) and (M2).
+
+    :param model: the filter's augmented quarter-car model (r, J, F_z, dt).
+    :param params: the outlier gate; None trusts every sample (no gate, no rule).
+    :param noise_std: wheel-speed noise standard deviation [rad/s].
+    """
+
+    def __init__(self, model, params: GateParams | None, noise_std: float):
+        self.model = model
+        self.params = params
+        self.noise_std = float(noise_std)
+        p = model.p
+        self.b_bound = JUMP_MU_MAX * p.Fz * p.r / p.J
+        self.reset()
+
+    def reset(self) -> None:
+        self.s = _State()
+
+    @property
+    def rejected(self) -> int:
+        """Failing samples in a row so far."""
+        return self.s.rejected
+
+    def _reference(self, omega: float | None) -> None:
+        """(M2) once per sample: fall at the bounded deceleration, rise to a wheel speed the filter used
+        (``omega`` None for a rejected sample)."""
+        r, dt = self.model.p.r, self.model.dt
+        fallen = self.s.v_ref - A_REF * dt if np.isfinite(self.s.v_ref) else -np.inf
+        wheel = -np.inf if omega is None else omega * r - REF_MARGIN_STD * self.noise_std * r
+        self.s.v_ref = max(fallen, wheel)
+
+    def reinit(self, x: np.ndarray, P: np.ndarray, P0: np.ndarray, omega: float) -> tuple[np.ndarray, np.ndarray]:
+        """(M2): re-initialise (v, slip) from the reference speed and the wheel speed (before a reference: the
+        filter's speed).
+
+        The (v, slip) covariance goes back to its initial block of ``P0``; their correlations with the parameters
+        are dropped.
+        """
+        r = self.model.p.r
+        wheel = max(float(omega) * r, 0.0)
+        v = max(self.s.v_ref if np.isfinite(self.s.v_ref) else float(x[0]), wheel)
+        slip = 1.0 - wheel / v if v > 0 else SLIP_PRIOR
+        x = x.copy()
+        x[0], x[1] = v, float(np.clip(slip, 0.0, 1.0))
+        P = P.copy()
+        P[:2, :] = 0.0
+        P[:, :2] = 0.0
+        P[:2, :2] = P0[:2, :2]
+        return x, P
+
+    def check(self, x: np.ndarray, P: np.ndarray, P0: np.ndarray, R: np.ndarray, Q: np.ndarray, y: np.ndarray,
+              brake_torque: float):
+        """Gate wheel speed ``y`` against the prior (x, P).
+
+        :param x: prior state; :param P: its covariance; :param P0: the initial covariance.
+        :param R: measurement noise (1, 1); :param Q: the filter's process noise (its (v, slip) block is raised).
+        :param y: the wheel speed (1,) [rad/s].
+        :param brake_torque: brake torque held since the last sample (brake-positive) [N m].
+        :return: (verdict, x, P, inflation c): ``REINIT`` re-initialised x, P; ``MISMATCH`` the raised P.
+        """
+        if self.params is None:
+            return Verdict.ACCEPT, x, P, 0.0
+        omega = float(y[0])
+        H = np.atleast_2d(self.model.h_jacobian(x))
+        S = float((H @ (P @ H.T) + R)[0, 0])  # as estimators.ekf.innovation_covariance
+        e = omega - float(self.model.h(x))
+        s = self.s
+        value = nis(e, S)
+        verdict, rejected = gate(value, s.rejected, self.params)
+        inflation = 0.0
+        if verdict != Verdict.ACCEPT:
+            # (J2) of estimators.jump over the samples since the last one used: a tire torque a road can produce?
+            span = s.since * self.model.dt
+            b_implied = (s.omega_used - omega) / span - float(brake_torque) / self.model.p.J
+            physical = bool(np.isfinite(b_implied) and abs(b_implied) <= self.b_bound)
+            sign = float(np.sign(e))
+            persistent = physical and s.run >= 1 and sign == s.sign
+            smooth = np.isfinite(s.e_prev) and (e - s.e_prev) ** 2 <= 2.0 * S * self.params.bound
+            if persistent and smooth and value <= MISMATCH_NIS_MAX * self.params.bound:  # (M1): the model is off
+                Hq = H[0, :2]
+                inflation = (e * e / self.params.bound - S) / max(float(Hq @ Q[:2, :2] @ Hq), 1e-300)
+                P = P.copy()
+                P[:2, :2] += max(inflation, 0.0) * Q[:2, :2]
+                verdict, rejected = Verdict.MISMATCH, s.rejected  # a run of mismatches never re-initialises
+            if physical:  # a sample no road can produce is a spike: it joins no run
+                s.run = s.run + 1 if sign == s.sign else 1
+                s.sign, s.e_prev = sign, e
+        if verdict != Verdict.ACCEPT and not np.isfinite(s.omega_used):  # (M3): no sample used yet
+            verdict, rejected = Verdict.START, 0
+        self._reference(None if verdict == Verdict.REJECT else omega)
+        if verdict in (Verdict.REINIT, Verdict.START):
+            x, P = self.reinit(x, P, P0, omega)
+        if verdict == Verdict.REJECT:
+            s.since += 1
+        else:
+            s.omega_used, s.since = omega, 1
+        if verdict in (Verdict.ACCEPT, Verdict.REINIT, Verdict.START):
+            s.run, s.sign, s.e_prev = 0, 0.0, np.nan
+        s.rejected = rejected
+        return verdict, x, P, inflation

@@ -1,0 +1,55 @@
+"""Every tuning constant of the quarter-car estimators, in one place: the EKF's noise and prior, the MHE's horizon
+and thresholds, the outlier gate's bound and run length.
+
+The estimator modules read these (and re-export the names they always offered); a tuning change is a change here.
+Values were chosen on the tuning seeds named beside each (the papers' cases and the estimators' own studies).
+"""
+
+from __future__ import annotations
+
+from types import MappingProxyType
+
+from fricenv.plants.sui_johansen import OMEGA_NOISE_VAR
+
+__all__ = ["A_REF", "DEFAULT_ARRIVAL", "DEFAULT_EKF_TUNING", "GATE_CHI2", "HORIZON", "JUMP_MU_MAX", "MAX_REJECTIONS",
+           "MISMATCH_NIS_MAX",
+           "PAPER_TUNING", "P_FALSE", "REF_MARGIN_STD", "SLIP_PRIOR", "STATE_SCALES", "V_PRIOR"]
+
+# ---- the augmented EKF (estimators.ekf), also the MHE's arrival-cost filter
+DEFAULT_EKF_TUNING = {
+    # initial prior spread, per state
+    "P0_std": {"v": 1.0, "slip": 0.05, "theta": 0.4, "B": 3.0, "C": 0.5, "E": 3.0},
+    # process noise per 10 ms sample: model error on v and slip, random walk on the parameters
+    "Q_std": {"v": 0.01, "slip": 0.01, "theta": 0.002, "B": 0.02, "C": 0.005, "E": 0.02},
+    "R": OMEGA_NOISE_VAR,  # wheel-speed noise variance [(rad/s)^2], Sui & Johansen Section IV
+}
+V_PRIOR = 19.0  # a priori initial speed [m/s], Sui & Johansen Section IV
+SLIP_PRIOR = 0.0  # a priori initial slip [-]
+
+# ---- the regularized MHE (estimators.mhe)
+HORIZON = 10  # N, Sui & Johansen Section IV
+# Paper tuning, Section IV.A (theta only) and IV.B (theta, B, C, E).
+PAPER_TUNING = MappingProxyType({
+    "theta-only": MappingProxyType({"alpha": 0.01, "beta": 1.0, "delta": 0.1}),
+    "all": MappingProxyType({"alpha": 0.01, "beta": 1.0, "delta": 0.8}),
+})
+# State scales D of the "scaled" reading (per group, as the paper tunes delta per group): the spread of the prior
+# per window state; chosen on cases 1-4 (seeds 0-2) for the RMS of v and slip after 0.5 s.
+STATE_SCALES = MappingProxyType({
+    "theta-only": MappingProxyType({"v": 0.3, "slip": 0.01, "theta": 0.04, "B": 2.0, "C": 0.4, "E": 2.0}),
+    "all": MappingProxyType({"v": 0.3, "slip": 0.03, "theta": 0.03, "B": 1.0, "C": 0.2, "E": 1.0}),
+})
+GATE_CHI2 = 25.0  # EKF-consistency gate of the arrival="ekf" MHE: squared Mahalanobis distance (estimators.mhe)
+# Default arrival cost per group: the EKF arrival cost, with process noise in the window, for both; the paper's
+# prior terms and hard dynamics are arrival="paper", model_error=None.
+DEFAULT_ARRIVAL = MappingProxyType({"theta-only": "ekf", "all": "ekf"})
+
+# ---- the outlier gate (estimators.outliers)
+P_FALSE = 1e-5  # default per-sample false-rejection probability of a consistent filter [-]
+MAX_REJECTIONS = 10  # default number of samples in a row that may be rejected before a re-initialisation [-]
+
+# ---- the mismatch rule and reference speed of the EKF's wheel-speed gate (estimators.mismatch)
+JUMP_MU_MAX = 1.5  # largest friction coefficient a road may show in a run of failing samples (the presets peak at 1) [-]
+A_REF = 12.0  # deceleration bound of the reference speed, about 1.2 g (the presets peak at 1.0) [m/s^2]
+REF_MARGIN_STD = 2.0  # the reference follows the wheel speed less this many noise std's [-]
+MISMATCH_NIS_MAX = 10.0  # a persistent innovation above this many gate bounds is taken as outliers (M1) [-]

@@ -1,0 +1,147 @@
+"""The quarter-car estimators on plants with the effect grid's effects: do they keep the speed?
+
+For each estimator (registry name), driver (``abs``, ``open-loop``), road and seed, the gap tool's stand-in
+(:func:`fricenv.gap.quarter_car.simulate.simulate_log`) writes a stop on the nominal plant and one per effect of
+:data:`fricenv.effects.grid.EFFECT_GRID` at the chosen size (``mu_change`` switches at the nominal stop's mid
+time); the estimator runs on the logged wheel speed and commanded torque (and ``a_x`` if it reads it). Figures per
+run: rms and largest speed error after ``SETTLE_TIME``, and the share of samples flagged ``OUTLIER`` or
+``REINITIALISED`` (the logs hold no spike, so every flag is false), the first half second included.
+
+Targets: rms <= ``RMS_FACTOR`` x the same estimator's nominal rms (same road, driver, seed) + ``RMS_MARGIN``;
+largest error <= ``MAX_ERROR``; flags <= ``MAX_FLAGS``.
+
+Command::
+
+    python -m validation.estimator_mismatch [--estimators ekf mhe ekf-rls] [--roads dry wet snow]
+        [--drivers abs open-loop] [--seeds 0 1 2] [--size high] [--effects brake_lag ...] [--jobs 2] [--json PATH]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from estimators.base import Health, run
+from estimators.registry import make_estimator
+from fricenv.effects.grid import EFFECT_GRID, GRID_SIZES, grid_effect
+from fricenv.effects.quarter_car import make_effect
+from fricenv.gap.quarter_car.simulate import DRIVERS, simulate_log
+from fricenv.plants.quarter_car import PAPER_PARAMS
+from fricenv.plants.tire import ROADS
+
+__all__ = ["MismatchRow", "format_table", "main", "measure", "run_cell"]
+
+SETTLE_TIME = 0.5  # errors over t >= this [s]
+RMS_FACTOR = 2.0  # rms target: this times the nominal rms ... [-]
+RMS_MARGIN = 0.1  # ... plus this [m/s]
+MAX_ERROR = 1.5  # largest speed error after SETTLE_TIME [m/s]
+MAX_FLAGS = 0.01  # share of samples flagged on a spike-free log [-]
+NOMINAL = "nominal"
+
+
+@dataclass(frozen=True)
+class MismatchRow:
+    """One estimator on one log."""
+
+    estimator: str
+    driver: str
+    road: str
+    seed: int
+    effect: str  # "nominal" or the grid effect
+    rms: float  # rms speed error after SETTLE_TIME [m/s]
+    worst: float  # largest |speed error| after SETTLE_TIME [m/s]
+    flags: float  # share of samples flagged OUTLIER or REINITIALISED [-]
+    reinits: int  # samples flagged REINITIALISED
+
+
+def _errors(name: str, log, v_true: np.ndarray) -> tuple[float, float, float, int]:
+    cols = {"t": log.t, "omega": log.omega, "T_b": log.T_b, "a_x": log.a_x}
+    out = run(make_estimator(name), cols)
+    settled = log.t >= SETTLE_TIME
+    err = out["v"][settled] - v_true[settled]
+    flagged = np.isin(out["health"], (Health.OUTLIER, Health.REINITIALISED))
+    return (float(np.sqrt(np.mean(err**2))), float(np.max(np.abs(err))), float(np.mean(flagged)),
+            int(np.sum(out["health"] == Health.REINITIALISED)))
+
+
+def run_cell(task: tuple) -> list[MismatchRow]:
+    """Every estimator on the nominal log and every effect's log of one (driver, road, seed).
+
+    :param task: (estimators, driver, road, seed, size, effects).
+    """
+    names, driver, road_name, seed, size, effects = task
+    road = ROADS[road_name]
+    log, truth = simulate_log([], road, driver, seed=seed)
+    rows = [MismatchRow(n, driver, road_name, seed, NOMINAL, *_errors(n, log, truth["v"])) for n in names]
+    for effect in effects:
+        cell = grid_effect(effect, size, road_name, truth["v0"], PAPER_PARAMS)
+        spec = make_effect(cell["effect"], **cell["params"])
+        elog, etruth = simulate_log([spec], road, driver, seed=seed)
+        rows += [MismatchRow(n, driver, road_name, seed, effect, *_errors(n, elog, etruth["v"])) for n in names]
+    return rows
+
+
+def measure(estimators, drivers, roads, seeds, size: str = "high", effects=tuple(EFFECT_GRID),
+            jobs: int = 1) -> list[MismatchRow]:
+    """All cells (see :func:`run_cell`), on ``jobs`` processes."""
+    tasks = [(tuple(estimators), d, r, int(s), size, tuple(effects)) for d in drivers for r in roads for s in seeds]
+    if jobs <= 1:
+        return [row for t in tasks for row in run_cell(t)]
+    with ProcessPoolExecutor(max_workers=jobs) as pool:
+        return [row for rows in pool.map(run_cell, tasks) for row in rows]
+
+
+def verdicts(rows: list[MismatchRow]) -> list[dict]:
+    """Per row: the targets against the same estimator's nominal run (same driver, road, seed)."""
+    nominal = {(r.estimator, r.driver, r.road, r.seed): r.rms for r in rows if r.effect == NOMINAL}
+    out = []
+    for r in rows:
+        bound = RMS_FACTOR * nominal[(r.estimator, r.driver, r.road, r.seed)] + RMS_MARGIN
+        out.append({**asdict(r), "rms_bound": bound, "rms_ok": r.rms <= bound or r.effect == NOMINAL,
+                    "worst_ok": r.worst <= MAX_ERROR, "flags_ok": r.flags <= MAX_FLAGS})
+    return out
+
+
+def format_table(rows: list[MismatchRow]) -> str:
+    """Per estimator and effect: worst rms over the runs against its bound, worst error, worst flag share, misses."""
+    checked = verdicts(rows)
+    header = (f"{'estimator':<9} {'effect':<18} {'runs':>4} {'rms mean':>9} {'rms max':>8} {'worst':>7} "
+              f"{'flags max':>9} {'reinits':>7} {'missed':>6}")
+    lines = [header]
+    keys = sorted({(c["estimator"], c["effect"]) for c in checked}, key=lambda k: (k[0], k[1] != NOMINAL, k[1]))
+    for est, eff in keys:
+        cs = [c for c in checked if c["estimator"] == est and c["effect"] == eff]
+        missed = sum(not (c["rms_ok"] and c["worst_ok"] and c["flags_ok"]) for c in cs)
+        lines.append(f"{est:<9} {eff:<18} {len(cs):>4d} {np.mean([c['rms'] for c in cs]):>9.3f} "
+                     f"{max(c['rms'] for c in cs):>8.3f} {max(c['worst'] for c in cs):>7.2f} "
+                     f"{max(c['flags'] for c in cs):>9.4f} {sum(c['reinits'] for c in cs):>7d} {missed:>6d}")
+    return "\n".join(lines)
+
+
+def main(argv=None) -> int:
+    """``python -m validation.estimator_mismatch`` (module docstring)."""
+    ap = argparse.ArgumentParser(prog="python -m validation.estimator_mismatch",
+                                 description="Quarter-car estimators on plants with the effect grid's effects.")
+    ap.add_argument("--estimators", nargs="+", default=["ekf", "mhe", "ekf-rls"])
+    ap.add_argument("--drivers", nargs="+", choices=DRIVERS, default=list(DRIVERS))
+    ap.add_argument("--roads", nargs="+", choices=("dry", "wet", "snow"), default=["dry", "wet", "snow"])
+    ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
+    ap.add_argument("--size", choices=GRID_SIZES, default="high")
+    ap.add_argument("--effects", nargs="+", choices=tuple(EFFECT_GRID), default=list(EFFECT_GRID))
+    ap.add_argument("--jobs", type=int, default=1)
+    ap.add_argument("--json", default=None, help="write every run and its verdicts to this JSON file")
+    args = ap.parse_args(argv)
+    rows = measure(args.estimators, args.drivers, args.roads, args.seeds, args.size, args.effects, args.jobs)
+    print(format_table(rows))
+    if args.json:
+        with open(args.json, "w") as fh:
+            json.dump({"args": vars(args), "rows": verdicts(rows)}, fh, indent=1)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,163 @@
+"""Wheel-speed spikes against the quarter-car estimators' outlier gate (:mod:`estimators.outliers`).
+
+On each study log (the MHE paper's cases 1-4 for the EKF and the MHE, the EKF/RLS paper's stop for the EKF/RLS) a
+share ``SPIKE_FRACTION`` of the wheel speeds is multiplied by a spike factor; the run is compared with the clean run
+of the same log: the rms speed error after ``SETTLE_TIME``, the share of spiked samples marked ``Health.OUTLIER``
+and the share of the other samples marked ``OUTLIER`` or ``REINITIALISED``.
+
+Command (tuning seeds 0-2; the test runs seeds 7-8)::
+
+    python -m validation.estimator_spikes --seeds 0 1 2 [--estimators ekf mhe] [--json PATH]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from estimators import scenarios
+from estimators.base import Health, run
+from estimators.ekf import QuarterCarEKF
+from estimators.ekf_rls import QuarterCarEkfRls
+from estimators.mhe import RegularizedMHE
+from estimators.outliers import DEFAULT_GATE
+from fricenv.plants.sui_johansen import OMEGA_NOISE_VAR
+
+__all__ = ["STUDY_ESTIMATORS", "StudyRow", "format_table", "main", "spike_indices", "study"]
+
+SPIKE_FACTORS = (0.5, 2.0, 5.0, 10.0)  # wheel speed multiplied by this on a spiked sample [-]
+SPIKE_FRACTION = 0.01  # share of the samples spiked [-]
+SPIKE_START = 11  # first sample that may be spiked: the filters (and the MHE's window) have a prior by then
+SETTLE_TIME = 0.5  # rms errors over t >= this, as the paper commands do [s]
+MHE_STUDY_CASES = (1, 2, 3, 4)  # the MHE paper cases run by the EKF and the MHE
+TARGET_RATIO = 1.5  # spiked rms speed error within 1.5x of the clean run
+TARGET_HIT = 0.95  # OUTLIER marks >= 95 % of the spiked samples
+TARGET_FALSE = 0.01  # < 1 % false marks
+
+
+@dataclass(frozen=True)
+class StudyRow:
+    """One estimator and spike size, pooled over seeds (and cases)."""
+
+    estimator: str
+    factor: float  # spike size [-]
+    runs: int  # logs run (seeds x cases)
+    rms_clean: float  # mean over runs of the clean run's rms speed error [m/s]
+    rms_spiked: float  # mean over runs of the spiked run's rms speed error [m/s]
+    ratio: float  # worst run's rms_spiked / rms_clean [-]
+    hit_rate: float  # spiked samples marked OUTLIER / spiked samples [-]
+    false_rate: float  # other samples marked OUTLIER or REINITIALISED / other samples [-]
+    spikes: int  # spiked samples in all runs
+
+    @property
+    def meets_target(self) -> bool:
+        return self.ratio <= TARGET_RATIO and self.hit_rate >= TARGET_HIT and self.false_rate < TARGET_FALSE
+
+
+def spike_indices(n: int, rng: np.random.Generator, fraction: float = SPIKE_FRACTION,
+                  start: int = SPIKE_START) -> np.ndarray:
+    """Sorted distinct random sample indices in [start, n): ``round(fraction n)`` of them, at least one."""
+    count = max(1, round(fraction * n))
+    return np.sort(rng.choice(np.arange(start, n), size=count, replace=False))
+
+
+def _logs(estimator: str, seed: int):
+    """(log, true speed, estimated parameters) of every study log of an estimator for one seed."""
+    if estimator == "ekf-rls":
+        pc = scenarios.ekf_rls_scenario(noisy=True, seed=seed, omega_noise_var=OMEGA_NOISE_VAR)
+        return [pc]
+    return [scenarios.mhe_case(case, seed=seed) for case in MHE_STUDY_CASES]
+
+
+def _factory(estimator: str, estimated: tuple[str, ...], gated: bool = True):
+    opt = {"outlier_gate": DEFAULT_GATE if gated else None}
+    makers = {"ekf": lambda: QuarterCarEKF(estimated=estimated, **opt),
+              "mhe": lambda: RegularizedMHE(estimated=estimated, **opt), "ekf-rls": lambda: QuarterCarEkfRls(**opt)}
+    return makers[estimator]()
+
+
+STUDY_ESTIMATORS = ("ekf", "ekf-rls", "mhe")
+
+
+def _run_one(est, pc, omega: np.ndarray) -> tuple[float, np.ndarray]:
+    log = {"t": pc.log.t, "omega": omega, "T_b": pc.log.T_b, "a_x": pc.log.a_x}
+    out = run(est, log)
+    settled = pc.log.t >= SETTLE_TIME
+    return float(np.sqrt(np.mean((out["v"][settled] - pc.v[settled]) ** 2))), out["health"]
+
+
+def study(estimator: str, seeds, factors=SPIKE_FACTORS, gated: bool = True) -> list[StudyRow]:
+    """Run one estimator over its study logs, clean and with spikes of every size (module docstring).
+
+    :param estimator: one of :data:`STUDY_ESTIMATORS`.
+    :param seeds: noise seeds of the logs (the spike places are drawn from (seed, log, factor)).
+    :param factors: spike sizes.
+    :param gated: False runs the estimators without the gate (the behaviour before it, for comparison).
+    """
+    if estimator not in STUDY_ESTIMATORS:
+        raise ValueError(f"estimator must be one of {', '.join(STUDY_ESTIMATORS)}, got {estimator!r}")
+    cache: dict = {}
+    acc = {f: {"clean": [], "spiked": [], "ratio": [], "hits": 0, "spikes": 0, "false": 0, "other": 0}
+           for f in factors}
+    for seed in seeds:
+        for j, pc in enumerate(_logs(estimator, seed)):
+            if pc.estimated not in cache:
+                cache[pc.estimated] = _factory(estimator, pc.estimated, gated)
+            est = cache[pc.estimated]
+            rms_clean, _ = _run_one(est, pc, pc.log.omega)
+            for k, factor in enumerate(factors):
+                idx = spike_indices(len(pc.log.t), np.random.default_rng([int(seed), j, k]))
+                omega = pc.log.omega.copy()
+                omega[idx] *= factor
+                rms, health = _run_one(est, pc, omega)
+                bad = np.zeros(len(omega), dtype=bool)
+                bad[idx] = True
+                a = acc[factor]
+                a["clean"].append(rms_clean)
+                a["spiked"].append(rms)
+                a["ratio"].append(rms / rms_clean)
+                a["hits"] += int(np.sum(health[bad] == Health.OUTLIER))
+                a["spikes"] += int(bad.sum())
+                a["false"] += int(np.sum(np.isin(health[~bad], (Health.OUTLIER, Health.REINITIALISED))))
+                a["other"] += int((~bad).sum())
+    return [StudyRow(estimator, float(f), len(a["clean"]), float(np.mean(a["clean"])), float(np.mean(a["spiked"])),
+                     float(np.max(a["ratio"])), a["hits"] / a["spikes"], a["false"] / a["other"], a["spikes"])
+            for f, a in acc.items()]
+
+
+def format_table(rows: list[StudyRow]) -> str:
+    """The study as a text table."""
+    header = (f"{'estimator':<9} {'spike':>6} {'runs':>5} {'rms clean':>10} {'rms spiked':>11} {'worst ratio':>12} "
+              f"{'hit rate':>9} {'false rate':>11} {'target':>7}")
+    lines = [header]
+    for r in rows:
+        lines.append(f"{r.estimator:<9} {r.factor:>6g} {r.runs:>5d} {r.rms_clean:>10.4f} {r.rms_spiked:>11.4f} "
+                     f"{r.ratio:>12.3f} {r.hit_rate:>9.3f} {r.false_rate:>11.5f} "
+                     f"{'met' if r.meets_target else 'MISSED':>7}")
+    return "\n".join(lines)
+
+
+def main(argv=None) -> int:
+    """``python -m validation.estimator_spikes [--seeds ...] [--factors ...] [--estimators ...] [--json PATH]``."""
+    ap = argparse.ArgumentParser(prog="python -m validation.estimator_spikes",
+                                 description="Wheel-speed spikes against the estimators' outlier gate.")
+    ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
+    ap.add_argument("--factors", type=float, nargs="+", default=list(SPIKE_FACTORS))
+    ap.add_argument("--estimators", nargs="+", choices=STUDY_ESTIMATORS, default=list(STUDY_ESTIMATORS))
+    ap.add_argument("--json", default=None, help="write the rows to this JSON file")
+    ap.add_argument("--no-gate", action="store_true", help="run without the outlier gate (for comparison)")
+    args = ap.parse_args(argv)
+    rows = [row for name in args.estimators for row in study(name, args.seeds, args.factors, not args.no_gate)]
+    print(format_table(rows))
+    if args.json:
+        with open(args.json, "w") as fh:
+            json.dump({"seeds": args.seeds, "gated": not args.no_gate, "rows": [{**asdict(r), "meets_target": r.meets_target} for r in rows]},
+                      fh, indent=1)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
