@@ -1,4 +1,4 @@
-"""The one small interface every estimator follows (DESIGN.md, "Estimators").
+"""The one small interface every estimator follows (docs/contracts.md).
 
 An estimator is fed one sample at a time with ``update(measurement, u)`` and answers an :class:`Estimate`: named
 values plus a health flag. It never raises inside a loop for a bad sample or a failed solve; it falls back (keeps

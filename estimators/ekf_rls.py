@@ -41,8 +41,8 @@ Steps per sample (Section III of the paper), for n wheels (quarter car n = 1, tw
    peak friction ``mu = theta max g``. As S_bar -> 0, ``g(S)/S -> B C`` and the map is linear,
    ``mu = k_s max(g) / (B C)`` (dry shape: mu = 0.0584 k_s, the project's counterpart of 0.1 k_s + 0.02). It is
    exact for any slip on the family, so it does not drift down when braking moves the slip into the curved part
-   (the paper's Fig. 11 shows that drift with a linear map). :class:`MagicFormulaFamilyMap` implements it;
-   :class:`LinearMap` is the paper's form, used on the paper's own two-axle set-up (:class:`TwoAxleEkfRls`):
+   (the paper's Fig. 11 shows that drift with a linear map). :class:`estimators.slope_maps.MagicFormulaFamilyMap` implements it;
+   :class:`estimators.slope_maps.LinearMap` is the paper's form, used on the paper's own two-axle set-up (:class:`TwoAxleEkfRls`):
    there the Dugoff tire's force is ``C_s S / (1 - S)`` whatever mu is until the slip reaches about
    ``mu F_z / (2 C_s)`` (6.8 % on the front axle at mu = 0.9), so below that the slip slope carries no
    information on mu and no map can recover it; the paper's empirical map is reported as is.
@@ -61,18 +61,16 @@ from estimators.curve_shape import DEFAULT_BANK, ShapeBank, ShapeFit, ShapeFitPa
 from estimators.ekf import ekf_predict, ekf_update
 from estimators.jump import JUMP_MU_MAX, jump_test
 from estimators.outliers import DEFAULT_GATE, GateParams, Verdict, check_gate, gate, nis
+from estimators.slope_maps import PAPER_MAP, MagicFormulaFamilyMap
 from fricenv.plants.quarter_car import PAPER_PARAMS, QuarterCarParams
 from fricenv.plants.sui_johansen import OMEGA_NOISE_STD
-from fricenv.plants.tire import DRY, MagicFormula, magic_formula
+from fricenv.plants.tire import DRY, MagicFormula
 
 __all__ = [
     "DEFAULT_CORRECTION_GAIN",
     "PAPER_CORRECTION_GAIN",
-    "PAPER_MAP",
     "EkfRlsConfig",
     "EkfRlsCore",
-    "LinearMap",
-    "MagicFormulaFamilyMap",
     "QuarterCarEkfRls",
     "TwoAxleEkfRls",
 ]
@@ -88,51 +86,7 @@ RLS_P0 = 10.0  # initial RLS covariance [(1/unit slip)^2]
 KS0 = 10.0  # initial slip slope [1/unit slip]
 Q_STD = {"a_x": 0.5, "a_w": 50.0, "F": 300.0}  # EKF process noise per sample [m/s^2, rad/s^2, N]
 AX_STD_MIN = 0.01  # floor of the a_x noise standard deviation in the EKF [m/s^2]
-SLIP_SMALL = 1e-4  # below this slip the family maps use their linear limit [-]
 WHEEL_B_STD = 100.0  # random walk of the tire torque over inertia in the wheel-speed gate, per sample [rad/s^2]
-
-
-class LinearMap:
-    """``mu = a k_s + b`` (the paper's eq. (15) form)."""
-
-    def __init__(self, a: float = 0.1, b: float = 0.02):
-        self.a, self.b = float(a), float(b)
-
-    def __call__(self, k_s: float, s_bar: float) -> float:
-        return self.a * k_s + self.b
-
-    def batch(self, k_s: np.ndarray, s_bar: np.ndarray) -> np.ndarray:
-        """The map over arrays of slopes and mean slips (the batched estimator's form)."""
-        return self.a * np.asarray(k_s, dtype=float) + self.b
-
-
-PAPER_MAP = LinearMap(0.1, 0.02)  # eq. (15), for the paper's tire
-
-
-class MagicFormulaFamilyMap:
-    """Peak friction from the slip slope on the family mu = theta g(S) of one tire shape (module docstring).
-
-    :param shape: Magic Formula whose B, C, E give the shape (theta ignored).
-    """
-
-    def __init__(self, shape: MagicFormula = DRY):
-        self.B, self.C, self.E = shape.B, shape.C, shape.E
-        unit = MagicFormula(self.B, self.C, self.E, 1.0)
-        self.g_max = unit.mu_max
-        self.linear_factor = self.g_max / (self.B * self.C)  # mu per unit k_s as S -> 0
-
-    def __call__(self, k_s: float, s_bar: float) -> float:
-        if s_bar < SLIP_SMALL:
-            return k_s * self.linear_factor
-        g = float(magic_formula(s_bar, self.B, self.C, self.E, 1.0))
-        return k_s * s_bar / g * self.g_max
-
-    def batch(self, k_s: np.ndarray, s_bar: np.ndarray) -> np.ndarray:
-        """The map over arrays of slopes and mean slips (the batched estimator's form)."""
-        k_s, s_bar = np.asarray(k_s, dtype=float), np.asarray(s_bar, dtype=float)
-        small = s_bar < SLIP_SMALL
-        g = magic_formula(np.where(small, 1.0, s_bar), self.B, self.C, self.E, 1.0)
-        return np.where(small, k_s * self.linear_factor, k_s * s_bar / g * self.g_max)
 
 
 @dataclass(frozen=True)

@@ -41,9 +41,10 @@ from typing import Any
 
 from estimators.base import Estimator, EstimatorConfigError
 from estimators.ekf import QuarterCarEKF
-from estimators.ekf_rls import PAPER_CORRECTION_GAIN, PAPER_MAP, QuarterCarEkfRls, TwoAxleEkfRls
+from estimators.ekf_rls import PAPER_CORRECTION_GAIN, QuarterCarEkfRls, TwoAxleEkfRls
 from estimators.mhe import RegularizedMHE
 from estimators.quarter_car_model import PARAM_NAMES, AugmentedModel
+from estimators.slope_maps import PAPER_MAP
 from fricenv.errors import InvalidInputError
 from fricenv.plants import sui_johansen as sj
 from fricenv.plants.quarter_car import PAPER_PARAMS, QuarterCarParams

@@ -135,9 +135,7 @@ def test_cycle_finder_sees_function_local_and_type_checking_imports(tmp_path):
 
 
 @pytest.mark.parametrize("package", [
-    pytest.param("fricenv", marks=pytest.mark.xfail(
-        strict=False, reason="the braking env's config re-export and the gap signals' speed/speed_kernel loop "
-                             "are being untangled")),
+    "fricenv",
     "estimators",
     "agents",
 ])

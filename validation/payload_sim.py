@@ -105,7 +105,7 @@ def random_excitation(rng: np.random.Generator) -> MultiSine:
 
 @dataclass(frozen=True)
 class PayloadRecipe:
-    """What to simulate. Effects (DESIGN.md names): ``delay`` (vision_delay), ``S_true`` (calibration_error),
+    """What to simulate. Effects (registry names): ``delay`` (vision_delay), ``S_true`` (calibration_error),
     ``rate`` (calibration_drift: ``S(t) = S_true (1 + rate t)``), ``offset`` (wrench_offset, on the raw reading);
     ``damping`` = (b_lin [N s/m], b_rot [N m s/rad]) is viscous damping, outside the library."""
 

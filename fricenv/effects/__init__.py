@@ -1,4 +1,4 @@
-"""Unmodelled effects (DESIGN.md effect tables) as switchable, parameterised extensions of the plants.
+"""Unmodelled effects (the effect tables of docs/contracts.md) as switchable, parameterised extensions of the plants.
 
 The same code builds the "real" stand-in of the gap tool and the augmented simulators its diagnosis fits.
 Quarter car: :mod:`fricenv.effects.quarter_car` (simulator), :mod:`fricenv.effects.registry` (one entry per effect:

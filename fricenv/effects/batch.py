@@ -50,7 +50,7 @@ class ModelBatch:
         return len(self.tau)
 
     def param(self, name: str) -> np.ndarray:
-        """The (n,) values of an effect parameter by its DESIGN.md name (built-in field or ``extra``)."""
+        """The (n,) values of an effect parameter by its registry name (built-in field or ``extra``)."""
         for entry in registry.REGISTRY.values():
             for q in entry.params:
                 if q.name == name:

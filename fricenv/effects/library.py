@@ -1,4 +1,4 @@
-"""The built-in quarter-car effects (DESIGN.md, "Effect names (quarter car)"): each one's spec and registry entry.
+"""The built-in quarter-car effects (docs/contracts.md): each one's spec and registry entry.
 
 | name                | parameters                  | where it acts                                             |
 | ------------------- | --------------------------- | --------------------------------------------------------- |

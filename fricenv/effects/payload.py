@@ -1,4 +1,4 @@
-"""Unmodelled effects of the planar payload with a force-moment sensor (DESIGN.md, "Effect names (planar payload)").
+"""Unmodelled effects of the planar payload with a force-moment sensor (docs/contracts.md).
 
 | name                | parameters                 | where it acts                                              |
 | ------------------- | -------------------------- | ---------------------------------------------------------- |
@@ -145,7 +145,7 @@ PAYLOAD_TESTABLE: dict[str, Callable[[PayloadExcitation], str | None]] = {
 
 
 def make_payload_effect(name: str, **params):
-    """A payload effect spec from its DESIGN.md name and parameters; unknown names/parameters raise ValueError."""
+    """A payload effect spec from its registry name and parameters; unknown names/parameters raise ValueError."""
     if name not in PAYLOAD_EFFECTS:
         raise ValueError(f"unknown payload effect {name!r}; valid effects: {', '.join(PAYLOAD_EFFECTS)}")
     valid = PAYLOAD_EFFECT_PARAMS[name]

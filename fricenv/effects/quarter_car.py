@@ -1,6 +1,6 @@
-"""Unmodelled effects of the quarter-car braking plant (DESIGN.md, "Effect names (quarter car)").
+"""Unmodelled effects of the quarter-car braking plant (docs/contracts.md).
 
-Each effect is a typed, frozen spec whose name and parameter names are the DESIGN.md contract; the specs and
+Each effect is a typed, frozen spec whose name and parameter names are the docs/contracts.md contract; the specs and
 their registry entries are in :mod:`fricenv.effects.library` (the table there), the registry in
 :mod:`fricenv.effects.registry`. This module re-exports them.
 
@@ -119,18 +119,18 @@ OUT_OF_LIBRARY: Mapping[str, type] = _RegistryView(lambda e: not e.in_library, l
 
 
 def make_effect(name: str, allow_out_of_library: bool = False, **params: float):
-    """An effect spec from its DESIGN.md name and parameters.
+    """An effect spec from its registry name and parameters.
 
     :param name: effect name, one of :data:`EFFECTS` (or :data:`OUT_OF_LIBRARY` if allowed).
     :param allow_out_of_library: accept the validation-only effects too.
-    :param params: the effect's parameters, by their DESIGN.md names.
+    :param params: the effect's parameters, by their registry names.
     :raises ValueError: unknown name (lists the valid ones), unknown or missing parameter (lists the valid ones).
     """
     return registry.get(name, allow_out_of_library).make(**params)
 
 
 def effect_params(effect) -> dict[str, float]:
-    """The parameters of an effect spec as a plain dict (DESIGN.md names, SI units)."""
+    """The parameters of an effect spec as a plain dict (registry names, SI units)."""
     return {f.name: float(getattr(effect, f.name)) for f in fields(effect)}
 
 

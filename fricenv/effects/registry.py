@@ -1,7 +1,7 @@
 """The quarter-car effect registry: one entry per effect holds everything the library does with it.
 
 An entry (:class:`QuarterCarEffect`) names the effect's spec class (a frozen dataclass whose fields are the
-DESIGN.md parameter names), its parameters (unit, fit range, the value that switches it off, fit scales), its fit
+registry parameter names), its parameters (unit, fit range, the value that switches it off, fit scales), its fit
 starts, what it needs from a log, how the gap tool fits it, its draw for the validation logs and, for an effect the
 simulator does not build in, its physics hooks. :mod:`fricenv.effects.quarter_car` (``ModelBatch``,
 ``EffectSimulator``, ``make_effect``), the diagnosis, the validation and the speed reconstruction iterate over
@@ -49,7 +49,7 @@ class UnknownEffectError(InvalidInputError):
 class Param:
     """One effect parameter.
 
-    :param name: DESIGN.md parameter name (unique over all effects: the fits concatenate parameter vectors).
+    :param name: registry parameter name (unique over all effects: the fits concatenate parameter vectors).
     :param unit: SI unit, for reports.
     :param bounds: the fit's physical range (``(-inf, inf)`` for a log time: then the training windows bound it).
     :param off: the value that switches the effect off; a callable ``(road (4,) or (n, 4), p) -> value`` when it
@@ -168,7 +168,7 @@ class QuarterCarEffect:
         return tuple(q.name for q in self.params)
 
     def make(self, **params: float):
-        """The effect's spec from its parameters, by their DESIGN.md names (ValueError listing the valid ones)."""
+        """The effect's spec from its parameters, by their registry names (ValueError listing the valid ones)."""
         valid = self.param_names
         unknown = sorted(set(params) - set(valid))
         missing = [v for v in valid if v not in params]

@@ -138,7 +138,7 @@ class BrakingEnv(gym.Env):
 
     ## The corrected simulator: effects
 
-    ``effects`` steps the quarter car with unmodelled effects (DESIGN.md effect names): a list of
+    ``effects`` steps the quarter car with unmodelled effects (the registry's effect names): a list of
     ``{"effect": "brake_lag", "params": {"tau": 0.04}}`` entries, or the path of a ``gap diagnose`` report.json (its
     ``effects`` list if present, else its ``verdict`` and ``params``; ``none``/``unexplained`` give no effects).
     ``effects_randomization={"brake_lag": {"tau": (0.02, 0.08)}, ...}`` draws parameters per episode from

@@ -1,6 +1,6 @@
 """The ``effects=`` and ``effects_randomization=`` arguments of the braking envs: parsing and validation.
 
-``effects`` (DESIGN.md, "The corrected simulator"):
+``effects`` (docs/contracts.md):
 
 * a sequence of ``{"effect": NAME, "params": {PARAM: value}}`` dicts (or effect specs of
   :func:`fricenv.effects.quarter_car.make_effect`); ``[]`` or None: the plain env;
@@ -9,7 +9,7 @@
 
 ``effects_randomization``: ``{NAME: {PARAM: (low, high) or value}}``, parameter ranges drawn uniformly per episode
 from the env's ``np_random``. A parameter without a range keeps its value from ``effects``; an effect named in both
-is replaced by its drawn version. Draws are made in the mapping's order, parameters in their DESIGN.md order, and a
+is replaced by its drawn version. Draws are made in the mapping's order, parameters in their registry order, and a
 degenerate range (``low == high``) draws nothing.
 
 Unknown effect or parameter names, missing parameters and malformed entries raise :class:`EffectSpecError` (a

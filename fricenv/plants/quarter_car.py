@@ -212,6 +212,6 @@ def refine_where_unphysical(v0, w0, v1, w1, Tb, road, h: float, p: QuarterCarPar
 def physical_limit_distance(v0, v_stop, mu_max, p: QuarterCarParams = PAPER_PARAMS):
     """Distance [m] to brake from ``v0`` to ``v_stop`` at the road's peak friction held the whole way.
 
-    ``(v0^2 - v_stop^2) / (2 g mu_max)``: the figure every ABS result is divided by (DESIGN.md).
+    ``(v0^2 - v_stop^2) / (2 g mu_max)``: the figure every ABS result is divided by (docs/contracts.md).
     """
     return (np.square(v0) - np.square(v_stop)) / (2.0 * p.g * mu_max)

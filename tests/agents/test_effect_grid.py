@@ -10,7 +10,14 @@ import pytest
 from agents.effect_scenarios import GRID_SCENARIOS, fixed_effect_scenarios, grid_scenarios, parse_effects_arg
 from agents.evaluation import Scenario, evaluate
 from agents.robustness_report import policy_matrix, write_matrix
-from fricenv.effects.grid import EFFECT_GRID, GridCell, cell_effects, grid_cells, grid_effect, grid_randomization
+from fricenv.effects.grid import (
+    EFFECT_GRID,
+    GridCell,
+    cell_effects,
+    grid_cells,
+    grid_effect,
+    grid_randomization,
+)
 from fricenv.envs.effect_spec import EffectSpecError
 from fricenv.plants.quarter_car import PAPER_PARAMS
 from fricenv.plants.tire import WET

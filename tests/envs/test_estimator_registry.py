@@ -10,7 +10,7 @@ import pytest
 from agents.pipeline import assumed_shape
 from estimators.base import EstimatorConfigError
 from estimators.ekf import QuarterCarEKF
-from estimators.ekf_rls import PAPER_CORRECTION_GAIN, PAPER_MAP, QuarterCarEkfRls, TwoAxleEkfRls
+from estimators.ekf_rls import PAPER_CORRECTION_GAIN, QuarterCarEkfRls, TwoAxleEkfRls
 from estimators.mhe import RegularizedMHE
 from estimators.registry import (
     ESTIMATORS,
@@ -21,6 +21,7 @@ from estimators.registry import (
     make_estimator,
 )
 from estimators.scenarios import ekf_rls_scenario, mhe_case
+from estimators.slope_maps import PAPER_MAP
 from fricenv.envs.estimator_observation import ESTIMATOR_NAMES, EstimatorObservation
 from fricenv.envs.factory import make_braking
 from fricenv.plants import sui_johansen as sj

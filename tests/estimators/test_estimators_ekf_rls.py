@@ -9,12 +9,11 @@ from estimators.base import EstimatorConfigError, Health, run
 from estimators.ekf_rls import (
     PAPER_CORRECTION_GAIN,
     EkfRlsConfig,
-    LinearMap,
-    MagicFormulaFamilyMap,
     QuarterCarEkfRls,
     TwoAxleEkfRls,
 )
 from estimators.scenarios import SETTLE_WINDOWS, ekf_rls_scenario, two_axle_scenario
+from estimators.slope_maps import LinearMap, MagicFormulaFamilyMap
 from fricenv.plants import two_axle as ta
 from fricenv.plants.quarter_car import PAPER_PARAMS
 from fricenv.plants.tire import DRY, MagicFormula

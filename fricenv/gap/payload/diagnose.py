@@ -21,7 +21,7 @@ The payload's dynamics are linear in the wrench, so the diagnosis compares accel
    squares; ``calibration_drift`` is a 1-D bounded search over the rate; ``vision_delay`` a grid plus bounded search
    over the delay (the wrench is shifted by linear interpolation, the rotation uses the measured, i.e. delayed,
    orientation). Every fit uses the training blocks only. The drift's ``t`` is the time since the log's first sample
-   (DESIGN.md: ``S(t) = S (1 + rate t)``; the report's time base, so an epoch-stamped log drifts as one from 0). Errors of m, I_G or rho map the generalised force by a constant matrix that commutes
+   (docs/contracts.md: ``S(t) = S (1 + rate t)``; the report's time base, so an epoch-stamped log drifts as one from 0). Errors of m, I_G or rho map the generalised force by a constant matrix that commutes
    with the rotation, so they show up (exactly) as a ``calibration_error``.
 5. **Scoring and verdict** as for the quarter car (:mod:`fricenv.gap.quarter_car.diagnose`): ``gap = sqrt(max(MSE - 1, 0))`` of
    the held-out normalised residual; a candidate is significant when its held-out improvement, without its largest
