@@ -135,6 +135,7 @@ def test_ray_workers_share_the_study(tmp_path, local_ray):  # noqa: F811 - pytes
     assert result.best["value"] == min(t["value"] for t in trials)
 
 
+@pytest.mark.slow
 def test_real_tiny_trial_is_read_by_fricenv_train(tmp_path, capsys):
     """One real trial (PPO, no estimator, one training rollout, one evaluation episode per scenario), then
     ``fricenv train --hyperparams`` trains with exactly the tuned configuration."""

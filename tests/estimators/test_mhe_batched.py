@@ -74,6 +74,7 @@ def test_batched_mhe_equals_single_mhes_across_resets_outliers_nan_and_failures(
         assert (health == int(flag)).any(), f"{flag.name} never occurred"
 
 
+@pytest.mark.slow
 def test_thread_map_and_virtual_machine_equal_the_compiled_serial_map():
     template = get_estimator("mhe").make(P, DT)
     for variant in (BatchedMHE(template, 3, parallel="thread", threads=2), BatchedMHE(template, 3, compile_c=False)):

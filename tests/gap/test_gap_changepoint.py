@@ -5,6 +5,7 @@ from __future__ import annotations
 import warnings
 
 import numpy as np
+import pytest
 
 from fricenv.gap.quarter_car.changepoint import _local_minima
 from fricenv.gap.quarter_car.diagnose import DiagnoseConfig, diagnose_file
@@ -17,6 +18,7 @@ def test_the_local_minima_of_a_split_profile_are_one_per_dip():
     assert _local_minima(total) == [(0, 1), (0, 4), (0, 6), (1, 0)]  # a plateau counts once, at its start
 
 
+@pytest.mark.slow
 def test_a_friction_change_the_nominal_road_places_off_is_found_at_a_second_dip(tmp_path):
     """A clean independent-simulator log of a friction change (tuning seed 3104, log 0: pedal, dry road, wheel speed
     only, the change at 1.59 s to theta 0.61). The search's best split of each road shape lies at 1.99 s; fitted

@@ -12,6 +12,7 @@ import pytest
 from fricenv.effects.quarter_car import make_effect
 from fricenv.gap.quarter_car import selection
 from fricenv.gap.quarter_car.config import DiagnoseConfig
+from fricenv.gap.quarter_car.context import FitContext
 from fricenv.gap.quarter_car.diagnose import diagnose, diagnose_file
 from fricenv.gap.quarter_car.params import ROAD_NAMES
 from fricenv.gap.quarter_car.simulate import simulate_log
@@ -36,6 +37,7 @@ def _drag_force(params: dict, v: float = 15.0) -> float:
     return params["c0"] + params["c2"] * v**2
 
 
+@pytest.mark.slow
 def test_drag_and_relaxation_length_are_both_named_with_their_parameters():
     dg = _diagnosed([make_effect("drag", **DRAG), make_effect("relaxation_length", sigma=0.4)], DRY, "abs", 3)
     named = {e["effect"]: e["params"] for e in dg.effects}
@@ -135,9 +137,9 @@ def test_joint_fits_are_screened_from_their_best_start_and_refitted_only_near_th
     z_set = {"drag+a": 3.0, "drag+b": 1.0, "drag+c": 1.0}  # paired z of each joint model over the set
     calls = []
 
-    def fake_fit_joints(current, extra, folds, d, cfg, jobs, nominal, restart=()):
-        calls.append(([c.effect for c in extra], cfg.fit_starts))
-        return [CandidateFit(effect=f"drag+{c.effect}", names=ROAD_NAMES, x=np.full(4, cfg.fit_starts),
+    def fake_fit_joints(ctx, nominal, current, extra, restart=()):
+        calls.append(([c.effect for c in extra], ctx.cfg.fit_starts))
+        return [CandidateFit(effect=f"drag+{c.effect}", names=ROAD_NAMES, x=np.full(4, ctx.cfg.fit_starts),
                              train_mse=1.0, test_mse=1.0, window_mse=np.ones(4)) for c in extra]
 
     def fake_paired_z(a, b, d):
@@ -149,9 +151,9 @@ def test_joint_fits_are_screened_from_their_best_start_and_refitted_only_near_th
                            window_mse=np.ones(4))
     singles = [CandidateFit(effect=e, names=ROAD_NAMES, x=np.ones(4), train_mse=1.0, test_mse=1.0,
                             window_mse=np.ones(4), z_paired=z) for e, z in (("a", 0.0), ("b", 1.0), ("c", 10.0))]
-    cfg = DiagnoseConfig(fit_starts=2)
+    ctx = FitContext(None, (None, None), DiagnoseConfig(fit_starts=2), 1)
     known: dict = {}
-    joints = selection._extend(current, singles, [None, None], None, cfg, 1, current, known)
+    joints = selection._extend(ctx, current, current, singles, known)
     assert calls == [(["a", "b", "c"], 1), (["a", "c"], 2)]  # b: far from the test and not confounded
     assert [j.x[0] for j in joints] == [2.0, 1.0, 2.0]
     assert set(known) == {frozenset({"drag", e}) for e in "abc"}
@@ -165,7 +167,7 @@ def test_a_joint_fit_that_fits_worse_than_its_set_is_fitted_again_from_the_start
     refit_train = {"drag+brake_gain": 0.8}
     calls = []
 
-    def fake_fit_joints(current, extra, folds, d, cfg, jobs, nominal, restart=()):
+    def fake_fit_joints(ctx, nominal, current, extra, restart=()):
         calls.append(([c.effect for c in extra], set(restart)))
         table = refit_train if restart else train
         return [CandidateFit(effect=f"drag+{c.effect}", names=ROAD_NAMES, x=np.ones(4),
@@ -177,14 +179,16 @@ def test_a_joint_fit_that_fits_worse_than_its_set_is_fitted_again_from_the_start
     current = CandidateFit(effect="drag", names=ROAD_NAMES, x=np.ones(4), train_mse=1.0, test_mse=1.0,
                            window_mse=np.ones(4))
     todo = [_fit(e, np.ones((4, 5))) for e in ("brake_gain", "brake_lag", "mu_change")]
-    joints = fake_fit_joints(current, todo, None, d, None, 1, None)
+    ctx = FitContext(d, (None, None), DiagnoseConfig(), 1)
+    joints = fake_fit_joints(ctx, None, current, todo)
     calls.clear()
-    redone = selection._restart(current, todo, joints, [None, None], d, DiagnoseConfig(), 1, current)
+    redone = selection._restart(ctx, current, current, todo, joints)
     # brake_lag fits better than the set: kept; a change point has no start list: its single fit is its only start
     assert calls == [(["brake_gain"], {"brake_gain"})]
     assert [(i, r.train_mse) for i, r in redone] == [(0, 0.8)]
 
 
+@pytest.mark.slow
 def test_a_relaxation_length_whose_single_fit_is_far_off_is_added_to_a_radius_error(tmp_path):
     """Combos tuning seed 3011, log 36 (`validation.independent_sim --real --combos`): a radius error of 0.328 m and a
     relaxation length of 0.27 m, v and a_x logged. The relaxation length fitted alone ends at 1.18 m (the radius

@@ -4,10 +4,13 @@ from __future__ import annotations
 
 import warnings
 
+import pytest
+
 from fricenv.gap.quarter_car.diagnose import DiagnoseConfig, diagnose_file
 from validation import independent_sim as ind
 
 
+@pytest.mark.slow
 def test_a_brake_fade_read_as_a_gain_and_a_drag_drifts(tmp_path):
     """A clean independent-simulator log of a brake fade (seed 3804, log 32: pedal, dry road): no single effect
     closes the gap, and the forward selection closes it with a brake gain plus a drag whose speed dependence imitates

@@ -64,6 +64,7 @@ def test_a_2s_abs_log_with_brake_lag_is_testable_and_diagnosed_brake_lag(tmp_pat
     assert dg.gap_after < 0.3 * dg.gap_before
 
 
+@pytest.mark.slow
 def test_a_friction_change_below_the_peak_is_found_and_its_caveat_reported():
     """Open-loop braking on ice that never nears the peak, theta 0.108 -> 0.079 at 1.65 s (gap validate seed 9006,
     a tuning log): the rule that asked for slip near the peak left the change untested, verdict none. The change

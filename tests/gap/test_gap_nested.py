@@ -64,6 +64,7 @@ def test_an_effect_that_closes_the_gap_passes_both_tests():
     assert nominal.z_without is None  # the nominal model has no effect to switch off
 
 
+@pytest.mark.slow
 def test_the_oracle_applies_the_same_rule():
     """The oracle is the diagnosis' significance rule (nested test included) and its explains rule applied to the
     true model. On a log with a brake gain of 0.8 the true model passes both. On a nominal log whose calibrated

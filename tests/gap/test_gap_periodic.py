@@ -54,6 +54,7 @@ def test_a_line_below_the_band_is_left_to_the_braking():
     assert periodic_line(_nominal(series), DATA) is None
 
 
+@pytest.mark.slow
 def test_a_load_oscillation_under_the_gap_threshold_reads_unexplained():
     """omega-only tuning log (independent simulator seed 3000, log 12): a 10.7 Hz load oscillation of 19 % leaves a
     nominal gap of 0.86 noise units, below gap_none, and no candidate is significant; before the line test the

@@ -53,6 +53,7 @@ def test_summary_counts_right_verdicts_and_ratios():
     assert "right verdicts: 75.0 %" in text
 
 
+@pytest.mark.slow
 def test_blind_case_is_scored():
     case = draw_case("brake_delay", np.random.default_rng(3))
     r = run_case(case)

@@ -337,6 +337,7 @@ def test_selection_figures_of_a_combo_log():
     assert set(out["effect_errors"]) == {"drag", "relaxation_length"}
 
 
+@pytest.mark.slow
 def test_draws_cover_categories_and_stop_conditions():
     rng = np.random.default_rng(5)
     for cat in CATEGORIES:

@@ -31,6 +31,7 @@ def _ray_children() -> list[str]:
     return [n for n in names if "raylet" in n or "gcs_server" in n]
 
 
+@pytest.mark.slow
 def test_ray_started_here_gives_task_order_and_is_shut_down():
     assert not ray.is_initialized()
     sink = RecordingSink()

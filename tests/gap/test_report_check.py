@@ -87,6 +87,7 @@ def test_a_wrong_verdict_is_classed_by_the_first_reason_that_applies():
                                 "not testable": 1, "other": 2}
 
 
+@pytest.mark.slow
 def test_the_oracle_of_several_effects_shows_a_large_one_and_not_a_negligible_one():
     """A brake gain of 0.8 on a log that also holds a drag of 0.1 N (nothing a log could show) is shown; the drag is
     not: the brake gain alone, fitted with the road, predicts the log as well as the true model."""
@@ -120,6 +121,7 @@ def test_combo_summary_counts_the_logs_where_what_is_shown_is_named():
     assert s == {"logs": 4, "every_shown": 2, "every_shown_all_named": 1, "some_shown": 3, "shown_named": 2}
 
 
+@pytest.mark.slow
 def test_the_noise_free_truth_shows_a_strong_brake_fade_and_not_a_nominal_log(tmp_path):
     """The oracle of an out-of-library log: on a pedal log whose brake fades by 40 % over the stop the noise-free
     truth beats the calibrated nominal model by far; on the same log without the fade (the nominal model's own

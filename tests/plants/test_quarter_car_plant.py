@@ -34,7 +34,13 @@ CASES = [(road, profile) for road in (DRY, WET, SNOW, ICE) for profile in ("belo
 CASES += [(DRY, "modulated"), (WET, "modulated")]
 
 
-@pytest.mark.parametrize("road, profile", CASES, ids=lambda x: getattr(x, "name", x))
+# The longest references (a lock-up on ice, the modulated wet stop) run with the slow tests.
+SLOW_CASES = {("ice", "lock_up"), ("wet", "modulated")}
+
+
+@pytest.mark.parametrize("road, profile", [pytest.param(r, prof, marks=pytest.mark.slow)
+                                           if (r.name, prof) in SLOW_CASES else (r, prof) for r, prof in CASES],
+                         ids=lambda x: getattr(x, "name", x))
 def test_stopping_distance_matches_radau(road, profile):
     t_safe = 0.8 * road.mu_max * P.Fz * P.r
     torque = {
