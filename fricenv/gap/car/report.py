@@ -4,13 +4,11 @@ marked), written as :func:`fricenv.gap.report.write_report` writes: complete und
 
 from __future__ import annotations
 
-import os
-import shutil
-import tempfile
 from pathlib import Path
 
 from fricenv.gap.car.diagnose import SessionDiagnosis
-from fricenv.utils import atomic_write, to_jsonable, write_json
+from fricenv.gap.core import report as files
+from fricenv.utils import to_jsonable
 
 __all__ = ["PLOT_TIMELINE", "report_dict", "report_markdown", "summary_line", "write_session_report"]
 
@@ -129,21 +127,8 @@ def plot_timeline(dg: SessionDiagnosis, path) -> None:
 
 
 def write_session_report(dg: SessionDiagnosis, out_dir, plant: str = "quarter-car", plots: bool = True) -> dict:
-    """Write report.json, report.md and the timeline into ``out_dir``; returns the report dict."""
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    report = report_dict(dg, plant)
-    tmp = Path(tempfile.mkdtemp(prefix=".report.", dir=out))
-    try:
-        if plots:
-            plot_timeline(dg, tmp / PLOT_TIMELINE)
-        images = [PLOT_TIMELINE] if (tmp / PLOT_TIMELINE).exists() else []
-        with atomic_write(tmp / "report.md") as fh:
-            fh.write(report_markdown(dg, report, images))
-        write_json(tmp / "report.json", report)
-        for name in (PLOT_TIMELINE, "report.md", "report.json"):
-            if (tmp / name).exists():
-                os.replace(tmp / name, out / name)
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
-    return report
+    """Write report.json, report.md and the timeline into ``out_dir`` (atomically, as
+    :func:`fricenv.gap.core.report.write_report`); returns the report dict."""
+    return files.write_report(dg, out_dir, plant, markdown=lambda d, r, images: report_markdown(d, r, images),
+                              plotter=lambda d, r, folder: plot_timeline(d, folder / PLOT_TIMELINE), plots=plots,
+                              plot_names=(PLOT_TIMELINE,), report=report_dict(dg, plant))

@@ -82,29 +82,30 @@ def plot_regimes(report: dict, with_after: bool, path) -> None:
 
 
 def write_report(dg, out_dir, plant: str, markdown: Callable[..., str], plotter: Callable[..., None],
-                 plots: bool = True) -> dict:
+                 plots: bool = True, plot_names: Sequence[str] = (PLOT_TIME, PLOT_REGIMES),
+                 report: dict | None = None) -> dict:
     """Write report.json, report.md and the plots into ``out_dir``; returns the report dict.
 
     Files are produced in a temporary directory beside the final ones, then renamed into place (report.json last).
 
     :param plots: write the PNG plots; report.md links only the plots actually written (none without plots).
-    :param markdown: ``(dg, report, images=...) -> str`` for report.md (default :func:`report_markdown`, the quarter
-        car's); ``images`` are the plot files written.
-    :param plotter: ``(dg, report, directory) -> None`` writing the PNG plots named ``PLOT_TIME`` and
-        ``PLOT_REGIMES`` (default the quarter car's).
+    :param markdown: ``(dg, report, images=...) -> str`` for report.md; ``images`` are the plot files written.
+    :param plotter: ``(dg, report, directory) -> None`` writing the PNG plots named ``plot_names``.
+    :param plot_names: the plot files the plotter may write.
+    :param report: the report dict (default :func:`report_dict` of ``dg``).
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    report = report_dict(dg, plant)
+    report = report_dict(dg, plant) if report is None else report
     tmp = Path(tempfile.mkdtemp(prefix=".report.", dir=out))
     try:
         if plots:
             plotter(dg, report, tmp)
-        images = [name for name in (PLOT_TIME, PLOT_REGIMES) if (tmp / name).exists()]
+        images = [name for name in plot_names if (tmp / name).exists()]
         with atomic_write(tmp / "report.md") as fh:
             fh.write(markdown(dg, report, images=images))
         write_json(tmp / "report.json", report)
-        for name in [PLOT_TIME, PLOT_REGIMES, "report.md", "report.json"]:
+        for name in [*plot_names, "report.md", "report.json"]:
             if (tmp / name).exists():
                 os.replace(tmp / name, out / name)
     finally:
