@@ -11,6 +11,7 @@ import pytest
 import fricenv  # noqa: F401  (registers the envs)
 from fricenv.effects.quarter_car import make_effect
 from fricenv.envs.braking_sim import BrakingSim
+from fricenv.envs.braking_vector import BrakingVectorEnv
 from fricenv.envs.config import BrakingConfig
 from fricenv.envs.effect_plant import EffectPlant
 from fricenv.envs.effect_spec import EffectSpecError, parse_effect_args, resolve_effects
@@ -98,7 +99,7 @@ def test_brake_lag_env_applies_the_lag_and_stops_later():
     env = gym.make("fricenv/Braking-v0", effects=LAG, road="wet")
     env.reset(seed=0)
     env.step(np.array([1.0], dtype=np.float32))
-    sim = env.unwrapped.sim.plant.sims[0]
+    sim = env.unwrapped.sim.plant.sim
     assert 0.0 < sim.applied[0] < 0.5 * env.unwrapped.config.t_max  # the applied torque trails the command
     lagged = _stop(env, 0, action=-0.2)["stopping_distance"]
     plain = _stop(gym.make("fricenv/Braking-v0", road="wet"), 0, action=-0.2)["stopping_distance"]
@@ -194,3 +195,22 @@ def test_cli_effect_parser_is_public_and_clear():
         parse_effect_args(["brake_lag"], ["x=1"])
     with pytest.raises(EffectSpecError, match="unknown effect 'lag'"):
         parse_effect_args(["lag"], [])
+
+
+def test_vector_cars_with_drawn_effects_equal_single_cars():
+    """The cars of a vector env are the elements of one effect simulator: each car's episode, with the effects its
+    own generator draws, equals the same episode of a one-car plant."""
+    ranges = {"brake_lag": {"tau": (0.001, 0.08)}, "brake_delay": {"delay": (0.0, 0.06)},
+              "drag": {"c0": (0.0, 150.0), "c2": (0.0, 0.6)}, "relaxation_length": {"sigma": (0.001, 0.6)}}
+    vec = BrakingVectorEnv(num_envs=3, effects_randomization=ranges, road="wet")
+    vec.reset(seed=[11, 12, 13])
+    singles = [gym.make("fricenv/Braking-v0", effects_randomization=ranges, road="wet") for _ in range(3)]
+    for env, seed in zip(singles, (11, 12, 13)):
+        env.reset(seed=seed)
+    actions = np.linspace(-1.0, 1.0, 40)
+    for a in actions:
+        obs, *_ = vec.step(np.full((3, 1), a, dtype=np.float32))
+        for i, env in enumerate(singles):
+            single, *_ = env.step(np.array([a], dtype=np.float32))
+            np.testing.assert_allclose(obs[i], single, rtol=1e-12, atol=1e-12)
+    assert len({tuple(map(str, e)) for e in vec.sim.plant.effects}) == 3  # three different draws
