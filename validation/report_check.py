@@ -200,10 +200,11 @@ def truth_shown(sim: dict, dg, cfg, noise: dict[str, float]) -> bool:
     calibrated nominal model by the diagnosis' paired test? Its residual is the measurement noise alone, and it fits
     no state per window, so the nominal model's per-window fits are counted against that model
     (:func:`fricenv.gap.quarter_car.stats.paired_z`). If the truth itself does not pass, the data cannot show the effect, and
-    `none` is all that a tool can say. A clean log only: its rows are the simulator's samples. Judged at the true
+    `none` is all that a tool can say. ``sim`` holds the truth on the log's rows (a real-like log's:
+    :func:`validation.independent_sim.real_truth_rows`). Judged at the true
     noise levels: the nominal model is re-scored there at its own roads (:mod:`validation.quarter_car_oracle`).
 
-    :param sim: :func:`validation.independent_sim.simulate_case` of the log's case.
+    :param sim: ``omega_true``, ``v_true``, ``a_x_true`` on the log's rows (``simulate_case`` of a clean log's case).
     :param dg: the log's diagnosis (its prepared data and nominal model).
     :param cfg: the diagnosis settings (``sig_z``).
     :param noise: the true noise std per logged channel.
@@ -214,7 +215,7 @@ def truth_shown(sim: dict, dg, cfg, noise: dict[str, float]) -> bool:
 
     d, nominal = nominal_with_noise(dg, noise)
     if d.n != len(sim["t"]):
-        raise ValueError(f"the log has {d.n} samples, its simulation {len(sim['t'])}: not a clean log")
+        raise ValueError(f"the log has {d.n} samples, its truth {len(sim['t'])}: not the same rows")
     r = trajectory_residuals({"omega": sim["omega_true"], "v": sim["v_true"], "a_x": sim["a_x_true"]}, d)
     wm = window_mse(r, window_counts(d))
     truth = CandidateFit(effect="truth", names=(), x=np.zeros(0), train_mse=float(np.mean(wm[~d.test])),

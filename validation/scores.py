@@ -5,8 +5,8 @@ writes:
 - the share of logs whose data show the answer: a nominal log always; a one-effect log when the true model passes
   the diagnosis' significance test (``detectable``, :func:`validation.quarter_car_oracle.true_model_oracle`); a
   log with several effects when every effect is shown (``shown``, :func:`validation.report_check.shown_effects`); an
-  out-of-library log when its noise-free truth beats the nominal model (``truth_shown``), and where no such oracle
-  ran (a rig export, the stand-in's brake fade) it counts as shown;
+  out-of-library log when its noise-free truth beats the nominal model (``truth_shown``; a real-like export's on
+  its resampled rows), and where no such oracle ran (the library stand-in's out-of-library logs) it counts as shown;
 - the right verdicts on those logs (several effects: every effect named);
 - the share of all logs with at least one named effect that is not in the log.
 
