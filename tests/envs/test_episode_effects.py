@@ -140,6 +140,9 @@ def test_report_path_effects_list_verdict_and_none(tmp_path):
     ({"effects_randomization": {"brake_lag": {"tau": (0.08, 0.02)}}}, "low <= high"),
     ({"effects_randomization": {"brake_lag": {"tau": (-0.1, 0.02)}}}, "tau must be"),
     ({"effects_randomization": {"drag": {"c0": (0.0, 50.0)}}}, "'c2' needs a range"),
+    ({"effects_randomization": {"one_of": {"brake_lag": {"tau": (0.02, 0.08)}}, "drag": {"c0": (0.0, 50.0)}}},
+     "'one_of' .* stands alone"),
+    ({"effects_randomization": {"one_of": {"brake_lag": {"tua": (0.02, 0.08)}}}}, "tua"),
 ])
 def test_bad_effects_are_rejected_naming_them(kwargs, match):
     with pytest.raises(EffectSpecError, match=match):
@@ -214,3 +217,17 @@ def test_vector_cars_with_drawn_effects_equal_single_cars():
             single, *_ = env.step(np.array([a], dtype=np.float32))
             np.testing.assert_allclose(obs[i], single, rtol=1e-12, atol=1e-12)
     assert len({tuple(map(str, e)) for e in vec.sim.plant.effects}) == 3  # three different draws
+
+
+def test_one_of_randomization_draws_one_effect_or_none_per_episode():
+    spec = {"one_of": {"brake_lag": {"tau": (0.02, 0.08)}, "brake_gain": {"gain": (0.8, 1.25)}}}
+    env = gym.make("fricenv/Braking-v0", effects_randomization=spec)
+    plant = env.unwrapped.sim.plant
+    counts = {(): 0, ("brake_lag",): 0, ("brake_gain",): 0}
+    for seed in range(300):
+        env.reset(seed=seed)
+        names = tuple(e.name for e in plant.effects[0])
+        counts[names] += 1  # a KeyError if both were drawn at once
+        if names == ("brake_lag",):
+            assert 0.02 <= plant.effects[0][0].tau <= 0.08
+    assert all(70 <= c <= 130 for c in counts.values()), counts  # 1/3 each: 100 +- 3 sd
