@@ -25,6 +25,10 @@ filter until the re-initialisation, which then took the speed from a wheel that 
      touches whenever it rolls freely. A re-initialisation takes the speed from it, ``v = max(v_ref, omega r)``
      (the filter's own speed after a run of rejections is not to be trusted), and the slip that makes eq. (7) hold
      at that speed (a locked wheel or a dropout to zero: slip 1): never the speed of a wheel that may be slipping.
+     The reference less its margin once more also bounds every posterior speed from below
+     (:meth:`WheelSpeedGuard.floor_speed`): at a locked wheel the measurement is flat in v, and a linearised update
+     can take the speed to 0, where the stiff model step diverges (the four-parameter filters, 20 ms brake delay,
+     dry ABS stop: 4482 m/s off without it).
 (M3) **Start.** The state after a reset is a guess (19 m/s a priori): a first sample that fails against it is no
      outlier; the filter starts from it as from a re-initialisation (``Verdict.START``) and keeps its own health.
 """
@@ -83,6 +87,16 @@ class WheelSpeedGuard:
         fallen = self.s.v_ref - A_REF * dt if np.isfinite(self.s.v_ref) else -np.inf
         wheel = -np.inf if omega is None else omega * r - REF_MARGIN_STD * self.noise_std * r
         self.s.v_ref = max(fallen, wheel)
+
+    def floor_speed(self, x: np.ndarray) -> np.ndarray:
+        """(M2) as a bound: a posterior speed below the reference speed less its margin once more is raised to that
+        floor. The reference is a lower bound of the car's speed while braking; a linearised update at a locked
+        wheel (``h = v (1 - slip) / r`` is flat in v at slip 1) can take the speed to 0."""
+        floor = self.s.v_ref - REF_MARGIN_STD * self.noise_std * self.model.p.r
+        if np.isfinite(floor) and x[0] < floor:
+            x = x.copy()
+            x[0] = floor
+        return x
 
     def reinit(self, x: np.ndarray, P: np.ndarray, P0: np.ndarray, omega: float) -> tuple[np.ndarray, np.ndarray]:
         """(M2): re-initialise (v, slip) from the reference speed and the wheel speed (before a reference: the
