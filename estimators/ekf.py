@@ -20,7 +20,7 @@ import numpy as np
 from estimators.base import Estimate, Estimator, EstimatorConfigError, Health, check_dt
 from estimators.mismatch import WheelSpeedGuard
 from estimators.outliers import DEFAULT_GATE, GateParams, Verdict, check_gate
-from estimators.quarter_car_model import BOUNDS, PARAM_NAMES, AugmentedModel
+from estimators.quarter_car_model import BOUNDS, EXTRA_NAMES, PARAM_NAMES, AugmentedModel
 from estimators.tuning import DEFAULT_EKF_TUNING, HORIZON, PAPER_TUNING, SLIP_PRIOR, V_PRIOR
 
 __all__ = ["DEFAULT_EKF_TUNING", "SLIP_PRIOR", "V_PRIOR", "ExtendedKalmanFilter", "ParameterInformation", "QuarterCarEKF",
@@ -195,7 +195,7 @@ class QuarterCarEKF(Estimator):
         except ValueError as exc:
             raise EstimatorConfigError(str(exc)) from None
         for label, given in (("P0_std", P0_std), ("Q_std", Q_std)):
-            bad = [k for k in (given or {}) if k not in ("v", "slip") + PARAM_NAMES]
+            bad = [k for k in (given or {}) if k not in ("v", "slip") + PARAM_NAMES + EXTRA_NAMES]
             if bad:
                 raise EstimatorConfigError(f"{label} keys {bad} unknown; valid: v, slip, {', '.join(PARAM_NAMES)}")
         p0 = {**DEFAULT_EKF_TUNING["P0_std"], **(P0_std or {})}
@@ -216,7 +216,7 @@ class QuarterCarEKF(Estimator):
         self.outlier_gate = check_gate(outlier_gate)
         self.guard = WheelSpeedGuard(self.model, self.outlier_gate, float(np.sqrt(R)))
         group = "theta-only" if len(self.model.estimated) <= 1 else "all"
-        self.information = ParameterInformation(slice(2, self.model.nx), HORIZON, PAPER_TUNING[group]["delta"])
+        self.information = ParameterInformation(slice(2, 2 + len(self.model.estimated)), HORIZON, PAPER_TUNING[group]["delta"])
         self.reset()
 
     def reset(self, v: float = V_PRIOR, slip: float = SLIP_PRIOR, params: dict | None = None) -> Estimate:
@@ -243,7 +243,7 @@ class QuarterCarEKF(Estimator):
         if verdict == Verdict.REJECT:
             return verdict, self.x, self.P, None, inflation
         x_post, P_post, innov = self.filter.update(self.x, self.P, y)
-        return verdict, self.guard.floor_speed(x_post), P_post, innov, inflation
+        return verdict, self.guard.bound_speed(x_post, float(self.x[0]), float(y[0])), P_post, innov, inflation
 
     def propagate(self, x_post: np.ndarray, P_post: np.ndarray, brake_torque: float) -> bool:
         """Time update from the posterior (clipped to the bounds) under the torque held to the next sample.
