@@ -109,7 +109,9 @@ class BrakingSim(PlantSubsteps):
         torque_scale = np.ones(len(self.layout))
         torque_scale[2] = c.t_max
         self._scale_t = self._scale * torque_scale
-        self._obs64 = np.zeros((self.n, len(self.layout)))
+        # the batched observation is scaled with one row per entry (contiguous rows over the cars), then transposed
+        self._obs_rows = np.zeros((len(self.layout), self.n))
+        self._scale_col, self._low_col, self._high_col = self._scale_t[:, None], self._low[:, None], self._high[:, None]
         self._obs_consts = tuple(zip(self._scale_t.tolist(), self._low.tolist(), self._high.tolist()))
         n = self.n
         z = lambda: np.zeros(n)
@@ -229,7 +231,7 @@ class BrakingSim(PlantSubsteps):
             self._inv_2g_mu = tuple(self._inv_2g_mu_ab[0].tolist())
         noise = self.noise.take(idx)
         w, v = self.omega[idx], self.v[idx]  # at rest in the ECU's view: no previous sample, no decelerations
-        for j, m in enumerate(measure(w, w, v, v, noise[:, 0], noise[:, 1], noise[:, 2], self._p.r, c.dt)):
+        for j, m in enumerate(measure(w, w, v, v, noise[0], noise[1], noise[2], self._p.r, c.dt)):
             self.meas[idx, j] = m
 
     def _make_plant(self, plant: BrakingPlant | None) -> BrakingPlant:
@@ -314,7 +316,7 @@ class BrakingSim(PlantSubsteps):
         self.lock_seen |= self.locked
         noise = self.noise.take()
         self.meas[:, 0], self.meas[:, 1], self.meas[:, 2] = measure(
-            w, w_start, v, v_start, noise[:, 0], noise[:, 1], noise[:, 2], p.r, c.dt)
+            w, w_start, v, v_start, noise[0], noise[1], noise[2], p.r, c.dt)
         self.reward = step_reward(energy, travel, self.limit, self.locked, c.lock_penalty)
         self.terminated = self.stopped.copy()
         self.truncated = (self.t >= self._max_steps) & ~self.terminated
@@ -380,37 +382,30 @@ class BrakingSim(PlantSubsteps):
     # ------------------------------------------------------------------ observation
     def observe(self) -> np.ndarray:
         """Scaled, clipped float32 observation of every car, shape (n, obs_dim) (internal buffer)."""
-        c = self.config
         if self.scalar:
             m0, m1, m2 = self.meas[0].tolist()
             return self._observe_scalar(m0, m1, self.torque.item(0), m2, self.v.item(0), self.slip.item(0),
                                         self.mu.item(0))
-        buf = self._obs64
-        buf[:, 0:2] = self.meas[:, 0:2]
-        buf[:, 2] = self.torque
-        buf[:, 3] = self.meas[:, 2]
-        if c.observation == "oracle":
-            buf[:, 4], buf[:, 5], buf[:, 6] = self.v, self.slip, self.mu
-        buf /= self._scale_t  # one pass over (n, obs_dim): scale (torque by t_max), clip, cast to float32
-        np.maximum(buf, self._low, out=buf)
-        np.minimum(buf, self._high, out=buf)
-        self._obs[...] = buf
+        self._obs[...] = self._scaled_rows(self._obs_rows, self.meas, self.torque, self.v, self.slip, self.mu).T
         return self._obs
 
     def _observe_rows(self, idx: np.ndarray) -> np.ndarray:
         """:meth:`observe` for the cars ``idx`` only (the other rows are current already)."""
-        meas = self.meas[idx]
-        buf = np.empty((len(idx), len(self.layout)))
-        buf[:, 0:2] = meas[:, 0:2]
-        buf[:, 2] = self.torque[idx]
-        buf[:, 3] = meas[:, 2]
-        if self.config.observation == "oracle":
-            buf[:, 4], buf[:, 5], buf[:, 6] = self.v[idx], self.slip[idx], self.mu[idx]
-        buf /= self._scale_t
-        np.maximum(buf, self._low, out=buf)
-        np.minimum(buf, self._high, out=buf)
-        self._obs[idx] = buf
+        buf = np.empty((len(self.layout), len(idx)))
+        self._obs[idx] = self._scaled_rows(buf, self.meas[idx], self.torque[idx], self.v[idx], self.slip[idx],
+                                           self.mu[idx]).T
         return self._obs
+
+    def _scaled_rows(self, buf: np.ndarray, meas, torque, v, slip, mu) -> np.ndarray:
+        """``buf`` (obs_dim, k) filled with the observation entries of k cars, one row per entry, scaled (the torque
+        by t_max) and clipped."""
+        buf[0], buf[1], buf[2], buf[3] = meas[:, 0], meas[:, 1], torque, meas[:, 2]
+        if self.config.observation == "oracle":
+            buf[4], buf[5], buf[6] = v, slip, mu
+        buf /= self._scale_col
+        np.maximum(buf, self._low_col, out=buf)
+        np.minimum(buf, self._high_col, out=buf)
+        return buf
 
     @property
     def ratio(self) -> np.ndarray:

@@ -115,17 +115,20 @@ class NoiseBlocks:
         self.pos[i] = 0
 
     def take(self, idx: np.ndarray | None = None) -> np.ndarray:
-        """The next scaled noise row of the cars ``idx`` (all if None), (len, N_NOISE); refills exhausted blocks."""
+        """The next scaled noise rows of the cars ``idx`` (all if None), one row per channel: (N_NOISE, len);
+        refills exhausted blocks."""
         if idx is None:  # every car: gather one row per car from the flat (n * NOISE_BLOCK, N_NOISE) view
             pos = self.pos
-            out = np.take(self._rows, self._row_base + pos, axis=0)
+            raw = np.take(self._rows, self._row_base + pos, axis=0)
             pos += 1
         else:
             pos = self.pos[idx]
-            out = self.blocks[idx, pos]
+            raw = self.blocks[idx, pos]
             pos += 1
             self.pos[idx] = pos
-        out *= self.std
+        out = np.empty((N_NOISE, len(raw)))
+        for j, sd in enumerate(self.sd):  # one contiguous row per channel
+            np.multiply(raw[:, j], sd, out=out[j])
         if pos.max() >= NOISE_BLOCK:
             for i in np.flatnonzero(self.pos >= NOISE_BLOCK):  # once every NOISE_BLOCK steps per car
                 self.refill(i)
