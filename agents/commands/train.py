@@ -11,7 +11,8 @@ Writes ``model.zip``, ``vecnormalize.pkl``, ``config.yml``, ``env_kwargs.yml``, 
 says so when it is. ``--effects-randomization grid`` trains a braking policy on plants with effects: every
 episode draws each effect of the effect grid but the friction change (which the road mix already draws) over a
 range from the nominal plant through both grid sizes (brake lag 0.001-0.08 s, delay 0-0.06 s, gain 0.80-1.25, rolling
-radius 0.97-1.04 r, relaxation length 0.001-0.6 m, drag c0 0-150 N and c2 0-0.6 N s^2/m^2).
+radius 0.97-1.04 r, relaxation length 0.001-0.6 m, drag c0 0-150 N and c2 0-0.6 N s^2/m^2);
+``--effects-randomization grid-one`` draws one of those effects or none per episode, each with equal probability.
 """
 
 from __future__ import annotations
@@ -40,9 +41,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--hyperparams", metavar="PATH", default=None,
                         help="hyperparameter JSON file (algorithm -> config fields); default: the committed "
                              "agents/hyperparams/braking.json for braking")
-    parser.add_argument("--effects-randomization", choices=("none", "grid"), default="none",
-                        help="braking: draw the plant's effects per episode over the effect grid's ranges "
-                             "(default %(default)s)")
+    parser.add_argument("--effects-randomization", choices=("none", "grid", "grid-one"), default="none",
+                        help="braking: draw the plant's effects per episode over the effect grid's ranges: every "
+                             "effect at once (grid), or one of them or none (grid-one, the grid's own "
+                             "distribution) (default %(default)s)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     parser.add_argument("--json", metavar="PATH", help="write the run summary (wall time, steps/s) as JSON")
 
@@ -60,12 +62,15 @@ def run(args) -> int:
     if args.steps < 1:
         raise InvalidInputError("--steps must be >= 1")
     env_kwargs = None
-    if args.effects_randomization == "grid":
+    if args.effects_randomization != "none":
         if args.env != "braking":
-            raise InvalidInputError("--effects-randomization grid is for --env braking")
+            raise InvalidInputError(f"--effects-randomization {args.effects_randomization} is for --env braking")
         from fricenv.effects.grid import grid_randomization
+        from fricenv.envs.effect_spec import ONE_OF
 
-        env_kwargs = {"effects_randomization": grid_randomization()}
+        ranges = grid_randomization()
+        env_kwargs = {"effects_randomization": {ONE_OF: ranges} if args.effects_randomization == "grid-one"
+                      else ranges}
     with user_input("--hyperparams"):
         config = None
         if args.hyperparams:

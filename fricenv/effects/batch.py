@@ -96,6 +96,16 @@ class ModelBatch:
                         updates[q.batch_field] = values[q.name]
         return replace(self, extra=extra, **updates)
 
+    def with_element(self, i: int, element: ModelBatch) -> ModelBatch:
+        """A copy whose element ``i`` is the one element of ``element`` (same plug-in parameters)."""
+        def put(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+            a = a.copy()
+            a[i] = b[0]
+            return a
+
+        return ModelBatch(extra={k: put(v, element.extra[k]) for k, v in self.extra.items()},
+                          **{f: put(getattr(self, f), getattr(element, f)) for f in _arrays()})
+
     @classmethod
     def stack(cls, batches: Sequence[ModelBatch]) -> ModelBatch:
         """Concatenate batches along the leading dimension."""

@@ -168,6 +168,12 @@ class EffectSimulator:
             self._cmd = commands[None, :] if commands.ndim == 1 else commands
             self._record = False
         self._rows = np.arange(n) if self._cmd.shape[0] == n else np.zeros(n, dtype=int)
+        self._derive()
+        self.reset(np.zeros(n), np.zeros(n))
+
+    def _derive(self) -> None:
+        """The per-element constants and the switches that follow from :attr:`batch`."""
+        batch, p, n = self.batch, self.p, self.n
         self._relax = batch.sigma > 0.0
         self._any_relax = bool(np.any(self._relax))
         self._std = ~self._relax
@@ -187,7 +193,36 @@ class EffectSimulator:
         self._torque_hooks = [e for e in plugins if e.torque is not None]
         self._theta_hooks = [e for e in plugins if e.theta is not None]
         self._init_actuator()
-        self.reset(np.zeros(n), np.zeros(n))
+
+    def replace_element(self, i: int, element: ModelBatch) -> None:
+        """Give element ``i`` the model of the one-element batch ``element`` and start it afresh: state zero, sample
+        index 0, no recorded command (a car of a vector env beginning its next episode with new effects).
+
+        :param i: element index.
+        :param element: a :class:`ModelBatch` of length 1 (e.g. :meth:`ModelBatch.from_effects`).
+        """
+        if len(element) != 1:
+            raise ValueError(f"replace_element takes a one-element ModelBatch, got {len(element)} elements")
+        if not self._record:
+            raise ValueError("this simulator replays a preset command log; its elements cannot be replaced")
+        self.batch = self.batch.with_element(i, element)
+        self._derive()
+        self._cmd[i] = 0.0
+        self.reset_elements(np.array([i]), 0.0, 0.0)
+
+    def reset_elements(self, idx: np.ndarray, v, omega) -> None:
+        """:meth:`reset` of the elements ``idx`` only (sample index 0, lag state 0, transient slip of the state).
+
+        :param idx: element indices; :param v: vehicle speed [m/s]; :param omega: wheel speed [rad/s].
+        """
+        idx = np.asarray(idx, dtype=int)
+        v = np.broadcast_to(np.asarray(v, dtype=float), idx.shape)
+        omega = np.broadcast_to(np.asarray(omega, dtype=float), idx.shape)
+        self.v[idx], self.omega[idx], self.k[idx] = v, omega, 0
+        self.Ta[idx] = 0.0 if self._record else self._cmd[self._rows[idx], 0]  # settled on the first command
+        self.lam_t[idx] = longitudinal_slip(v, omega, self.batch.r_eff[idx])
+        for state in (self.energy, self.pitch, self.pitch_rate, self.applied):
+            state[idx] = 0.0
 
     def _init_actuator(self) -> None:
         """Per-element constants of the actuator chain over one substep (delay and lag are fixed per element)."""

@@ -1,11 +1,11 @@
 """The quarter car with unmodelled effects as a :class:`~fricenv.plants.braking_plant.BrakingPlant`: the corrected
 simulator under the braking episode (``gymnasium.make("fricenv/Braking-v0", effects=...)``).
 
-Each car is one :class:`fricenv.effects.quarter_car.EffectSimulator` (its public API: ``ModelBatch.from_effects``,
-``reset``, ``step``, ``tire_force``, ``accel``) run with a sample time of one physics substep and one substep per
-sample, so the episode sees every substep (the stop and a friction change are located inside it, as on the nominal
+The cars are the elements of one :class:`fricenv.effects.quarter_car.EffectSimulator` (its public API:
+``ModelBatch.from_effects``, ``replace_element``, ``reset_elements``, ``step``, ``tire_force``, ``accel``) run with
+a sample time of one physics substep and one substep per sample, so the episode sees every substep (the stop and a friction change are located inside it, as on the nominal
 plant). The actuator effects are exact over a zero-order-held substep (the lag's exact solution, the delay's exact
-average), so this equals the effect simulator's own 10 ms samples of 5 substeps. A car's simulator is rebuilt at
+average), so this equals the effect simulator's own 10 ms samples of 5 substeps. A car's element is replaced at
 each of its episodes, with the episode's effects (fixed, or drawn from the car's generator by an
 :class:`~fricenv.envs.effect_spec.EffectRandomization`).
 
@@ -31,6 +31,10 @@ class EffectPlant:
     """``n`` quarter cars with effects (see the module docstring); members of
     :class:`~fricenv.plants.braking_plant.BrakingPlant` on arrays of shape (n,).
 
+    The cars are the elements of one :class:`~fricenv.effects.quarter_car.EffectSimulator`; a car beginning an
+    episode gets its new effects by :meth:`~fricenv.effects.quarter_car.EffectSimulator.replace_element`, so every
+    substep is one numpy call over all cars.
+
     :param n: number of cars.
     :param h: physics substep [s].
     :param p: nominal quarter-car parameters.
@@ -44,41 +48,35 @@ class EffectPlant:
         self.n, self.h, self.p = int(n), float(h), p
         self.fixed, self.randomization = tuple(effects), randomization
         self.effects: list[tuple] = [self.fixed] * self.n  # the effects of each car's current episode
-        self.sims: list[EffectSimulator | None] = [None] * self.n
-        self._samples = int(max_substeps) + 2
         self.road = np.tile(DRY.as_array(), (self.n, 1))
-        self.r_eff = np.full(self.n, p.r)
+        element = ModelBatch.from_effects(self.road[0], self.fixed, p)
+        self.sim = EffectSimulator(ModelBatch.stack([element] * self.n), self.h, int(max_substeps) + 2, p, 1, t0=0.0)
+        self._started = np.zeros(self.n, dtype=bool)
+        self.r_eff = self.sim.batch.r_eff.copy()
         self.v, self.omega, self.Tb = np.zeros(self.n), np.zeros(self.n), np.zeros(self.n)
 
     def new_episode(self, i: int, rng: np.random.Generator) -> None:
-        """Car ``i``'s effects for its next episode (drawn from ``rng`` if randomised) and a fresh simulator."""
+        """Car ``i``'s effects for its next episode (drawn from ``rng`` if randomised), its simulator state afresh."""
         effects = self.randomization.draw(rng) if self.randomization is not None else self.fixed
-        batch = ModelBatch.from_effects(self.road[i], effects, self.p)
         self.effects[i] = effects
-        self.sims[i] = EffectSimulator(batch, self.h, self._samples, self.p, 1, t0=0.0)
-        self.r_eff[i] = float(batch.r_eff[0])
-
-    def _sim(self, i: int) -> EffectSimulator:
-        sim = self.sims[i]
-        if sim is None:
-            raise RuntimeError("EffectPlant: reset the car (new_episode) before stepping it")
-        return sim
+        self.sim.replace_element(i, ModelBatch.from_effects(self.road[i], effects, self.p))
+        self.r_eff[i] = float(self.sim.batch.r_eff[i])
+        self._started[i] = True
 
     def reset(self, idx, v, omega) -> None:
         """Set the speeds of cars ``idx`` (lag state 0, transient slip at the slip of the state)."""
         idx = np.atleast_1d(np.arange(self.n)[idx])
+        if not np.all(self._started[idx]):
+            raise RuntimeError("EffectPlant: reset the car (new_episode) before stepping it")
         v, omega = np.broadcast_to(v, idx.shape), np.broadcast_to(omega, idx.shape)
-        for k, i in enumerate(idx):
-            self._sim(i).reset(np.array([v[k]]), np.array([omega[k]]))
+        self.sim.reset_elements(idx, v, omega)
         self.v, self.omega = self.v.copy(), self.omega.copy()
         self.v[idx], self.omega[idx] = v, omega
 
     def set_road(self, idx, road) -> None:
         """Road rows (B, C, E, theta) of cars ``idx`` (a friction change at a distance switches it)."""
         self.road[idx] = road
-        for i in np.atleast_1d(np.arange(self.n)[idx]):
-            if self.sims[i] is not None:
-                self.sims[i].batch.road[0] = self.road[i]
+        self.sim.batch.road[idx] = self.road[idx]
 
     def set_torque(self, Tb) -> None:
         """Commanded brake torques [N m]; the effects act on them (lag, delay, gain)."""
@@ -86,26 +84,25 @@ class EffectPlant:
 
     def substep(self) -> tuple[np.ndarray, np.ndarray]:
         """One substep of every car; new state arrays."""
-        v, w = np.empty(self.n), np.empty(self.n)
-        for i in range(self.n):
-            vi, wi = self._sim(i).step(self.Tb[i:i + 1])
-            v[i], w[i] = vi[0], wi[0]
-        self.v, self.omega = v, w
-        return v, w
+        if not np.all(self._started):
+            raise RuntimeError("EffectPlant: reset the car (new_episode) before stepping it")
+        v, w = self.sim.step(self.Tb)
+        self.v, self.omega = v.copy(), w.copy()
+        return self.v, self.omega
 
     def slip(self) -> np.ndarray:
         return longitudinal_slip(self.v, self.omega, self.r_eff)
 
     def tire_force(self) -> np.ndarray:
         """F_x [N] of every car (through the transient slip with ``relaxation_length``, the changed theta...)."""
-        return np.array([self._sim(i).tire_force()[0] for i in range(self.n)])
+        return self.sim.tire_force()
 
     def friction(self, slip: np.ndarray | None = None) -> np.ndarray:
         """F_x / F_z (``slip`` is not needed: with ``relaxation_length`` the force follows the transient slip)."""
         return self.tire_force() / self.p.Fz
 
     def accel(self) -> np.ndarray:
-        return np.array([self._sim(i).accel()[0] for i in range(self.n)])
+        return self.sim.accel()
 
 
 def effect_plant_or_none(n: int, config, effects=None, effects_randomization=None) -> EffectPlant | None:

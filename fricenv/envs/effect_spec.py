@@ -10,7 +10,9 @@
 ``effects_randomization``: ``{NAME: {PARAM: (low, high) or value}}``, parameter ranges drawn uniformly per episode
 from the env's ``np_random``. A parameter without a range keeps its value from ``effects``; an effect named in both
 is replaced by its drawn version. Draws are made in the mapping's order, parameters in their registry order, and a
-degenerate range (``low == high``) draws nothing.
+degenerate range (``low == high``) draws nothing. ``{"one_of": {NAME: {PARAM: (low, high)}, ...}}`` draws, per
+episode, one of the named effects or none, each with probability ``1 / (k + 1)`` for ``k`` effects (the effect
+grid's distribution: one effect at a time, the nominal plant included), then that effect's parameters.
 
 Unknown effect or parameter names, missing parameters and malformed entries raise :class:`EffectSpecError` (a
 ``ValueError``) naming them and the valid ones.
@@ -33,6 +35,7 @@ from fricenv.errors import InvalidInputError
 
 __all__ = [
     "NO_EFFECT_VERDICTS",
+    "ONE_OF",
     "EffectRandomization",
     "EffectSpecError",
     "describe_effects",
@@ -43,6 +46,7 @@ __all__ = [
 ]
 
 NO_EFFECT_VERDICTS = ("none", "unexplained")
+ONE_OF = "one_of"  # the key of an effects_randomization that draws one effect per episode
 
 
 class EffectSpecError(InvalidInputError):
@@ -161,11 +165,17 @@ class EffectRandomization:
 
     fixed: tuple  # effects drawn nothing for
     ranges: tuple[tuple[str, tuple[tuple[str, float, float], ...]], ...]  # (effect, ((param, low, high), ...))
+    one_of: bool = False  # per episode one of the ranged effects or none, instead of all of them
 
     def draw(self, rng: np.random.Generator) -> tuple:
-        """One episode's effects: the fixed ones, then each randomised effect with its parameters drawn."""
+        """One episode's effects: the fixed ones, then each randomised effect (``one_of``: one of them or none) with
+        its parameters drawn."""
         out = list(self.fixed)
-        for name, params in self.ranges:
+        ranges = self.ranges
+        if self.one_of:
+            k = int(rng.integers(len(ranges) + 1))
+            ranges = ranges[k:k + 1]  # k == len(ranges): the nominal plant
+        for name, params in ranges:
             values = {p: lo if lo == hi else float(rng.uniform(lo, hi)) for p, lo, hi in params}
             out.append(make_effect(name, **values))
         return tuple(out)
@@ -179,6 +189,12 @@ def parse_randomization(spec: Mapping[str, Any] | None, effects: Sequence = ()) 
     if not isinstance(spec, Mapping):
         raise EffectSpecError(f"effects_randomization must be a mapping {{effect: {{param: (low, high)}}}}, got "
                               f"{type(spec).__name__}")
+    one_of = ONE_OF in spec
+    if one_of:
+        if len(spec) != 1 or not isinstance(spec[ONE_OF], Mapping) or not spec[ONE_OF]:
+            raise EffectSpecError(f"effects_randomization: {ONE_OF!r} takes a non-empty mapping "
+                                  f"{{effect: {{param: (low, high)}}}} and stands alone, got {dict(spec)!r}")
+        spec = spec[ONE_OF]
     base = {e.name: effect_params(e) for e in effects}
     ranges = []
     for name, params in spec.items():
@@ -199,7 +215,7 @@ def parse_randomization(spec: Mapping[str, Any] | None, effects: Sequence = ()) 
             _make(name, {r[0]: r[end] for r in rows}, where)
         ranges.append((name, tuple(rows)))
     fixed = tuple(e for e in effects if e.name not in spec)
-    return EffectRandomization(fixed=fixed, ranges=tuple(ranges))
+    return EffectRandomization(fixed=fixed, ranges=tuple(ranges), one_of=one_of)
 
 
 def parse_effect_args(names: Sequence[str], params: Sequence[str]) -> list:

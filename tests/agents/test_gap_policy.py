@@ -45,7 +45,7 @@ def test_closed_loop_env_is_braking_v0_with_effects():
     assert obs[0] * 100.0 == pytest.approx(20.0 / 0.345, abs=3.0)  # measured wheel speed, free rolling
     obs, *_ = env.step(np.array([0.0], dtype=np.float32))  # action 0 = half of t_max
     assert obs[2] == pytest.approx(0.5)
-    applied = env.unwrapped.sim.plant.sims[0].applied[0]
+    applied = env.unwrapped.sim.plant.sim.applied[0]
     assert 0.0 < applied < 0.5 * env.unwrapped.config.t_max  # the lag: the applied torque trails the command
     with pytest.raises(ValueError, match="finite"):
         env.step(np.array([np.nan], dtype=np.float32))

@@ -11,6 +11,7 @@ import pytest
 import fricenv  # noqa: F401  (registers the envs)
 from fricenv.effects.quarter_car import make_effect
 from fricenv.envs.braking_sim import BrakingSim
+from fricenv.envs.braking_vector import BrakingVectorEnv
 from fricenv.envs.config import BrakingConfig
 from fricenv.envs.effect_plant import EffectPlant
 from fricenv.envs.effect_spec import EffectSpecError, parse_effect_args, resolve_effects
@@ -98,7 +99,7 @@ def test_brake_lag_env_applies_the_lag_and_stops_later():
     env = gym.make("fricenv/Braking-v0", effects=LAG, road="wet")
     env.reset(seed=0)
     env.step(np.array([1.0], dtype=np.float32))
-    sim = env.unwrapped.sim.plant.sims[0]
+    sim = env.unwrapped.sim.plant.sim
     assert 0.0 < sim.applied[0] < 0.5 * env.unwrapped.config.t_max  # the applied torque trails the command
     lagged = _stop(env, 0, action=-0.2)["stopping_distance"]
     plain = _stop(gym.make("fricenv/Braking-v0", road="wet"), 0, action=-0.2)["stopping_distance"]
@@ -139,6 +140,9 @@ def test_report_path_effects_list_verdict_and_none(tmp_path):
     ({"effects_randomization": {"brake_lag": {"tau": (0.08, 0.02)}}}, "low <= high"),
     ({"effects_randomization": {"brake_lag": {"tau": (-0.1, 0.02)}}}, "tau must be"),
     ({"effects_randomization": {"drag": {"c0": (0.0, 50.0)}}}, "'c2' needs a range"),
+    ({"effects_randomization": {"one_of": {"brake_lag": {"tau": (0.02, 0.08)}}, "drag": {"c0": (0.0, 50.0)}}},
+     "'one_of' .* stands alone"),
+    ({"effects_randomization": {"one_of": {"brake_lag": {"tua": (0.02, 0.08)}}}}, "tua"),
 ])
 def test_bad_effects_are_rejected_naming_them(kwargs, match):
     with pytest.raises(EffectSpecError, match=match):
@@ -194,3 +198,36 @@ def test_cli_effect_parser_is_public_and_clear():
         parse_effect_args(["brake_lag"], ["x=1"])
     with pytest.raises(EffectSpecError, match="unknown effect 'lag'"):
         parse_effect_args(["lag"], [])
+
+
+def test_vector_cars_with_drawn_effects_equal_single_cars():
+    """The cars of a vector env are the elements of one effect simulator: each car's episode, with the effects its
+    own generator draws, equals the same episode of a one-car plant."""
+    ranges = {"brake_lag": {"tau": (0.001, 0.08)}, "brake_delay": {"delay": (0.0, 0.06)},
+              "drag": {"c0": (0.0, 150.0), "c2": (0.0, 0.6)}, "relaxation_length": {"sigma": (0.001, 0.6)}}
+    vec = BrakingVectorEnv(num_envs=3, effects_randomization=ranges, road="wet")
+    vec.reset(seed=[11, 12, 13])
+    singles = [gym.make("fricenv/Braking-v0", effects_randomization=ranges, road="wet") for _ in range(3)]
+    for env, seed in zip(singles, (11, 12, 13)):
+        env.reset(seed=seed)
+    actions = np.linspace(-1.0, 1.0, 40)
+    for a in actions:
+        obs, *_ = vec.step(np.full((3, 1), a, dtype=np.float32))
+        for i, env in enumerate(singles):
+            single, *_ = env.step(np.array([a], dtype=np.float32))
+            np.testing.assert_allclose(obs[i], single, rtol=1e-12, atol=1e-12)
+    assert len({tuple(map(str, e)) for e in vec.sim.plant.effects}) == 3  # three different draws
+
+
+def test_one_of_randomization_draws_one_effect_or_none_per_episode():
+    spec = {"one_of": {"brake_lag": {"tau": (0.02, 0.08)}, "brake_gain": {"gain": (0.8, 1.25)}}}
+    env = gym.make("fricenv/Braking-v0", effects_randomization=spec)
+    plant = env.unwrapped.sim.plant
+    counts = {(): 0, ("brake_lag",): 0, ("brake_gain",): 0}
+    for seed in range(300):
+        env.reset(seed=seed)
+        names = tuple(e.name for e in plant.effects[0])
+        counts[names] += 1  # a KeyError if both were drawn at once
+        if names == ("brake_lag",):
+            assert 0.02 <= plant.effects[0][0].tau <= 0.08
+    assert all(70 <= c <= 130 for c in counts.values()), counts  # 1/3 each: 100 +- 3 sd
