@@ -264,9 +264,9 @@ def cars_substeps_compiled(v, w, x, Tb, roads, change, stopped, inv_2g_mu, subst
             out[2, i], out[3, i], out[4, i], out[5, i], out[6, i], out[7, i], out[8, i] = _substep_accounting(
                 sub, v[i], v_new[i], out[2, i], out[3, i], out[4, i], out[5, i] != 0.0, out[6, i], out[7, i], passed,
                 change[i], h, v_stop, inv_2g_mu[i, 0], inv_2g_mu[i, 1])
-            if out[8, i] != 0.0 and not passed:
-                B[i], C[i], E[i], theta[i], mu1[i] = roads[i, 1, 0], roads[i, 1, 1], roads[i, 1, 2], roads[i, 1, 3], \
-                    roads[i, 1, 4]
+            if out[8, i] != 0.0 and not passed:  # the road after the change point from the next substep on
+                B[i], C[i], E[i] = roads[i, 1, 0], roads[i, 1, 1], roads[i, 1, 2]
+                theta[i], mu1[i] = roads[i, 1, 3], roads[i, 1, 4]
         v, w = v_new, w_new
     lam = _slip_cars(v, w, r)
     out[0], out[1], out[9], out[10] = v, w, lam, _mf_cars(lam, B, C, E, theta)
