@@ -28,3 +28,11 @@ def test_payload_score_rows():
     s = score_rows(rows)
     assert s["shown_share"] == 2 / 3 and s["right_on_shown"] == 1.0 and s["wrong_named_share"] == 1 / 3
     assert s["nominal_none"] == (1, 1) and s["delay_within_tol"] == (1, 1)
+
+
+def test_an_effect_log_without_the_oracle_is_refused():
+    """A `fricenv gap validate` result has no oracle: counting its effect logs as shown would flatter the suite."""
+    import pytest
+
+    with pytest.raises(ValueError, match="stand_in_suite"):
+        quarter_car_numbers([{"category": "drag", "verdict": "drag", "right": True}])

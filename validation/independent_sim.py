@@ -41,6 +41,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from validation import report_check
+from validation.quarter_car_oracle import true_model_oracle
 from validation.independent_model import (  # the physics; re-exported: tests and worker processes use these names
     AX_NOISE_RANGE,
     CATEGORIES,
@@ -83,9 +84,10 @@ from validation.independent_model import (  # the physics; re-exported: tests an
 )
 from validation.measure_cli import measurement_parser, pool_map
 from validation.real_artifacts import QuarterCarArtifacts, real_like_quarter_car, write_export
+from validation.true_noise import real_like_noise, white_noise
 
 __all__ = ["CATEGORIES", "DRIVERS", "EFFECT_PARAMS", "H_STEP", "LIBRARY_EFFECTS", "OUT_OF_LIBRARY_EFFECTS", "ROADS",
-           "V_STOP", "Effect", "G", "IndependentCase", "Road", "Vehicle", "draw_independent_case", "initial_state",
+           "V_STOP", "Effect", "G", "IndependentCase", "Road", "Vehicle", "case_noise", "draw_independent_case", "initial_state",
            "integrate", "make_model", "measure", "simulate_case", "stopping_distance", "write_independent_log",
            "write_real_log"]
 
@@ -237,6 +239,16 @@ def simulate_case(case: IndependentCase, veh: Vehicle = VEHICLE) -> dict:
     return {k: np.asarray(v, dtype=float) for k, v in rec.items()}
 
 
+def case_noise(case: IndependentCase) -> dict[str, float]:
+    """The noise levels the case's log carries, per logged channel (:mod:`validation.true_noise`): the white noise
+    the simulator draws, or with ``case.real`` that noise through the export's chain."""
+    stds = {"omega": math.sqrt(OMEGA_NOISE_VAR), "v": case.v_std, "a_x": case.a_x_std}
+    channels = ("omega",) + tuple(case.columns)
+    if case.real is None:
+        return white_noise(stds, channels)
+    return real_like_noise(QuarterCarArtifacts(**case.real), stds, case.columns, DT)
+
+
 def write_csv(path: str | os.PathLike, cols: dict, columns: Sequence[str]) -> None:
     """Write the contract log: a neutral comment, header ``t,T_b,omega[,v][,a_x]``, rows (atomic rename)."""
     names = ["t", "T_b", "omega"] + [c for c in ("v", "a_x") if c in columns]
@@ -270,6 +282,15 @@ def real_export(case: IndependentCase):
              "v": sim["v"] if "v" in case.columns else None, "a_x": sim["a_x"] if "a_x" in case.columns else None}
     return real_like_quarter_car(clean, np.random.default_rng(case.seed + 1), spec,
                                  noise_rng=np.random.default_rng(case.seed + 2))
+
+
+def real_truth_rows(case: IndependentCase, n: int, dt: float) -> dict:
+    """The simulator's noise-free truth (``omega_true``, ``v_true``, ``a_x_true``, unfiltered: the physical states
+    the diagnosis' model predicts, against which it realigns a filtered channel) on the ``n`` rows of step ``dt`` of
+    the case's real-like log after resampling (its first row is the export's first instant, the simulation's 0)."""
+    sim = simulate_case(case)
+    t = np.arange(n) * dt
+    return {"t": t, **{k: np.interp(t, sim["t"], sim[k]) for k in ("omega_true", "v_true", "a_x_true")}}
 
 
 def write_real_log(stem: str | os.PathLike, case: IndependentCase) -> tuple[str, str, dict]:
@@ -347,13 +368,18 @@ def diagnose_case(case: IndependentCase) -> dict:
            "tests": {e: {"z_paired": float(t["z_paired"]), "z_without_effect": t.get("z_without_effect"),
                          "robust_gap": float(t["robust_gap"]), "significant": bool(t["significant"])}
                      for e, t in dg.where.get("tests", {}).items()},
-           "sensors": report_check.sensor_flags(dg), "periodic": dg.where.get("periodic")}
+           "sensors": report_check.sensor_flags(dg), "periodic": dg.where.get("periodic"),
+           "guard": dg.where.get("false_discovery_guard"), "true_noise": case_noise(case)}
     out["right_or_untestable"] = right_or_untestable(out)
     _selection_figures(out, case, dg)
     if case.category in LIBRARY_EFFECTS:
         _effect_figures(out, case, dg)
-    elif case.category == OUT and case.real is None:  # the noise-free truth, on the log's own samples
-        out["truth_shown"] = report_check.truth_shown(simulate_case(case), dg, DiagnoseConfig(jobs=1))
+    elif case.category == OUT:  # the noise-free truth, on the log's own samples
+        truth_rows = simulate_case(case) if case.real is None else real_truth_rows(case, dg.data.n, dg.data.dt)
+        try:
+            out["truth_shown"] = report_check.truth_shown(truth_rows, dg, DiagnoseConfig(jobs=1), out["true_noise"])
+        except ValueError as exc:  # the export's rows and the log's differ: no oracle, the log counts as shown
+            out["truth_error"] = str(exc)
     return out
 
 
@@ -387,17 +413,18 @@ def _effect_figures(out: dict, case: IndependentCase, dg) -> None:
     """Gap ratio, detectability (on a log with several effects, also which of them the data show: ``shown``) and
     (if right) parameter error of an effect log's result row."""
     from fricenv.gap.quarter_car.diagnose import DiagnoseConfig
-    from fricenv.gap.quarter_car.validate import main_error, true_model_oracle
+    from fricenv.gap.quarter_car.validate import main_error
 
     truth = out["truth"]
     out["ratio"] = out["gap_after"] / out["gap_before"] if out["gap_before"] > 0 else float("nan")
-    # the tool's own model class with the true values: the oracle of "could any tool see it in these data"
+    # the tool's own model class with the true values and the true noise: "could any tool see it in these data"
     cfg = DiagnoseConfig(jobs=1)
-    out["detectable"], out["true_explains"] = true_model_oracle(case.category, truth["params"], truth["road"], dg, cfg)
+    out.update(true_model_oracle({case.category: truth["params"]}, truth["road"], dg, cfg, out["true_noise"]))
     if len(case.effects) < 2:
         out["size_ratio"] = report_check.size_ratio(case.category, truth, dg)
     else:
-        shown = report_check.shown_effects({e.name: dict(e.params) for e in case.effects}, truth["road"], dg, cfg)
+        shown = report_check.shown_effects({e.name: dict(e.params) for e in case.effects}, truth["road"], dg, cfg,
+                                           out["true_noise"])
         out["truth_effects"], out["shown"] = [e.name for e in case.effects], [e for e, yes in shown.items() if yes]
     if out["right"]:
         out["param_error"], out["param_errors"] = main_error(case.category, truth["params"], out["params"])

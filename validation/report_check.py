@@ -139,27 +139,29 @@ def miss_kinds(rows: list[dict]) -> dict:
     return {k: kinds.count(k) for k in MISS_KINDS}
 
 
-def shown_effects(effects: dict[str, dict], road: dict, dg, cfg) -> dict[str, bool]:
+def shown_effects(effects: dict[str, dict], road: dict, dg, cfg, noise: dict[str, float]) -> dict[str, bool]:
     """The oracle of a log with several effects: which of them its data show. For each effect, the true model (every
     effect at its true parameters, the true road) against the best the others can do without it (the road and the
     other effects fitted per fold from their true values, cross-fitted as the tool's candidates are), by the
     diagnosis' own significance test. An effect the others and a refitted road imitate within the noise is not
     shown, and no tool could name it from these data; the true set is not fitted, so "shown" is an upper bound of
-    what a fit can find (as for the single-effect oracle).
+    what a fit can find (as for the single-effect oracle). Judged at the true noise levels (:mod:`validation.
+    quarter_car_oracle`).
 
     :param effects: the log's effects, name -> true parameters (contract names, SI units).
     :param road: the true road, keys ``B, C, E, theta``.
     :param dg: the log's diagnosis (its prepared data).
     :param cfg: the diagnosis settings (folds, fit settings, ``sig_z``).
+    :param noise: the true noise std per logged channel (:mod:`validation.true_noise`).
     """
     from fricenv.gap.quarter_car.candidates import (
         fit_candidate,  # the tool, imported only where a diagnosis is checked
     )
     from fricenv.gap.quarter_car.params import ROAD_NAMES
     from fricenv.gap.quarter_car.stats import cross_fitted, fold_data, paired_z
-    from fricenv.gap.quarter_car.validate import true_model_fit
+    from validation.quarter_car_oracle import true_model_fit, with_noise
 
-    d, names = dg.data, list(effects)
+    d, names = with_noise(dg.data, noise), list(effects)
     road_x = np.array([road[k] for k in ROAD_NAMES], dtype=float)
     full = true_model_fit(effects, road, d)
     out = {}
@@ -192,29 +194,33 @@ def format_combos(s: dict) -> str:
             f"one shown on {c['some_shown']}/{c['logs']}, every shown effect named on {c['shown_named']} of those")
 
 
-def truth_shown(sim: dict, dg, cfg) -> bool:
+def truth_shown(sim: dict, dg, cfg, noise: dict[str, float]) -> bool:
     """The oracle of an out-of-library log, which the tool's model class cannot hold: does the noise-free truth (the
     simulator's own states and deceleration, ``omega_true``, ``v_true``, ``a_x_true``, on the log's samples) beat the
     calibrated nominal model by the diagnosis' paired test? Its residual is the measurement noise alone, and it fits
     no state per window, so the nominal model's per-window fits are counted against that model
     (:func:`fricenv.gap.quarter_car.stats.paired_z`). If the truth itself does not pass, the data cannot show the effect, and
-    `none` is all that a tool can say. A clean log only: its rows are the simulator's samples.
+    `none` is all that a tool can say. ``sim`` holds the truth on the log's rows (a real-like log's:
+    :func:`validation.independent_sim.real_truth_rows`). Judged at the true
+    noise levels: the nominal model is re-scored there at its own roads (:mod:`validation.quarter_car_oracle`).
 
-    :param sim: :func:`validation.independent_sim.simulate_case` of the log's case.
+    :param sim: ``omega_true``, ``v_true``, ``a_x_true`` on the log's rows (``simulate_case`` of a clean log's case).
     :param dg: the log's diagnosis (its prepared data and nominal model).
     :param cfg: the diagnosis settings (``sig_z``).
+    :param noise: the true noise std per logged channel.
     """
     from fricenv.gap.quarter_car.stats import CandidateFit, paired_z, window_counts, window_mse
     from fricenv.gap.quarter_car.windows import trajectory_residuals
+    from validation.quarter_car_oracle import nominal_with_noise
 
-    d = dg.data
+    d, nominal = nominal_with_noise(dg, noise)
     if d.n != len(sim["t"]):
-        raise ValueError(f"the log has {d.n} samples, its simulation {len(sim['t'])}: not a clean log")
+        raise ValueError(f"the log has {d.n} samples, its truth {len(sim['t'])}: not the same rows")
     r = trajectory_residuals({"omega": sim["omega_true"], "v": sim["v_true"], "a_x": sim["a_x_true"]}, d)
     wm = window_mse(r, window_counts(d))
     truth = CandidateFit(effect="truth", names=(), x=np.zeros(0), train_mse=float(np.mean(wm[~d.test])),
                          test_mse=float(np.mean(wm)), window_mse=wm, resid=r, nuisances=0)
-    return bool(paired_z(dg.nominal, truth, d) > cfg.sig_z)
+    return bool(paired_z(nominal, truth, d) > cfg.sig_z)
 
 
 def truth_summary(rows: list[dict]) -> dict:

@@ -1,16 +1,18 @@
-"""The three numbers of a quarter-car suite (docs/validation.md), from the JSON that ``fricenv gap validate --json``
-or ``python -m validation.independent_sim --json`` writes:
+"""The three numbers of a quarter-car suite (docs/validation.md), from the JSON that ``python -m
+validation.stand_in_suite --json`` (the library stand-in's logs) or ``python -m validation.independent_sim --json``
+writes:
 
 - the share of logs whose data show the answer: a nominal log always; a one-effect log when the true model passes
-  the diagnosis' significance test (``detectable``, :func:`fricenv.gap.quarter_car.validate.true_model_oracle`); a
+  the diagnosis' significance test (``detectable``, :func:`validation.quarter_car_oracle.true_model_oracle`); a
   log with several effects when every effect is shown (``shown``, :func:`validation.report_check.shown_effects`); an
-  out-of-library log when its noise-free truth beats the nominal model (``truth_shown``), and where no such oracle
-  ran (a rig export, ``gap validate``) it counts as shown;
+  out-of-library log when its noise-free truth beats the nominal model (``truth_shown``; a real-like export's on
+  its resampled rows), and where no such oracle ran (the library stand-in's out-of-library logs) it counts as shown;
 - the right verdicts on those logs (several effects: every effect named);
 - the share of all logs with at least one named effect that is not in the log.
 
-These quarter-car oracles judge with the noise level the tool estimated from the log; the payload's
-(:mod:`validation.payload_oracle`) with the noise level the source drew.
+Every oracle judges with the noise levels the source drew (``true_noise`` of each row, :mod:`validation.true_noise`),
+not with the tool's estimate. A ``fricenv gap validate --json`` result carries no oracle: its effect logs are
+refused here (run the same seed through ``python -m validation.stand_in_suite``).
 
 Command::
 
@@ -23,7 +25,7 @@ import json
 import sys
 from collections.abc import Sequence
 
-__all__ = ["quarter_car_numbers"]
+__all__ = ["format_numbers", "quarter_car_numbers"]
 
 NONE, OUT = "none", "out_of_library"
 
@@ -61,6 +63,11 @@ def quarter_car_numbers(rows: Sequence[dict]) -> dict:
 
     library = set(EFFECTS)
     rows = list(rows)
+    unjudged = [r for r in rows if r["category"] in library and r.get("verdict") != "error"
+                and "detectable" not in r and not r.get("truth_effects")]
+    if unjudged:
+        raise ValueError(f"{len(unjudged)} effect log(s) without the oracle's 'detectable': a fricenv gap validate "
+                         "result? Run the seed through python -m validation.stand_in_suite")
     shown = [r for r in rows if _shown(r)]
     wrong = [r for r in rows if any(e not in _truth_effects(r) for e in _named(r, library))]
     return {"n": len(rows), "shown": len(shown), "right_on_shown": sum(_right(r) for r in shown),
@@ -68,6 +75,13 @@ def quarter_car_numbers(rows: Sequence[dict]) -> dict:
             "shown_share": len(shown) / len(rows) if rows else float("nan"),
             "right_on_shown_share": sum(_right(r) for r in shown) / len(shown) if shown else float("nan"),
             "wrong_named_share": len(wrong) / len(rows) if rows else float("nan")}
+
+
+def format_numbers(q: dict, label: str = "") -> str:
+    """One line of :func:`quarter_car_numbers`."""
+    return (f"{label}data show the answer on {q['shown']}/{q['n']} ({q['shown_share']:.0%}); right on those "
+            f"{q['right_on_shown']}/{q['shown']} ({q['right_on_shown_share']:.0%}); wrong named effects "
+            f"{q['wrong_named']}/{q['n']} ({q['wrong_named_share']:.0%})")
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -79,10 +93,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     for path in paths:
         with open(path) as fh:
             s = json.load(fh)
-        q = quarter_car_numbers(s["logs"])
-        print(f"{path}: data show the answer on {q['shown']}/{q['n']} ({q['shown_share']:.0%}); right on those "
-              f"{q['right_on_shown']}/{q['shown']} ({q['right_on_shown_share']:.0%}); wrong named effects "
-              f"{q['wrong_named']}/{q['n']} ({q['wrong_named_share']:.0%})")
+        try:
+            q = quarter_car_numbers(s["logs"])
+        except ValueError as exc:
+            print(f"{path}: {exc}", file=sys.stderr)
+            return 2
+        print(format_numbers(q, f"{path}: "))
     return 0
 
 

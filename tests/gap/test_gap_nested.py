@@ -12,7 +12,7 @@ from fricenv.gap.quarter_car import candidates
 from fricenv.gap.quarter_car.config import DiagnoseConfig
 from fricenv.gap.quarter_car.fitting import fit_nominal, refine_noise, score
 from fricenv.gap.quarter_car.params import param_names
-from fricenv.gap.quarter_car.simulate import simulate_log
+from fricenv.gap.quarter_car.simulate import AX_NOISE_STD, OMEGA_NOISE_VAR, V_NOISE_STD, simulate_log
 from fricenv.gap.quarter_car.verdict import significant
 from fricenv.gap.quarter_car.windows import prepare
 from fricenv.plants import quarter_car as qc
@@ -73,18 +73,21 @@ def test_the_oracle_applies_the_same_rule():
     from types import SimpleNamespace
 
     from fricenv.gap.quarter_car.diagnose import diagnose
-    from fricenv.gap.quarter_car.validate import true_model_oracle
+    from validation.quarter_car_oracle import true_model_oracle
+
+    noise = {"omega": float(np.sqrt(OMEGA_NOISE_VAR)), "v": V_NOISE_STD, "a_x": AX_NOISE_STD}  # what the stand-in drew
 
     road = dict(zip("BCE", DRY[:3]), theta=DRY[3])
     log, _ = simulate_log([make_effect("brake_gain", gain=0.8)], ROADS["dry"], driver="open-loop", seed=11)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
         dg = diagnose(log, cfg=CFG)
-    assert true_model_oracle("brake_gain", {"gain": 0.8}, road, dg, CFG) == (True, True)
+    judged = true_model_oracle({"brake_gain": {"gain": 0.8}}, road, dg, CFG, noise)
+    assert (judged["detectable"], judged["true_explains"]) == (True, True)
 
     d = _data([])
     off_peak = SimpleNamespace(data=d, nominal=score("nominal", [], param_names([]), OFF_PEAK, d, 0.0))
     at_road = _gain_fit(DRY, 1.0, d)
     candidates.test_against(off_peak.nominal, at_road, d)
     assert at_road.z_paired > CFG.sig_z  # what the paired test against the nominal model alone would accept
-    assert true_model_oracle("brake_gain", {"gain": 1.0}, road, off_peak, CFG)[0] is False
+    assert true_model_oracle({"brake_gain": {"gain": 1.0}}, road, off_peak, CFG, noise)["detectable"] is False

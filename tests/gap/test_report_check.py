@@ -96,7 +96,7 @@ def test_the_oracle_of_several_effects_shows_a_large_one_and_not_a_negligible_on
     from fricenv.effects.quarter_car import make_effect
     from fricenv.gap.quarter_car.config import DiagnoseConfig
     from fricenv.gap.quarter_car.diagnose import diagnose
-    from fricenv.gap.quarter_car.simulate import simulate_log
+    from fricenv.gap.quarter_car.simulate import AX_NOISE_STD, OMEGA_NOISE_VAR, V_NOISE_STD, simulate_log
     from fricenv.plants.tire import MagicFormula
     from validation.report_check import shown_effects
 
@@ -107,7 +107,8 @@ def test_the_oracle_of_several_effects_shows_a_large_one_and_not_a_negligible_on
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
         dg = diagnose(log, cfg=cfg)
-        shown = shown_effects(effects, {"B": 11.0, "C": 1.9, "E": 0.8, "theta": 0.9}, dg, cfg)
+        noise = {"omega": float(np.sqrt(OMEGA_NOISE_VAR)), "v": V_NOISE_STD, "a_x": AX_NOISE_STD}
+        shown = shown_effects(effects, {"B": 11.0, "C": 1.9, "E": 0.8, "theta": 0.9}, dg, cfg, noise)
     assert shown == {"brake_gain": True, "drag": False}
 
 
@@ -146,5 +147,5 @@ def test_the_noise_free_truth_shows_a_strong_brake_fade_and_not_a_nominal_log(tm
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             dg = diagnose_file(path, cfg=cfg)
-        shown[name] = truth_shown(ind.simulate_case(case), dg, cfg)
+        shown[name] = truth_shown(ind.simulate_case(case), dg, cfg, ind.case_noise(case))
     assert shown == {"fade": True, "none": False}

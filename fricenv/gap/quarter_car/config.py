@@ -46,6 +46,9 @@ class DiagnoseConfig:
     jobs: int | None = None  # processes for the candidate fits (None: min(2, available cores))
     joint: bool = True  # also fit the two best significant candidates together
     drift_check: bool = True  # refit the verdict's model on each half of the log; a drift makes it unexplained
+    # On a log whose nominal model fits within the noise, a candidate is significant only if its evidence survives
+    # the noise covariance read from the nominal residual (fricenv.gap.quarter_car.guard)
+    false_discovery_guard: bool = True
     drift_z: float = 3.0  # paired z of the early/late refit over the constant model for a drift (one test) [-]
     candidates: tuple[str, ...] = tuple(EFFECTS)  # effects to try
     # Prediction windows simulated by the compiled (numba) kernel; False runs the numpy EffectSimulator path (the

@@ -90,6 +90,7 @@ from fricenv.gap.quarter_car.data import Data
 from fricenv.gap.quarter_car.drift import drift_test, fit_time_split
 from fricenv.gap.quarter_car.excitation import excitation, untestable
 from fricenv.gap.quarter_car.findings import Findings
+from fricenv.gap.quarter_car.guard import guard
 from fricenv.gap.quarter_car.fitting import distinct_starts, fit_nominal, refine_noise, score
 from fricenv.gap.quarter_car.localise import localise, tests_table
 from fricenv.gap.quarter_car.params import ROAD_NAMES, param_names, road_of
@@ -176,6 +177,7 @@ class _Selection:
     drift: dict | None = None
     residuals: dict = field(default_factory=dict)
     periodic: dict | None = None  # the line in the nominal wheel-speed residual (fricenv.gap.quarter_car.periodic), if any
+    guard: dict | None = None  # what the false-discovery guard held back (fricenv.gap.quarter_car.guard), if it ran
 
 
 def _calibrate_and_fit(ctx: FitContext):
@@ -227,7 +229,10 @@ def _select(ctx: FitContext, nominal: CandidateFit, fits: list) -> _Selection:
     d, p, cfg = ctx.d, ctx.p, ctx.cfg
     fits = sorted(fits, key=lambda f: f.adjusted_mse)
     sig = [f for f in fits if significant(f, nominal, cfg)]
-    s = _Selection(fits=fits, significant=sig, edges={f.effect: at_range_edge(f, p) for f in fits})
+    report = None
+    if cfg.false_discovery_guard:
+        sig, report = guard(nominal, sig, d, cfg)
+    s = _Selection(fits=fits, significant=sig, edges={f.effect: at_range_edge(f, p) for f in fits}, guard=report)
     eligible = [f for f in sig if not s.edges[f.effect]]  # significant, and not stretched to a bound
     if cfg.joint and len(eligible) >= 2:
         a, b = eligible[0], eligible[1]
@@ -293,6 +298,8 @@ def diagnose(log: QuarterCarLog, p: qc.QuarterCarParams = qc.PAPER_PARAMS,
         s.periodic["remains_with_effects"] = periodic_line(whole, d) is not None
     not_testable = not_testable.shown({f.effect for f in s.significant} | {e["effect"] for e in effects})
     findings = _findings(nominal, s, d, cfg, not_testable, steps, expected)
+    if s.guard is not None:
+        findings.extra["false_discovery_guard"] = s.guard
     findings.extra.update(time_base={"origin": "first_sample", "offset_s": float(log.t_offset)},
                           warnings=list(log.warnings))
     verdict = effects[0]["effect"] if effects else s.verdict  # a discovery before an expected calibration

@@ -1,0 +1,58 @@
+"""The quarter-car oracle judges a log with the noise levels its source drew, not with the tool's estimate."""
+
+from __future__ import annotations
+
+import math
+import warnings
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from fricenv.effects.quarter_car import make_effect
+from fricenv.gap.quarter_car.config import DiagnoseConfig
+from fricenv.gap.quarter_car.fitting import fit_nominal, refine_noise
+from fricenv.gap.quarter_car.simulate import OMEGA_NOISE_VAR, simulate_log
+from fricenv.gap.quarter_car.windows import prepare
+from fricenv.plants import quarter_car as qc
+from fricenv.plants.tire import ROADS
+from validation.quarter_car_oracle import true_model_oracle
+from validation.real_artifacts import QuarterCarArtifacts
+from validation.true_noise import real_like_noise
+
+CFG = DiagnoseConfig(jobs=1)
+
+
+def test_raising_the_drawn_noise_makes_a_shown_brake_gain_unshowable_with_the_tools_estimate_untouched():
+    """A brake gain of 0.7 on a stand-in log (wheel speed only) passes the significance test at the wheel-speed
+    noise the stand-in drew; told that the source drew five times that noise, the same log, the same calibrated
+    nominal model and the same estimate of the tool do not show it (the paired z falls with the noise level)."""
+    log, _ = simulate_log([make_effect("brake_gain", gain=0.7)], ROADS["dry"], driver="open-loop", seed=3,
+                          duration=3.0, write_v=False, write_ax=False)
+    d = prepare(log, qc.PAPER_PARAMS, CFG)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        nominal = fit_nominal(d, CFG)
+        refine_noise(nominal, d)
+    dg = SimpleNamespace(data=d, nominal=nominal)
+    estimate = dict(d.sigma)
+    road = dict(zip(("B", "C", "E", "theta"), ROADS["dry"].as_array()))
+    drawn = math.sqrt(OMEGA_NOISE_VAR)
+    at_drawn = true_model_oracle({"brake_gain": {"gain": 0.7}}, road, dg, CFG, {"omega": drawn})
+    louder = true_model_oracle({"brake_gain": {"gain": 0.7}}, road, dg, CFG, {"omega": 5.0 * drawn})
+    assert at_drawn["detectable"] and not louder["detectable"], (at_drawn, louder)
+    assert louder["z_true"] < at_drawn["z_true"] / 3.0
+    assert d.sigma == estimate  # the tool's own estimate is not what the oracle judged with
+
+
+def test_a_filtered_channels_true_level_is_its_white_equivalent():
+    """Through a real-like export the 100 Hz white noise of v, low-passed at 5 Hz and logged at 25 Hz, has the
+    in-band density of white noise of std * sqrt(25 / 100) at the log's rate; the wheel speed, interpolated at the
+    logger's instants, keeps most of its std (and gains the quantisation's q^2 / 12)."""
+    spec = QuarterCarArtifacts(rate_hz=25.0, jitter=0.0)
+    got = real_like_noise(spec, {"omega": 0.4, "v": 0.04, "a_x": 0.1}, ("v",), 0.01)
+    assert got["v"] == pytest.approx(0.04 * math.sqrt(0.25), rel=0.05)
+    q = 0.1 / 3.6 / spec.radius
+    assert got["omega"] == pytest.approx(math.sqrt(0.4**2 + q * q / 12.0), rel=0.05)  # instants on clean samples
+    assert "a_x" not in got
+    assert np.isfinite(list(got.values())).all()

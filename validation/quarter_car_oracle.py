@@ -1,0 +1,87 @@
+"""Whether a quarter-car log's data show its answer: the true model, at its TRUE parameters (no fit) and judged with
+the TRUE noise levels the source drew (not the tool's estimate), put through the diagnosis' own significance test
+against the nominal model the tool calibrated.
+
+The noise levels are given per logged channel as the white-noise standard deviation at the log's rate that carries
+the same low-frequency power (a channel low-passed or interpolated by a logger: its std times the square root of
+its integrated autocorrelation time, :mod:`validation.true_noise`), the form in which the diagnosis normalises a
+filtered channel. The log's prepared data are rescaled to those levels: the nominal model is re-scored at its own
+per-fold roads (nothing refitted) and the true model is scored on the same windows. A nominal log always counts as
+shown (the answer ``none`` needs no evidence).
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import replace
+
+import numpy as np
+
+__all__ = ["nominal_with_noise", "true_model_fit", "true_model_oracle", "with_noise"]
+
+
+def with_noise(d, noise: dict[str, float]):
+    """The prepared log ``d`` with its channels' noise levels replaced by ``noise`` (channel -> std, SI units).
+
+    :raises ValueError: when ``noise`` misses a logged channel.
+    """
+    missing = [c for c in d.channels if c not in noise]
+    if missing:
+        raise ValueError(f"true noise level missing for channel(s) {', '.join(missing)}")
+    return replace(d, sigma={c: float(noise[c]) for c in d.channels})
+
+
+def true_model_fit(effects: dict[str, dict], road: dict, d):
+    """The true model scored on the prepared log ``d`` (no fit): the true road and every effect at its true
+    parameters, held out on every window as the candidates are.
+
+    :param effects: effect name -> its true parameters (registry names, SI units), in the model's order.
+    :param road: the true road, keys ``B, C, E, theta``.
+    """
+    from fricenv.effects import registry
+    from fricenv.gap.quarter_car.fitting import score
+    from fricenv.gap.quarter_car.params import ROAD_NAMES, param_names
+
+    names = list(effects)
+    x = np.array([road[k] for k in ROAD_NAMES] + [effects[e][k] for e in names for k in registry.get(e).param_names],
+                 dtype=float)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return score("+".join(names), names, param_names(names), x, d, 0.0)
+
+
+def nominal_with_noise(dg, noise: dict[str, float]):
+    """(the prepared log at the true noise levels, the tool's calibrated nominal model re-scored there at its own
+    per-fold roads)."""
+    from fricenv.gap.quarter_car.candidates import without_effects
+
+    d = with_noise(dg.data, noise)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return d, without_effects(dg.nominal, d)
+
+
+def true_model_oracle(effects: dict[str, dict], road: dict, dg, cfg, noise: dict[str, float]) -> dict:
+    """The oracle of a library-effect log, at the true noise levels:
+
+    - ``detectable``: the true model passes the diagnosis' significance rule
+      (:func:`fricenv.gap.quarter_car.verdict.significant`: over the calibrated nominal model, and over its own road
+      with the effects switched off); if not, no tool could name the effect from these data;
+    - ``true_explains``: it closes the share of the gap the verdict rule asks of an effect
+      (:func:`fricenv.gap.quarter_car.verdict.explains`).
+
+    :param effects: effect name -> true parameters (registry names, SI units).
+    :param road: the true road, keys ``B, C, E, theta``; :param dg: the log's diagnosis.
+    :param cfg: the diagnosis settings; :param noise: the true noise std per logged channel.
+    :return: ``{"detectable", "true_explains", "z_true"}`` (the true model's paired z there).
+    """
+    from fricenv.gap.quarter_car.candidates import test_against
+    from fricenv.gap.quarter_car.verdict import explains, significant
+
+    d, nominal = nominal_with_noise(dg, noise)
+    true = true_model_fit(effects, road, d)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        test_against(nominal, true, d)
+    return {"detectable": bool(significant(true, nominal, cfg)), "true_explains": bool(explains(true, nominal, cfg)),
+            "z_true": float(true.z_paired)}
