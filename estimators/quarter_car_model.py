@@ -66,7 +66,7 @@ BOUNDS: dict[str, tuple[float, float]] = {
     "k_T": (0.5, 2.0),
     "a_b": (0.0, 5.0),
 }
-V_FLOOR = 0.5  # [m/s] smallest speed in the model's 1/v (the estimators run above 3 m/s)
+V_FLOOR = 0.5  # smallest speed in the estimator model's 1/v (the estimators run above 3 m/s) [m/s]
 DEFAULT_SUBSTEPS = 3  # ROS2 substeps per 10 ms sample (5 ms each; see the module docstring)
 
 
