@@ -39,10 +39,10 @@ from fricenv.plants.tire import magic_formula
 
 __all__ = [
     "BOUNDS",
+    "EXTRA_NAMES",
     "NOMINAL",
     "PARAM_NAMES",
     "V_FLOOR",
-    "EXTRA_NAMES",
     "AugmentedModel",
     "magic_formula_casadi",
 ]

@@ -11,10 +11,27 @@ from types import MappingProxyType
 
 from fricenv.plants.sui_johansen import OMEGA_NOISE_VAR
 
-__all__ = ["AB_P0_STD", "AB_Q_STD", "A_REF", "DEFAULT_ARRIVAL", "DEFAULT_EKF_TUNING", "GATE_CHI2", "HORIZON", "JUMP_MU_MAX", "MAX_REJECTIONS",
+__all__ = [
+           "AB_P0_STD",
+           "AB_Q_STD",
+           "A_REF",
+           "DEFAULT_ARRIVAL",
+           "DEFAULT_EKF_TUNING",
+           "GATE_CHI2",
+           "HORIZON",
+           "JUMP_MU_MAX",
+           "KT_P0_STD",
+           "KT_Q_STD",
+           "MAX_REJECTIONS",
            "MISMATCH_NIS_MAX",
-           "KT_P0_STD", "KT_Q_STD", "MISMATCH_STATES",
-           "PAPER_TUNING", "P_FALSE", "REF_MARGIN_STD", "SLIP_PRIOR", "STATE_SCALES", "V_PRIOR"]
+           "MISMATCH_STATES",
+           "PAPER_TUNING",
+           "P_FALSE",
+           "REF_MARGIN_STD",
+           "SLIP_PRIOR",
+           "STATE_SCALES",
+           "V_PRIOR",
+]
 
 # ---- the mismatch states (estimators.quarter_car_model.EXTRA_NAMES) of the env estimators
 KT_P0_STD, KT_Q_STD = 0.2, 0.1  # brake gain k_T: prior spread, random walk per sample [-]

@@ -15,8 +15,8 @@ import pytest
 from estimators.base import Health
 from estimators.batched import make_batched
 from estimators.ekf_rls import QuarterCarEkfRls
-from estimators.registry import get_estimator
 from estimators.jump import JUMP_MU_MAX, jump_test
+from estimators.registry import get_estimator
 from fricenv.plants import quarter_car as qc
 from fricenv.plants import sui_johansen as sj
 from fricenv.plants.tire import DRY, ICE
