@@ -14,8 +14,18 @@ from fricenv.envs.braking_sim import BrakingSim
 from fricenv.envs.config import ObsField
 from fricenv.plants.quarter_car import PAPER_PARAMS, QuarterCarParams
 
-__all__ = ["FIELD_AX", "FIELD_SLIP", "FIELD_TORQUE", "FIELD_V", "FIELD_WHEEL_DECEL", "FIELD_WHEEL_SPEED", "SPEED_FLOOR",
-           "ControlSpec", "Controller", "ObsReader"]
+__all__ = [
+    "CONTROL_SPEED_FLOOR",
+    "FIELD_AX",
+    "FIELD_SLIP",
+    "FIELD_TORQUE",
+    "FIELD_V",
+    "FIELD_WHEEL_DECEL",
+    "FIELD_WHEEL_SPEED",
+    "ControlSpec",
+    "Controller",
+    "ObsReader",
+]
 
 FIELD_WHEEL_SPEED = "wheel_speed"
 FIELD_WHEEL_DECEL = "wheel_decel"
@@ -23,7 +33,7 @@ FIELD_TORQUE = "torque"
 FIELD_AX = "a_x"
 FIELD_V = "v"
 FIELD_SLIP = "slip"
-SPEED_FLOOR = 0.5  # smallest speed used as a slip denominator or gain-scheduling variable [m/s]
+CONTROL_SPEED_FLOOR = 0.5  # smallest reference speed a controller divides by (ECU slip) or schedules on [m/s]
 
 
 class ObsReader:

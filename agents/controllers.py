@@ -25,13 +25,13 @@ from typing import Any, Protocol
 import numpy as np
 
 from agents.controller_base import (  # noqa: F401 (re-exported: the public names of the controllers)
+    CONTROL_SPEED_FLOOR,
     FIELD_AX,
     FIELD_SLIP,
     FIELD_TORQUE,
     FIELD_V,
     FIELD_WHEEL_DECEL,
     FIELD_WHEEL_SPEED,
-    SPEED_FLOOR,
     Controller,
     ControlSpec,
     ObsReader,
@@ -149,7 +149,7 @@ class RuleBasedABS(Controller):
         s["fresh"][:] = False
         # Reference speed: a_x integration, pulled up to the wheel speed (the vehicle is never slower).
         s["v_ref"] = np.maximum(s["v_ref"] + ax * dt, wheel - p.omega_margin * p.omega_noise_std * r)
-        slip = ecu_slip(self.reader.get(obs, FIELD_WHEEL_SPEED), s["v_ref"], r, SPEED_FLOOR)
+        slip = ecu_slip(self.reader.get(obs, FIELD_WHEEL_SPEED), s["v_ref"], r, CONTROL_SPEED_FLOOR)
         ph = s["phase"]
         rising = (ph == PH_BUILD) | (ph == PH_REAPPLY)
         new = np.where(rising & (excess > p.decel_minus), PH_HOLD, ph)
@@ -263,7 +263,7 @@ class _GainScheduledSlip(Controller):
         g, s, p, dt = self.gains, self._state, self.spec.params, self.spec.dt
         err = lam_ref - lam
         s["integral"] = np.clip(s["integral"] + err * dt, -g.integral_limit, g.integral_limit)
-        v = np.maximum(v, SPEED_FLOOR)
+        v = np.maximum(v, CONTROL_SPEED_FLOOR)
         return np.clip(t_ff + p.J * v / p.r * (g.kp * err + g.ki * s["integral"]), 0.0, self.spec.t_max)
 
 
@@ -299,7 +299,7 @@ class SlipController(_GainScheduledSlip):
         v_hat, lam_ref = self.source(values)
         v_hat = np.asarray(v_hat, dtype=float)
         lam_ref = np.asarray(lam_ref, dtype=float)
-        lam = ecu_slip(values[FIELD_WHEEL_SPEED], v_hat, p.r, SPEED_FLOOR)
+        lam = ecu_slip(values[FIELD_WHEEL_SPEED], v_hat, p.r, CONTROL_SPEED_FLOOR)
         mu_hat = np.maximum(-p.m * values[FIELD_AX] / p.Fz, 0.0)
         return self._pi(v_hat, lam, lam_ref, _equilibrium_torque(mu_hat, lam_ref, p))
 

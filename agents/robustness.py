@@ -88,7 +88,7 @@ def simulate_stop(cell: GridCell, road: str, driver: str, seed: int, duration: f
     from fricenv.envs.effect_spec import resolve_effects
     from fricenv.gap.quarter_car import simulate as gs
     from fricenv.plants import quarter_car as qc
-    from fricenv.plants.tire import longitudinal_slip, get_road
+    from fricenv.plants.tire import get_road, longitudinal_slip
 
     p, dt, tire = qc.PAPER_PARAMS, gs.DT, get_road(road)
     if abs(dt - DT) > 1e-12:
@@ -186,7 +186,7 @@ def stop_metrics(stop: Stop, estimate: dict[str, np.ndarray]) -> dict[str, Any]:
     return {"v_rms": rms("v"), "slip_rms": rms("slip"), "mu_rms": rms("mu"),
             "v_worst": float(np.max(np.abs(estimate["v"] - stop.v))) if stop.v.size else float("nan"),
             "health": {h.name.lower(): float(np.mean(health == int(h))) for h in Health},
-            "samples": int(len(stop.t))}
+            "samples": len(stop.t)}
 
 
 def _stops_job(cells: tuple[GridCell, ...], road: str, driver: str, seed: int,

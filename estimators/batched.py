@@ -33,6 +33,7 @@ from estimators.ekf_rls import KS0, PHI_MIN_SLIP, RLS_P0, QuarterCarEkfRls
 from estimators.jump import jump_test
 from estimators.mhe_batched import BATCHED_MHE
 from fricenv.plants.quarter_car import QuarterCarParams
+from fricenv.plants.tire import SLIP_SPEED_FLOOR
 
 __all__ = ["BATCHED", "BatchedEkfRls", "BatchedEstimator", "BatchedGate", "make_batched"]
 
@@ -134,7 +135,7 @@ def _core_rows(omega, a_x, T_b, k, gated, gc, gx, gP, started, rejected, gj, y, 
             y[i] = max(y[i] - dt * rate * min(max((y[i] - wr) / d, -1.0), 1.0), 0.0)
             c[i] = c_new
         R_g[i] = abs(torque) / (m_eff * R_w)  # eq. (5)
-        S = (wr - y[i]) / max(max(y[i], wr), 0.1)  # 2. slip, eq. (3)
+        S = (wr - y[i]) / max(max(y[i], wr), SLIP_SPEED_FLOOR)  # 2. slip, eq. (3)
         F = _ekf_row(i, a_x[i], torque, S, k, x, P, H, A, Q, T, U)  # 3. force EKF
         phi = Fz * S  # 4. RLS, eqs. (10)-(14)
         if abs(phi) > k[11] * Fz:

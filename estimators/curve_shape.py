@@ -96,7 +96,7 @@ MIN_SAMPLES = 20.0  # forgotten count of scored samples before the fit is used (
 FAST_FORGETTING = 0.95  # lam of the fast copy of (S1) that detects friction jumps: a memory of 0.2 s [-]
 JUMP_MIN_SAMPLES = 10.0  # forgotten count of the fast copy before it may detect a jump (it tends to 20) [-]
 JUMP_RATIO = 3.0  # a jump: the fast and slow theta of the winning shape differ by more than this factor [-]
-SPEED_FLOOR = 1.0  # floor of the speed in the slip-error weight [m/s]
+SAMPLE_SPEED_FLOOR = 1.0  # smallest bias-corrected speed of a sample in its slip and slip-error weight (1/v) [m/s]
 AMBIGUITY = 3.0  # a shape is plausible if its cost is within this many residual variances of the best [-]
 SPEED_BIAS_STEP = 0.1  # spacing of the candidate speed errors profiled out of the fit [m/s]
 SPEED_BIAS_MAX = 0.4  # largest candidate speed error (2.6 sigma of a reset from one noisy wheel speed) [m/s]
@@ -209,7 +209,7 @@ class ShapeFit:
         self.biases = self.params.biases
         p = self.params
         self._tuning = np.array([p.forgetting, p.fast_forgetting, p.sigma_mu, p.sigma_v, p.slip_min, p.min_samples,
-                                 p.jump_ratio, p.ambiguity, JUMP_MIN_SAMPLES, SPEED_FLOOR, self.coupling])
+                                 p.jump_ratio, p.ambiguity, JUMP_MIN_SAMPLES, SAMPLE_SPEED_FLOOR, self.coupling])
         self._rows = np.arange(self.n)
         shape = (self.n, len(bank), len(self.biases))
         self.a, self.b, self.c = np.zeros(shape), np.zeros(shape), np.zeros(shape)

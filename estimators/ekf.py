@@ -20,7 +20,7 @@ import numpy as np
 from estimators.base import Estimate, Estimator, EstimatorConfigError, Health, check_dt
 from estimators.mismatch import WheelSpeedGuard
 from estimators.outliers import DEFAULT_GATE, GateParams, Verdict, check_gate
-from estimators.quarter_car_model import PARAM_NAMES, AugmentedModel
+from estimators.quarter_car_model import BOUNDS, EXTRA_NAMES, PARAM_NAMES, AugmentedModel
 from estimators.tuning import DEFAULT_EKF_TUNING, HORIZON, PAPER_TUNING, SLIP_PRIOR, V_PRIOR
 
 __all__ = ["DEFAULT_EKF_TUNING", "SLIP_PRIOR", "V_PRIOR", "ExtendedKalmanFilter", "ParameterInformation", "QuarterCarEKF",
@@ -195,7 +195,7 @@ class QuarterCarEKF(Estimator):
         except ValueError as exc:
             raise EstimatorConfigError(str(exc)) from None
         for label, given in (("P0_std", P0_std), ("Q_std", Q_std)):
-            bad = [k for k in (given or {}) if k not in ("v", "slip") + PARAM_NAMES]
+            bad = [k for k in (given or {}) if k not in ("v", "slip") + PARAM_NAMES + EXTRA_NAMES]
             if bad:
                 raise EstimatorConfigError(f"{label} keys {bad} unknown; valid: v, slip, {', '.join(PARAM_NAMES)}")
         p0 = {**DEFAULT_EKF_TUNING["P0_std"], **(P0_std or {})}
@@ -209,10 +209,14 @@ class QuarterCarEKF(Estimator):
             np.array([[float(R)]]),
         )
         self.lower, self.upper = self.model.lower(), self.model.upper()
+        # the model's speed can change by at most F_z theta_max / m per second (|mu| <= theta <= 1): a predicted
+        # step beyond it is a numerical failure of the stiff step (slip near 1, speed near 0) and is clipped to it
+        theta_max = BOUNDS["theta"][1] if "theta" in self.model.estimated else self.model.road(self.lower)[3]
+        self.dv_max = self.model.p.Fz * theta_max / self.model.p.m * dt
         self.outlier_gate = check_gate(outlier_gate)
         self.guard = WheelSpeedGuard(self.model, self.outlier_gate, float(np.sqrt(R)))
         group = "theta-only" if len(self.model.estimated) <= 1 else "all"
-        self.information = ParameterInformation(slice(2, self.model.nx), HORIZON, PAPER_TUNING[group]["delta"])
+        self.information = ParameterInformation(slice(2, 2 + len(self.model.estimated)), HORIZON, PAPER_TUNING[group]["delta"])
         self.reset()
 
     def reset(self, v: float = V_PRIOR, slip: float = SLIP_PRIOR, params: dict | None = None) -> Estimate:
@@ -239,7 +243,7 @@ class QuarterCarEKF(Estimator):
         if verdict == Verdict.REJECT:
             return verdict, self.x, self.P, None, inflation
         x_post, P_post, innov = self.filter.update(self.x, self.P, y)
-        return verdict, x_post, P_post, innov, inflation
+        return verdict, self.guard.bound_speed(x_post, float(self.x[0]), float(y[0])), P_post, innov, inflation
 
     def propagate(self, x_post: np.ndarray, P_post: np.ndarray, brake_torque: float) -> bool:
         """Time update from the posterior (clipped to the bounds) under the torque held to the next sample.
@@ -247,10 +251,12 @@ class QuarterCarEKF(Estimator):
         :return: False when the step is not finite: the prior is kept and its covariance restarts at P0.
         """
         self._brake_torque = float(brake_torque)
-        x_next, P_next = self.filter.predict(np.clip(x_post, self.lower, self.upper), P_post, self._brake_torque)
+        x_post = np.clip(x_post, self.lower, self.upper)
+        x_next, P_next = self.filter.predict(x_post, P_post, self._brake_torque)
         if not (np.all(np.isfinite(x_next)) and np.all(np.isfinite(P_next))):
             self.P = self.P0.copy()
             return False
+        x_next[0] = np.clip(x_next[0], x_post[0] - self.dv_max, x_post[0] + self.dv_max)
         self.x, self.P = np.clip(x_next, self.lower, self.upper), P_next
         return True
 

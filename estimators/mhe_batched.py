@@ -195,6 +195,8 @@ class BatchedMHE:
         IKH = np.eye(self.nx) - K @ H
         P_post = sym(IKH @ P @ np.swapaxes(IKH, 1, 2) + K @ R @ np.swapaxes(K, 1, 2))
         x_post = x + (K @ (y - hx)[:, None, None])[:, :, 0]
+        for i in np.flatnonzero(active & (verdict != Verdict.REJECT)):  # (M2): the speed stays above the reference
+            x_post[i] = self.guards[i].bound_speed(x_post[i], float(x[i, 0]), float(y[i]))
         upd = active & (verdict != Verdict.REJECT)
         self.post_x = np.where(upd[:, None], x_post, np.where(active[:, None], x, self.post_x))
         self.post_P = np.where(upd[:, None, None], P_post, np.where(active[:, None, None], P, self.post_P))
@@ -206,6 +208,8 @@ class BatchedMHE:
         x_post = np.clip(self.post_x, lo, hi)
         xn, F = self._predict(x_post, u)
         xn = xn[:, :, 0]
+        dv = self.t.arrival_filter.dv_max  # the single EKF's bound on a predicted speed change
+        xn[:, 0] = np.clip(xn[:, 0], x_post[:, 0] - dv, x_post[:, 0] + dv)
         good = np.all(np.isfinite(xn), axis=1) & np.all(np.isfinite(F), axis=(1, 2))
         P_next = sym(F @ self.post_P @ np.swapaxes(F, 1, 2) + self.t._Q)
         self.ekf_x = np.where((active & good)[:, None], np.clip(xn, lo, hi), self.ekf_x)

@@ -39,6 +39,7 @@ from fricenv.plants.tire import magic_formula
 
 __all__ = [
     "BOUNDS",
+    "EXTRA_NAMES",
     "NOMINAL",
     "PARAM_NAMES",
     "V_FLOOR",
@@ -47,6 +48,11 @@ __all__ = [
 ]
 
 PARAM_NAMES = ("theta", "B", "C", "E")
+# Mismatch states a model may carry after the Magic Formula parameters (random walks, docs/contracts.md):
+# ``k_T`` the brake gain (the torque on the wheel is k_T T_b), ``a_b`` a deceleration of the car that the tire
+# force does not explain [m/s^2] (drag, a slope).
+EXTRA_NAMES = ("k_T", "a_b")
+EXTRA_NOMINAL = {"k_T": 1.0, "a_b": 0.0}
 # Sui & Johansen eq. (18): nominal values, a priori estimates or fixed values (read-only).
 NOMINAL = sj.NOMINAL_SHAPE
 # Bounds of Section IV: v >= 0, 0 <= lambda <= 1, 0 <= theta <= 1, 9 <= B <= 15.5, 0 <= C <= 3, -7.5 <= E <= 2.
@@ -57,8 +63,10 @@ BOUNDS: dict[str, tuple[float, float]] = {
     "B": (9.0, 15.5),
     "C": (0.0, 3.0),
     "E": (-7.5, 2.0),
+    "k_T": (0.5, 2.0),
+    "a_b": (0.0, 5.0),
 }
-V_FLOOR = 0.5  # [m/s] smallest speed in the model's 1/v (the estimators run above 3 m/s)
+V_FLOOR = 0.5  # smallest speed in the estimator model's 1/v (the estimators run above 3 m/s) [m/s]
 DEFAULT_SUBSTEPS = 3  # ROS2 substeps per 10 ms sample (5 ms each; see the module docstring)
 
 
@@ -84,6 +92,7 @@ class AugmentedModel:
     substeps: int = DEFAULT_SUBSTEPS  # ROS2 substeps per sample [-]
     p: QuarterCarParams = PAPER_PARAMS  # vehicle parameters
     fixed: dict = field(default_factory=lambda: dict(NOMINAL))  # values of non-estimated parameters
+    extras: tuple[str, ...] = ()  # mismatch states after the parameters (subset of EXTRA_NAMES)
     _cache: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     def __post_init__(self):
@@ -91,6 +100,10 @@ class AugmentedModel:
         if unknown:
             raise ValueError(f"estimated parameters {unknown} unknown; valid: {', '.join(PARAM_NAMES)}")
         object.__setattr__(self, "estimated", tuple(n for n in PARAM_NAMES if n in self.estimated))
+        unknown = [n for n in self.extras if n not in EXTRA_NAMES]
+        if unknown:
+            raise ValueError(f"extra states {unknown} unknown; valid: {', '.join(EXTRA_NAMES)}")
+        object.__setattr__(self, "extras", tuple(n for n in EXTRA_NAMES if n in self.extras))
         bad = [k for k in self.fixed if k not in PARAM_NAMES]
         if bad:
             raise ValueError(f"fixed parameters {bad} unknown; valid: {', '.join(PARAM_NAMES)}")
@@ -102,12 +115,18 @@ class AugmentedModel:
     # ----------------------------------------------------------------- layout
     @property
     def names(self) -> tuple[str, ...]:
-        """State names: ``("v", "slip", *estimated)``."""
-        return ("v", "slip") + self.estimated
+        """State names: ``("v", "slip", *estimated, *extras)``."""
+        return ("v", "slip") + self.estimated + self.extras
 
     @property
     def nx(self) -> int:
-        return 2 + len(self.estimated)
+        return 2 + len(self.estimated) + len(self.extras)
+
+    def extra(self, x, name: str):
+        """The value of mismatch state ``name`` in a (numeric or symbolic) state, its nominal value if not carried."""
+        if name not in self.extras:
+            return EXTRA_NOMINAL[name]
+        return x[2 + len(self.estimated) + self.extras.index(name)]
 
     def lower(self) -> np.ndarray:
         return np.array([BOUNDS[n][0] for n in self.names])
@@ -117,8 +136,8 @@ class AugmentedModel:
 
     def nominal_state(self, v: float, slip: float, params: dict | None = None) -> np.ndarray:
         """State vector from v, slip and parameter values (default: eq. (18) nominal)."""
-        params = {**NOMINAL, **(params or {})}
-        return np.array([v, slip] + [params[n] for n in self.estimated], dtype=float)
+        params = {**NOMINAL, **EXTRA_NOMINAL, **(params or {})}
+        return np.array([v, slip] + [params[n] for n in self.estimated + self.extras], dtype=float)
 
     def road(self, x) -> tuple:
         """(B, C, E, theta) from a (numeric or symbolic) state, filling in fixed values."""
@@ -134,7 +153,11 @@ class AugmentedModel:
         B, C, E, theta = self.road(x)
         v = ca.fmax(x[0], V_FLOOR)
         lam = x[1]
-        return _slip_ode_casadi(v, lam, Tb, B, C, E, theta, p.r, p.m, p.J, p.Fz)
+        vdot, lamdot = _slip_ode_casadi(v, lam, self.extra(x, "k_T") * Tb, B, C, E, theta, p.r, p.m, p.J, p.Fz)
+        if "a_b" not in self.extras:
+            return vdot, lamdot
+        a_b = self.extra(x, "a_b")  # lambda = 1 - omega r / v: a speed change a_b moves the slip by (1 - lambda) / v
+        return vdot - a_b, lamdot - (1.0 - lam) * a_b / v
 
     def step_sx(self, x, Tb):
         """One sample of the discrete model x+ = f(x, T_b), eq. (8a), as SX (ROS2 substeps)."""

@@ -6,7 +6,8 @@ Every place that builds an estimator by name reads :data:`ESTIMATORS` (the braki
 ==================  ========  ========  ==================================================================
 name                family    variant   estimator
 ==================  ========  ========  ==================================================================
-``ekf``             ekf       default   :class:`~estimators.ekf.QuarterCarEKF`, theta augmented
+``ekf``             ekf       default   :class:`~estimators.ekf.QuarterCarEKF`, theta and the mismatch states
+                                        ``k_T``, ``a_b`` augmented (``ekf-full``, ``mhe``, ``mhe-full`` too)
 ``ekf-full``        ekf       full      the same with (theta, B, C, E) augmented (Sui & Johansen, cases 3-4)
 ``mhe``             mhe       default   :class:`~estimators.mhe.RegularizedMHE`, default (EKF arrival cost,
                                         process noise, gate), theta augmented
@@ -15,7 +16,8 @@ name                family    variant   estimator
 ``mhe-ekf``         mhe       ekf       hard dynamics with the EKF arrival cost only (no process noise, gate)
 ``mhe-literal``     mhe       literal   the literal SI reading of eq. (16) with the paper's prior terms
 ``ekf-rls``         ekf-rls   default   :class:`~estimators.ekf_rls.QuarterCarEkfRls` (quarter car) or
-                                        :class:`~estimators.ekf_rls.TwoAxleEkfRls` (two-axle params)
+                                        :class:`~estimators.ekf_rls.TwoAxleEkfRls` (two-axle params), a_x loop
+                                        K = ``ENV_CORRECTION_GAIN``
 ``ekf-rls-paper-    ekf-rls   paper-    the same with the paper-literal a_x loop of Fig. 2 (K = 100 1/s)
 loop``                        loop
 ``ekf-rls-paper-    ekf-rls   paper-    the same with the paper's friction map eq. (15)
@@ -41,10 +43,11 @@ from typing import Any
 
 from estimators.base import Estimator, EstimatorConfigError
 from estimators.ekf import QuarterCarEKF
-from estimators.ekf_rls import PAPER_CORRECTION_GAIN, QuarterCarEkfRls, TwoAxleEkfRls
+from estimators.ekf_rls import ENV_CORRECTION_GAIN, PAPER_CORRECTION_GAIN, QuarterCarEkfRls, TwoAxleEkfRls
 from estimators.mhe import RegularizedMHE
 from estimators.quarter_car_model import PARAM_NAMES, AugmentedModel
 from estimators.slope_maps import PAPER_MAP
+from estimators.tuning import MISMATCH_STATES
 from fricenv.errors import InvalidInputError
 from fricenv.plants import sui_johansen as sj
 from fricenv.plants.quarter_car import PAPER_PARAMS, QuarterCarParams
@@ -77,24 +80,27 @@ def _shape_dict(road: MagicFormula) -> Mapping[str, float]:
     return MappingProxyType({"theta": road.theta, "B": road.B, "C": road.C, "E": road.E})
 
 
-def _augmented_model(params: Any, dt: float, estimated: tuple[str, ...], shape: Mapping[str, float]):
+def _augmented_model(params: Any, dt: float, estimated: tuple[str, ...], shape: Mapping[str, float],
+                     extras: tuple[str, ...] = ()):
     if not isinstance(params, QuarterCarParams):
         raise EstimatorConfigError(f"the EKF and MHE take QuarterCarParams, got {type(params).__name__}")
     try:
-        return AugmentedModel(estimated=tuple(estimated), dt=dt, p=params, fixed=dict(shape))
+        return AugmentedModel(estimated=tuple(estimated), dt=dt, p=params, fixed=dict(shape), extras=tuple(extras))
     except ValueError as exc:
         raise EstimatorConfigError(str(exc)) from None
 
 
 def _build_ekf(entry: EstimatorEntry, params: Any, dt: float, estimated: tuple[str, ...],
                options: dict[str, Any]) -> Estimator:
-    model = _augmented_model(params, dt, estimated, entry.assumed_shape)
+    options = dict(options)
+    model = _augmented_model(params, dt, estimated, entry.assumed_shape, options.pop("mismatch_states", ()))
     return QuarterCarEKF(estimated=model.estimated, dt=dt, model=model, **options)
 
 
 def _build_mhe(entry: EstimatorEntry, params: Any, dt: float, estimated: tuple[str, ...],
                options: dict[str, Any]) -> Estimator:
-    model = _augmented_model(params, dt, estimated, entry.assumed_shape)
+    options = dict(options)
+    model = _augmented_model(params, dt, estimated, entry.assumed_shape, options.pop("mismatch_states", ()))
     return RegularizedMHE(estimated=model.estimated, dt=dt, model=model, **options)
 
 
@@ -168,17 +174,20 @@ class EstimatorEntry:
 
 def _entries() -> tuple[EstimatorEntry, ...]:
     mhe_paper = {"arrival": "paper", "model_error": None}
+    absorb = MappingProxyType({"mismatch_states": MISMATCH_STATES})  # the env entries' brake gain and drag states
     return (
-        EstimatorEntry("ekf", "default", "augmented EKF, theta", _build_ekf, observation=True),
-        EstimatorEntry("mhe", "default", "regularized MHE (EKF arrival, process noise, gate), theta", _build_mhe,
-                       cls=RegularizedMHE, observation=True),
-        EstimatorEntry("ekf-rls", "default", "EKF/RLS, torque feedforward, Magic Formula family map",
-                       _build_ekf_rls, estimated=(), cls=QuarterCarEkfRls, values=EKF_RLS_VALUES,
-                       assumed_shape=_shape_dict(DRY), observation=True),
-        EstimatorEntry("ekf", "full", "augmented EKF, theta, B, C, E", _build_ekf, estimated=FULL_SHAPE,
+        EstimatorEntry("ekf", "default", "augmented EKF, theta, brake gain, deceleration bias", _build_ekf, absorb,
                        observation=True),
-        EstimatorEntry("mhe", "full", "regularized MHE, theta, B, C, E", _build_mhe, estimated=FULL_SHAPE,
-                       cls=RegularizedMHE, observation=True),
+        EstimatorEntry("mhe", "default", "regularized MHE (EKF arrival, process noise, gate), theta, brake gain, "
+                       "deceleration bias", _build_mhe, absorb, cls=RegularizedMHE, observation=True),
+        EstimatorEntry("ekf-rls", "default", "EKF/RLS, torque feedforward with an a_x loop, Magic Formula family map",
+                       _build_ekf_rls, MappingProxyType({"correction_gain": ENV_CORRECTION_GAIN}), estimated=(),
+                       cls=QuarterCarEkfRls, values=EKF_RLS_VALUES,
+                       assumed_shape=_shape_dict(DRY), observation=True),
+        EstimatorEntry("ekf", "full", "augmented EKF, theta, B, C, E, brake gain, deceleration bias", _build_ekf,
+                       absorb, estimated=FULL_SHAPE, observation=True),
+        EstimatorEntry("mhe", "full", "regularized MHE, theta, B, C, E, brake gain, deceleration bias", _build_mhe,
+                       absorb, estimated=FULL_SHAPE, cls=RegularizedMHE, observation=True),
         EstimatorEntry("mhe", "paper", "the paper's MHE: prior terms beta_i, hard dynamics", _build_mhe,
                        MappingProxyType(mhe_paper), cls=RegularizedMHE),
         EstimatorEntry("mhe", "ekf", "hard dynamics, EKF arrival cost only", _build_mhe,

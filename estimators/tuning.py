@@ -11,16 +11,41 @@ from types import MappingProxyType
 
 from fricenv.plants.sui_johansen import OMEGA_NOISE_VAR
 
-__all__ = ["A_REF", "DEFAULT_ARRIVAL", "DEFAULT_EKF_TUNING", "GATE_CHI2", "HORIZON", "JUMP_MU_MAX", "MAX_REJECTIONS",
+__all__ = [
+           "AB_P0_STD",
+           "AB_Q_STD",
+           "A_REF",
+           "DEFAULT_ARRIVAL",
+           "DEFAULT_EKF_TUNING",
+           "GATE_CHI2",
+           "HORIZON",
+           "JUMP_MU_MAX",
+           "KT_P0_STD",
+           "KT_Q_STD",
+           "MAX_REJECTIONS",
            "MISMATCH_NIS_MAX",
-           "PAPER_TUNING", "P_FALSE", "REF_MARGIN_STD", "SLIP_PRIOR", "STATE_SCALES", "V_PRIOR"]
+           "MISMATCH_STATES",
+           "PAPER_TUNING",
+           "P_FALSE",
+           "REF_MARGIN_STD",
+           "SLIP_PRIOR",
+           "STATE_SCALES",
+           "V_PRIOR",
+]
+
+# ---- the mismatch states (estimators.quarter_car_model.EXTRA_NAMES) of the env estimators
+KT_P0_STD, KT_Q_STD = 0.2, 0.1  # brake gain k_T: prior spread, random walk per sample [-]
+AB_P0_STD, AB_Q_STD = 1.0, 0.05  # deceleration bias a_b: prior spread, random walk per sample [m/s^2]
+MISMATCH_STATES = ("k_T", "a_b")  # what the env entries of the registry carry
 
 # ---- the augmented EKF (estimators.ekf), also the MHE's arrival-cost filter
 DEFAULT_EKF_TUNING = {
     # initial prior spread, per state
-    "P0_std": {"v": 1.0, "slip": 0.05, "theta": 0.4, "B": 3.0, "C": 0.5, "E": 3.0},
+    "P0_std": {"v": 1.0, "slip": 0.05, "theta": 0.4, "B": 3.0, "C": 0.5, "E": 3.0, "k_T": KT_P0_STD,
+               "a_b": AB_P0_STD},
     # process noise per 10 ms sample: model error on v and slip, random walk on the parameters
-    "Q_std": {"v": 0.01, "slip": 0.01, "theta": 0.002, "B": 0.02, "C": 0.005, "E": 0.02},
+    "Q_std": {"v": 0.01, "slip": 0.01, "theta": 0.002, "B": 0.02, "C": 0.005, "E": 0.02, "k_T": KT_Q_STD,
+              "a_b": AB_Q_STD},
     "R": OMEGA_NOISE_VAR,  # wheel-speed noise variance [(rad/s)^2], Sui & Johansen Section IV
 }
 V_PRIOR = 19.0  # a priori initial speed [m/s], Sui & Johansen Section IV
@@ -36,8 +61,10 @@ PAPER_TUNING = MappingProxyType({
 # State scales D of the "scaled" reading (per group, as the paper tunes delta per group): the spread of the prior
 # per window state; chosen on cases 1-4 (seeds 0-2) for the RMS of v and slip after 0.5 s.
 STATE_SCALES = MappingProxyType({
-    "theta-only": MappingProxyType({"v": 0.3, "slip": 0.01, "theta": 0.04, "B": 2.0, "C": 0.4, "E": 2.0}),
-    "all": MappingProxyType({"v": 0.3, "slip": 0.03, "theta": 0.03, "B": 1.0, "C": 0.2, "E": 1.0}),
+    "theta-only": MappingProxyType({"v": 0.3, "slip": 0.01, "theta": 0.04, "B": 2.0, "C": 0.4, "E": 2.0,
+                                    "k_T": 0.1, "a_b": 0.5}),
+    "all": MappingProxyType({"v": 0.3, "slip": 0.03, "theta": 0.03, "B": 1.0, "C": 0.2, "E": 1.0, "k_T": 0.1,
+                             "a_b": 0.5}),
 })
 GATE_CHI2 = 25.0  # EKF-consistency gate of the arrival="ekf" MHE: squared Mahalanobis distance (estimators.mhe)
 # Default arrival cost per group: the EKF arrival cost, with process noise in the window, for both; the paper's

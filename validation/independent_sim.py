@@ -41,7 +41,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from validation import report_check
-from validation.quarter_car_oracle import true_model_oracle
 from validation.independent_model import (  # the physics; re-exported: tests and worker processes use these names
     AX_NOISE_RANGE,
     CATEGORIES,
@@ -83,6 +82,7 @@ from validation.independent_model import (  # the physics; re-exported: tests an
     stopping_distance,
 )
 from validation.measure_cli import measurement_parser, pool_map
+from validation.quarter_car_oracle import true_model_oracle
 from validation.real_artifacts import QuarterCarArtifacts, real_like_quarter_car, write_export
 from validation.true_noise import real_like_noise, white_noise
 

@@ -72,9 +72,8 @@ def run(args) -> int:
         summarize_policies,
         write_outputs,
     )
-    from fricenv.utils import write_json
-
     from fricenv.errors import InvalidInputError, one_line
+    from fricenv.utils import write_json
 
     out = Path(args.out)
     if args.seeds < 1 or args.workers < 1 or args.steps < 1:

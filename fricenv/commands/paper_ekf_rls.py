@@ -42,11 +42,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def _estimator(setup: str, name: str):
     """Estimator ``name`` (a registry entry) for a set-up: on the paper's plant (Table I of the set-up's model),
     with the a_x noise level of the set-up."""
+    from estimators.ekf_rls import DEFAULT_CORRECTION_GAIN
     from estimators.registry import get_estimator
     from fricenv.plants.quarter_car import PAPER_PARAMS
     from fricenv.plants.two_axle import TABLE_I
 
     options = {"ax_std": AX_STD_NOISY} if "noisy" in setup else {}
+    if name == "ekf-rls":  # the paper's figures: the torque feedforward alone (the registry's env entry closes the loop)
+        options["correction_gain"] = DEFAULT_CORRECTION_GAIN
     params = TABLE_I if setup.startswith("two-axle") else PAPER_PARAMS
     return get_estimator(name, ESTIMATORS).make(params, **options)
 

@@ -44,10 +44,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def make_estimator(name: str, estimated: tuple[str, ...]):
     """The estimator called ``name`` (an entry of :data:`estimators.registry.ESTIMATORS` among :data:`ESTIMATORS`)
-    for the given augmented parameters, on the paper's vehicle (Table I) and sample time."""
+    for the given augmented parameters, on the paper's vehicle (Table I) and sample time, on the paper's model
+    (no brake-gain or deceleration-bias state)."""
     from estimators.registry import get_estimator
 
-    return get_estimator(name, ESTIMATORS).make(estimated=estimated)
+    return get_estimator(name, ESTIMATORS).make(estimated=estimated, mismatch_states=())
 
 
 def run_case(pc, name: str) -> dict:

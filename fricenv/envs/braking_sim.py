@@ -25,15 +25,17 @@ import numpy as np
 from fricenv.envs.actions import check_action
 from fricenv.envs.config import N_NOISE, REACH_SPEED_SLACK, BrakingConfig, observation_layout
 from fricenv.envs.episode import (
+    CAR_OUTPUTS,
     NoiseBlocks,
     brake_torque,
     car_substeps_compiled,
+    cars_substeps_compiled,
     clip_float,
     lock_count,
     measure,
     step_reward,
-    stop_crossing,
 )
+from fricenv.envs.plant_substeps import PlantSubsteps
 from fricenv.envs.scenario import RESET_OPTION_KEYS, V0_DEFAULT, Scenario, limit_distance, resolve_scenario
 from fricenv.plants.braking_plant import BatchPlant, BrakingPlant
 from fricenv.plants.tire import MagicFormula
@@ -41,7 +43,7 @@ from fricenv.plants.tire import MagicFormula
 __all__ = ["BrakingSim"]
 
 
-class BrakingSim:
+class BrakingSim(PlantSubsteps):
     """``n`` quarter cars braking, each with its own scenario, noise generator and episode clock.
 
     Typical use::
@@ -54,13 +56,18 @@ class BrakingSim:
     them to keep them.
 
     Plant. By default the nominal quarter car, :class:`~fricenv.plants.braking_plant.BatchPlant` (the ROS2 substep
-    of :mod:`fricenv.plants.rosenbrock`, compiled). With ``scalar=True`` (one nominal car) a control step's
-    substeps run in one compiled call (:func:`fricenv.envs.episode.car_substeps_compiled`) and the rest of the step
-    in Python floats, several times faster for one car than numpy on 1-element arrays and equal to the batched path
-    to about 1e-12 (``BrakingEnv`` uses it). ``plant=`` takes any other
-    :class:`~fricenv.plants.braking_plant.BrakingPlant`, e.g. :class:`fricenv.envs.effect_plant.EffectPlant` (the
-    quarter car with unmodelled effects). Per-car state (``v``, ``omega``, ``slip``, ``mu``, ``x``, ``t``,
-    ``torque``, ``locked``, ``lock_seen``, ``stop_distance``, ``limit``, ...) is public, read-only by convention.
+    of :mod:`fricenv.plants.rosenbrock`, compiled): the substeps of a control step of every car, with their
+    accounting (distance, stop, friction change, braking energy), run in one compiled call
+    (:func:`fricenv.envs.episode.cars_substeps_compiled`), the rest of the step on arrays. With ``scalar=True``
+    (one nominal car) that car's substeps run in one compiled call
+    (:func:`fricenv.envs.episode.car_substeps_compiled`, the same arithmetic) and the rest of the step in Python
+    floats, several times faster for one car than numpy on 1-element arrays (``BrakingEnv`` uses it). ``plant=``
+    takes any other :class:`~fricenv.plants.braking_plant.BrakingPlant`, e.g.
+    :class:`fricenv.envs.effect_plant.EffectPlant` (the quarter car with unmodelled effects): its cars advance one
+    :meth:`~fricenv.plants.braking_plant.BrakingPlant.substep` at a time with the accounting on arrays
+    (:class:`fricenv.envs.plant_substeps.PlantSubsteps`). Per-car state (``v``, ``omega``, ``slip``, ``mu``,
+    ``x``, ``t``, ``torque``, ``locked``, ``lock_seen``, ``stop_distance``, ``limit``, ...) is public, read-only by
+    convention.
 
     :param n: number of cars.
     :param config: constants shared by all cars.
@@ -80,6 +87,7 @@ class BrakingSim:
                              f"got n={n}, plant={type(plant).__name__}")
         self.n = int(n)
         self.scalar = bool(scalar)
+        self._compiled = plant is None and not self.scalar  # the nominal cars: one compiled call per control step
         self.config = config if config is not None else BrakingConfig()
         c = self.config
         # Validate the defaults once (a throwaway generator: only the spec is checked here).
@@ -101,7 +109,9 @@ class BrakingSim:
         torque_scale = np.ones(len(self.layout))
         torque_scale[2] = c.t_max
         self._scale_t = self._scale * torque_scale
-        self._obs64 = np.zeros((self.n, len(self.layout)))
+        # the batched observation is scaled with one row per entry (contiguous rows over the cars), then transposed
+        self._obs_rows = np.zeros((len(self.layout), self.n))
+        self._scale_col, self._low_col, self._high_col = self._scale_t[:, None], self._low[:, None], self._high[:, None]
         self._obs_consts = tuple(zip(self._scale_t.tolist(), self._low.tolist(), self._high.tolist()))
         n = self.n
         z = lambda: np.zeros(n)
@@ -110,6 +120,10 @@ class BrakingSim:
         self.t = np.zeros(n, dtype=np.int64)  # control steps since reset
         self.road_a, self.road_b = np.zeros((n, 4)), np.zeros((n, 4))
         self.road = np.zeros((n, 4))  # road in use
+        # (B, C, E, theta, mu(1)) of the road in use and of the road after the change point, and 1 / (2 g mu_max)
+        # of each: the compiled substeps' roads
+        self._roads, self._inv_2g_mu_ab = np.zeros((n, 2, 5)), np.zeros((n, 2))
+        self._car_roads = self._roads[0]  # the one car's (scalar path)
         self.mu_peak_a, self.mu_peak_b, self.mu_peak = z(), z(), z()
         self.change_distance = np.full(n, np.inf)
         self._next_change = np.full(n, np.inf)  # change distance until the switch, then inf [m]
@@ -181,14 +195,15 @@ class BrakingSim:
             self.scenarios[i] = sc
             self.names[i] = sc.name
             self.plant.new_episode(int(i), rng)
-            rows.append((*self._road_constants(sc.road_a)[:4], *self._road_constants(sc.road_b)[:4], sc.road_a.mu_max,
+            rows.append((*self._road_constants(sc.road_a), *self._road_constants(sc.road_b), sc.road_a.mu_max,
                          sc.road_b.mu_max, sc.change_distance, sc.v0))
             self.noise.start(int(i), rng)
         if rows:  # one write per array instead of one per car
             table = np.array(rows, dtype=float)
-            self.road_a[idx], self.road_b[idx] = table[:, 0:4], table[:, 4:8]
-            self.mu_peak_a[idx], self.mu_peak_b[idx] = table[:, 8], table[:, 9]
-            self.change_distance[idx], self.v0[idx] = table[:, 10], table[:, 11]
+            self._roads[idx, 0], self._roads[idx, 1] = table[:, 0:5], table[:, 5:10]
+            self.road_a[idx], self.road_b[idx] = table[:, 0:4], table[:, 5:9]
+            self.mu_peak_a[idx], self.mu_peak_b[idx] = table[:, 10], table[:, 11]
+            self.change_distance[idx], self.v0[idx] = table[:, 12], table[:, 13]
 
     def _start_episodes(self, idx: np.ndarray) -> None:
         """Cars ``idx`` at the start of their drawn scenario: free rolling at ``v0``, clocks and figures cleared,
@@ -197,8 +212,10 @@ class BrakingSim:
         self.limit[idx] = limit_distance(self.v0[idx], c.v_stop, self.mu_peak_a[idx], self.mu_peak_b[idx],
                                          self.change_distance[idx], self._p.g)
         self.road[idx] = self.road_a[idx]
-        self.plant.set_road(idx, self.road[idx])
+        self._set_plant_road(idx)
         self.mu_peak[idx] = self.mu_peak_a[idx]
+        self._inv_2g_mu_ab[idx, 0] = 1.0 / (2.0 * self._p.g * self.mu_peak_a[idx])
+        self._inv_2g_mu_ab[idx, 1] = 1.0 / (2.0 * self._p.g * self.mu_peak_b[idx])
         self.switched[idx] = False
         self._next_change[idx] = self.change_distance[idx]
         self.v[idx] = self.v0[idx]
@@ -211,10 +228,10 @@ class BrakingSim:
         self.stop_distance[idx] = np.nan
         self.stop_time[idx] = np.nan
         if self.scalar:
-            self._set_car_roads()
+            self._inv_2g_mu = tuple(self._inv_2g_mu_ab[0].tolist())
         noise = self.noise.take(idx)
         w, v = self.omega[idx], self.v[idx]  # at rest in the ECU's view: no previous sample, no decelerations
-        for j, m in enumerate(measure(w, w, v, v, noise[:, 0], noise[:, 1], noise[:, 2], self._p.r, c.dt)):
+        for j, m in enumerate(measure(w, w, v, v, noise[0], noise[1], noise[2], self._p.r, c.dt)):
             self.meas[idx, j] = m
 
     def _make_plant(self, plant: BrakingPlant | None) -> BrakingPlant:
@@ -227,6 +244,13 @@ class BrakingSim:
         if plant.n != self.n or abs(plant.h - self._h) > 1e-12 * self._h:
             raise ValueError(f"plant has n={plant.n}, h={plant.h}; this sim needs n={self.n}, h={self._h}")
         return plant
+
+    def _set_plant_road(self, idx) -> None:
+        """The plant's road of cars ``idx``: the road in use (the nominal plant takes the compiled substeps' rows)."""
+        if self.scalar or self._compiled:
+            self.plant.set_road_constants(idx, self._roads[idx, 0])
+        else:
+            self.plant.set_road(idx, self.road[idx])
 
     def _road_constants(self, road: MagicFormula) -> tuple[float, ...]:
         """(B, C, E, theta, mu(1)) of a road as floats, cached per road (the compiled substeps' road)."""
@@ -258,109 +282,57 @@ class BrakingSim:
             self.noise.pos[_as_index_array(resetting, self.n)] = 0
         if self.scalar:
             return self._step_scalar(float(action.item(0)))
-        return self._step_batch(np.clip(np.asarray(action, dtype=float), -1.0, 1.0))
+        action = np.clip(np.asarray(action, dtype=float), -1.0, 1.0)
+        return self._step_compiled(action) if self._compiled else self._step_batch(action)
 
-    def _step_batch(self, action) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """:meth:`step` of ``n`` cars on arrays (``action`` checked and clipped)."""
-        a = action
+    def _step_compiled(self, action) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`step` of ``n`` nominal cars: the substeps and their accounting of every car in one compiled call
+        (:func:`~fricenv.envs.episode.cars_substeps_compiled`), the rest on arrays (``action`` checked, clipped)."""
         c, p, plant = self.config, self._p, self.plant
-        self.torque = brake_torque(a, self.torque, c)
-        plant.set_torque(self.torque)
-        v_start, w_start = self.v, self.omega
-        energy, travel = self._substeps_batch()
-        v, w = self.v, self.omega = plant.v.copy(), plant.omega.copy()
+        self.torque = brake_torque(action, self.torque, c)
+        v_start, w_start, stopped_before = self.v, self.omega, self.stopped
+        out = np.empty((len(CAR_OUTPUTS), self.n))  # rows of CAR_OUTPUTS; the new state arrays are its rows
+        cars_substeps_compiled(v_start, w_start, self.x, self.torque, self._roads, self._next_change, stopped_before,
+                               self._inv_2g_mu_ab, self._substeps, self._h, c.v_stop, p.r, p.m, p.J, p.Fz, out)
+        self.v, self.omega, self.x, energy, travel, stopped, stop_x, stop_sub, switched, self.slip, self.mu = out
+        self.stopped = stopped != 0.0
+        first = np.flatnonzero(self.stopped & ~stopped_before)  # the first stop of the episode, in this step
+        if first.size:
+            self.stop_distance[first] = stop_x[first]
+            self.stop_time[first] = (self.t[first] + stop_sub[first] / self._substeps) * c.dt
+        switch = np.flatnonzero(switched)
+        if switch.size:
+            self._switch_road(switch)
+        np.copyto(plant.v, self.v)
+        np.copyto(plant.omega, self.omega)
         self.t += 1
-        self.slip = plant.slip()
-        self.mu = plant.friction(self.slip)
-        self.lock_count = lock_count(self.lock_count, w, v, plant.r_eff, c)
+        return self._finish_step(v_start, w_start, energy, travel)
+
+    def _finish_step(self, v_start, w_start, energy, travel) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The rest of a batched step after the substeps: wheel lock, measurement, reward, episode end."""
+        c, p, v, w = self.config, self._p, self.v, self.omega
+        self.lock_count = lock_count(self.lock_count, w, v, self.plant.r_eff, c)
         self.locked = self.lock_count > c.lock_steps
         self.lock_seen |= self.locked
         noise = self.noise.take()
         self.meas[:, 0], self.meas[:, 1], self.meas[:, 2] = measure(
-            w, w_start, v, v_start, noise[:, 0], noise[:, 1], noise[:, 2], p.r, c.dt)
+            w, w_start, v, v_start, noise[0], noise[1], noise[2], p.r, c.dt)
         self.reward = step_reward(energy, travel, self.limit, self.locked, c.lock_penalty)
         self.terminated = self.stopped.copy()
         self.truncated = (self.t >= self._max_steps) & ~self.terminated
         return self.observe(), self.reward, self.terminated, self.truncated
 
-    def _substeps_batch(self) -> tuple[np.ndarray, np.ndarray]:
-        """The physics substeps of one control step: distance, stop crossing, road switch, braking energy.
-
-        Substep sums (scaled once at the end): ssum = sum of (v_k + v_k+1), so x = x0 + h/2 ssum (trapezoid: the
-        speed is nearly linear over a substep); esum = sum of (v_k^2 - v_k+1^2) and tsum = sum of (v_k + v_k+1)
-        while above v_stop, so the braking energy is esum / (2 g mu_peak) and the travel h/2 tsum.
-
-        :return: (energy, travel) [m] of the step per car.
-        """
-        c, plant, n, v_stop = self.config, self.plant, self.n, self.config.v_stop
-        half_h = 0.5 * self._h
-        v, x0 = self.v, self.x
-        ssum, esum, tsum, energy = np.zeros(n), np.zeros(n), np.zeros(n), np.zeros(n)
-        inv_2g_mu = 1.0 / (2.0 * self._p.g * self.mu_peak)
-        # Road switches are checked only if some car can reach its change point in this step.
-        check_switch = float((self._next_change - x0).min()) <= c.dt * (float(v.max()) + self._reach_slack)
-        v_above = v.min() > v_stop  # every car above the stop speed at the start of the substep
-        for sub in range(c.substeps):
-            v_new = plant.substep()[0]
-            s = v + v_new
-            d = (v - v_new) * s  # v_k^2 - v_k+1^2
-            new_above = v_new.min() > v_stop
-            if not (v_above and new_above):  # some car at or below the stop speed: mask it, locate crossings
-                active = v > v_stop
-                d *= active
-                s_act = s * active
-                cross = np.flatnonzero(active & (v_new <= v_stop))
-                if cross.size:
-                    d[cross], s_act[cross] = self._stop_in_substep(cross, sub, v, v_new, s, x0 + half_h * ssum)
-                s_tot = s_act
-            else:
-                s_tot = s
-            esum += d
-            tsum += s_tot
-            ssum += s
-            v, v_above = v_new, new_above
-            if check_switch:
-                switch = np.flatnonzero(x0 + half_h * ssum >= self._next_change)
-                if switch.size:
-                    energy[switch] += esum[switch] * inv_2g_mu[switch]  # close the energy segment on road a
-                    esum[switch] = 0.0
-                    self._switch_road(switch)
-                    inv_2g_mu = 1.0 / (2.0 * self._p.g * self.mu_peak)
-        energy += esum * inv_2g_mu  # sum of (v^2 drop) / (2 g mu_peak) over substeps [m]
-        self.x = x0 + ssum * half_h
-        return energy, tsum * half_h
-
-    def _stop_in_substep(self, cross, sub: int, v, v_new, s, x_start) -> tuple[np.ndarray, np.ndarray]:
-        """Record the stop of the cars ``cross`` that fall through ``v_stop`` in substep ``sub`` (first time only);
-        return their ``v^2`` drop and speed sum down to ``v_stop``."""
-        v_stop = self.config.v_stop
-        vc, vn = v[cross], v_new[cross]
-        frac, tfrac = stop_crossing(vc, vn, v_stop)
-        first = ~self.stopped[cross]  # cars stopping for the first time this episode
-        idx = cross[first]
-        self.stop_distance[idx] = (x_start[cross] + frac * (0.5 * self._h * s[cross]))[first]
-        self.stop_time[idx] = ((self.t[cross] + (sub + tfrac) / self.config.substeps) * self.config.dt)[first]
-        self.stopped[cross] = True
-        return vc * vc - v_stop * v_stop, frac * s[cross]
-
     def _switch_road(self, idx) -> None:
         """Cars ``idx`` pass their friction-change point: road b from now on."""
         self.road[idx] = self.road_b[idx]
-        if self.scalar:  # the road's constants are at hand: the car's road after the change, from now on
-            self._car_roads[0] = self._car_roads[1]
+        self._roads[idx, 0] = self._roads[idx, 1]
+        self._inv_2g_mu_ab[idx, 0] = self._inv_2g_mu_ab[idx, 1]
+        if self.scalar:
             self._inv_2g_mu = (self._inv_2g_mu[1], self._inv_2g_mu[1])
-            self.plant.set_road_constants(idx, self._car_roads[1])
-        else:
-            self.plant.set_road(idx, self.road[idx])
+        self._set_plant_road(idx)
         self.mu_peak[idx] = self.mu_peak_b[idx]
         self.switched[idx] = True
         self._next_change[idx] = np.inf
-
-    def _set_car_roads(self) -> None:
-        """The one car's road constants and ``1 / (2 g mu_max)`` before and after its change point (scalar path)."""
-        sc, g = self.scenarios[0], self._p.g
-        self._car_roads = np.array([self._road_constants(sc.road_a), self._road_constants(sc.road_b)])
-        self._inv_2g_mu = (1.0 / (2.0 * g * sc.road_a.mu_max), 1.0 / (2.0 * g * sc.road_b.mu_max))
 
     def _step_scalar(self, a: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """:meth:`step` of the one nominal car: its substeps in one compiled call, the rest in floats."""
@@ -410,37 +382,30 @@ class BrakingSim:
     # ------------------------------------------------------------------ observation
     def observe(self) -> np.ndarray:
         """Scaled, clipped float32 observation of every car, shape (n, obs_dim) (internal buffer)."""
-        c = self.config
         if self.scalar:
             m0, m1, m2 = self.meas[0].tolist()
             return self._observe_scalar(m0, m1, self.torque.item(0), m2, self.v.item(0), self.slip.item(0),
                                         self.mu.item(0))
-        buf = self._obs64
-        buf[:, 0:2] = self.meas[:, 0:2]
-        buf[:, 2] = self.torque
-        buf[:, 3] = self.meas[:, 2]
-        if c.observation == "oracle":
-            buf[:, 4], buf[:, 5], buf[:, 6] = self.v, self.slip, self.mu
-        buf /= self._scale_t  # one pass over (n, obs_dim): scale (torque by t_max), clip, cast to float32
-        np.maximum(buf, self._low, out=buf)
-        np.minimum(buf, self._high, out=buf)
-        self._obs[...] = buf
+        self._obs[...] = self._scaled_rows(self._obs_rows, self.meas, self.torque, self.v, self.slip, self.mu).T
         return self._obs
 
     def _observe_rows(self, idx: np.ndarray) -> np.ndarray:
         """:meth:`observe` for the cars ``idx`` only (the other rows are current already)."""
-        meas = self.meas[idx]
-        buf = np.empty((len(idx), len(self.layout)))
-        buf[:, 0:2] = meas[:, 0:2]
-        buf[:, 2] = self.torque[idx]
-        buf[:, 3] = meas[:, 2]
-        if self.config.observation == "oracle":
-            buf[:, 4], buf[:, 5], buf[:, 6] = self.v[idx], self.slip[idx], self.mu[idx]
-        buf /= self._scale_t
-        np.maximum(buf, self._low, out=buf)
-        np.minimum(buf, self._high, out=buf)
-        self._obs[idx] = buf
+        buf = np.empty((len(self.layout), len(idx)))
+        self._obs[idx] = self._scaled_rows(buf, self.meas[idx], self.torque[idx], self.v[idx], self.slip[idx],
+                                           self.mu[idx]).T
         return self._obs
+
+    def _scaled_rows(self, buf: np.ndarray, meas, torque, v, slip, mu) -> np.ndarray:
+        """``buf`` (obs_dim, k) filled with the observation entries of k cars, one row per entry, scaled (the torque
+        by t_max) and clipped."""
+        buf[0], buf[1], buf[2], buf[3] = meas[:, 0], meas[:, 1], torque, meas[:, 2]
+        if self.config.observation == "oracle":
+            buf[4], buf[5], buf[6] = v, slip, mu
+        buf /= self._scale_col
+        np.maximum(buf, self._low_col, out=buf)
+        np.minimum(buf, self._high_col, out=buf)
+        return buf
 
     @property
     def ratio(self) -> np.ndarray:

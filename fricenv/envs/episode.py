@@ -2,12 +2,14 @@
 the substep), the wheel-lock counter, the ECU measurement, the reward, written once.
 
 The model is a handful of pure functions below (:func:`brake_torque`, :func:`stop_crossing`, :func:`lock_count`,
-:func:`measure`, :func:`step_reward`, :func:`car_substeps`): plain arithmetic, so the same function serves floats
-(one car) and arrays over ``n`` cars. :class:`fricenv.envs.braking_sim.BrakingSim` steps its cars with them, in two
-drivers that differ only in control flow: ``n`` cars on any :class:`~fricenv.plants.braking_plant.BrakingPlant`
-as arrays, and the single nominal car (``Braking-v0``) through :func:`car_substeps_compiled`, the physics substeps
-of one control step compiled by numba from :func:`car_substeps` and the ROS2 substep of
-:mod:`fricenv.plants.rosenbrock`. Both give the same episode to about 1e-12 (tested).
+:func:`measure`, :func:`step_reward`, :func:`substep_accounting`, :func:`car_substeps`): plain arithmetic, so the
+same function serves floats (one car) and arrays over ``n`` cars. :class:`fricenv.envs.braking_sim.BrakingSim`
+steps its cars with them in three drivers that differ only in control flow: ``n`` nominal cars through
+:func:`cars_substeps_compiled` (the substeps of one control step of every car in one compiled call: the ROS2
+substep of :mod:`fricenv.plants.rosenbrock` compiled on arrays, the accounting car by car), the single nominal car
+(``Braking-v0``) through :func:`car_substeps_compiled` (:func:`car_substeps` compiled on floats), and ``n`` cars on
+any :class:`~fricenv.plants.braking_plant.BrakingPlant` substep by substep on arrays. The first two do each car's
+arithmetic in the same order (tested equal); the third gives the same episode to about 1e-12 (tested).
 
 Measurement model (an ABS ECU), per control step of ``dt``: wheel speed ``omega + e`` (variance
 ``OMEGA_NOISE_VAR``, Sui & Johansen Section V); wheel deceleration ``-r (omega_k - omega_{k-1}) / dt + e`` with the
@@ -27,11 +29,13 @@ import math
 import numpy as np
 
 from fricenv.envs.config import N_NOISE, NOISE_BLOCK
-from fricenv.plants.compiled import compile_formula, guard_cache, jit, substep_refined
+from fricenv.plants.compiled import compile_array_formula, compile_formula, guard_cache, jit, substep_refined
+from fricenv.plants.rosenbrock import REFINE_MIN_STEP, ros2_substep
 from fricenv.plants.tire import longitudinal_slip, magic_formula
 
-__all__ = ["TINY", "NoiseBlocks", "brake_torque", "car_substeps", "car_substeps_compiled", "clip_float", "lock_count", "measure",
-           "step_reward", "stop_crossing"]
+__all__ = ["CAR_OUTPUTS", "TINY", "NoiseBlocks", "brake_torque", "car_substeps", "car_substeps_compiled",
+           "cars_substeps_compiled", "clip_float", "lock_count", "measure", "step_reward", "stop_crossing",
+           "substep_accounting"]
 
 TINY = 1e-300  # guard of the crossing interpolations
 
@@ -111,17 +115,20 @@ class NoiseBlocks:
         self.pos[i] = 0
 
     def take(self, idx: np.ndarray | None = None) -> np.ndarray:
-        """The next scaled noise row of the cars ``idx`` (all if None), (len, N_NOISE); refills exhausted blocks."""
+        """The next scaled noise rows of the cars ``idx`` (all if None), one row per channel: (N_NOISE, len);
+        refills exhausted blocks."""
         if idx is None:  # every car: gather one row per car from the flat (n * NOISE_BLOCK, N_NOISE) view
             pos = self.pos
-            out = np.take(self._rows, self._row_base + pos, axis=0)
+            raw = np.take(self._rows, self._row_base + pos, axis=0)
             pos += 1
         else:
             pos = self.pos[idx]
-            out = self.blocks[idx, pos]
+            raw = self.blocks[idx, pos]
             pos += 1
             self.pos[idx] = pos
-        out *= self.std
+        out = np.empty((N_NOISE, len(raw)))
+        for j, sd in enumerate(self.sd):  # one contiguous row per channel
+            np.multiply(raw[:, j], sd, out=out[j])
         if pos.max() >= NOISE_BLOCK:
             for i in np.flatnonzero(self.pos >= NOISE_BLOCK):  # once every NOISE_BLOCK steps per car
                 self.refill(i)
@@ -140,9 +147,43 @@ class NoiseBlocks:
         return row
 
 
+def substep_accounting(sub, v, v_new, x, energy, travel, stopped, stop_x, stop_sub, switched, change, h, v_stop,
+                       inv_2g_mu, inv_2g_mu_b):
+    """The accounting of one physics substep of one car from ``v`` to ``v_new``: distance (trapezoid), braking
+    energy and travel above ``v_stop``, the stop located inside the substep, the friction change point.
+
+    :param sub: index of the substep in the control step.
+    :param v: speed before and :param v_new: after the substep [m/s]; :param x: distance before it [m].
+    :param energy: braking energy [m] and :param travel: travel [m] of the control step so far.
+    :param stopped: the car has stopped; :param stop_x: :param stop_sub: the stop's distance and substep position
+        if the first stop happened in this control step (NaN otherwise).
+    :param switched: the change point was passed in this control step; :param change: its distance [m] (inf once
+        passed in an earlier step).
+    :param h: substep [s]; :param v_stop: stop speed [m/s].
+    :param inv_2g_mu: ``1 / (2 g mu_max)`` of the road in use at the start of the step; :param inv_2g_mu_b: the
+        same after the change.
+    :return: (x, energy, travel, stopped, stop_x, stop_sub, switched) after the substep.
+    """
+    inv = inv_2g_mu_b if switched else inv_2g_mu
+    dx = (0.5 * h) * (v + v_new)
+    if v > v_stop:
+        if v_new <= v_stop:
+            frac, tfrac = stop_crossing(v, v_new, v_stop)
+            if not stopped:
+                stop_x, stop_sub = x + frac * dx, sub + tfrac
+            stopped = True
+            energy += (v * v - v_stop * v_stop) * inv
+            travel += frac * dx
+        else:
+            energy += (v - v_new) * (v + v_new) * inv
+            travel += dx
+    x += dx
+    return x, energy, travel, stopped, stop_x, stop_sub, switched or x >= change
+
+
 def car_substeps(v, w, x, Tb, roads, change, stopped, substeps, h, v_stop, inv_2g_mu, inv_2g_mu_b, r, m, J, Fz):
-    """The physics substeps of one control step of one nominal car, with the distance, the stop located inside its
-    substep and the friction change (the batched driver's accounting, on floats).
+    """The physics substeps of one control step of one nominal car with their accounting
+    (:func:`substep_accounting`), on floats.
 
     :param v: speed [m/s]; :param w: wheel speed [rad/s]; :param x: distance [m] at the start of the step.
     :param Tb: brake torque [N m] over the step.
@@ -156,34 +197,30 @@ def car_substeps(v, w, x, Tb, roads, change, stopped, substeps, h, v_stop, inv_2
         position in [0, substeps] (NaN if not this step), switched, slip, mu) at the end of the step.
     """
     B, C, E, theta, mu1 = roads[0, 0], roads[0, 1], roads[0, 2], roads[0, 3], roads[0, 4]
-    half_h = 0.5 * h
     energy = travel = 0.0
     stop_x = stop_sub = math.nan
     switched = False
     for sub in range(substeps):
-        v_new, w = substep_refined(v, w, Tb, B, C, E, theta, mu1, h, r, m, J, Fz)
-        dx = half_h * (v + v_new)
-        if v > v_stop:
-            if v_new <= v_stop:
-                frac, tfrac = stop_crossing(v, v_new, v_stop)
-                if not stopped:
-                    stop_x, stop_sub = x + frac * dx, sub + tfrac
-                stopped = True
-                energy += (v * v - v_stop * v_stop) * inv_2g_mu
-                travel += frac * dx
-            else:
-                energy += (v - v_new) * (v + v_new) * inv_2g_mu
-                travel += dx
-        x += dx
-        v = v_new
-        if x >= change:
+        v_new, w_new, broken = ros2_substep(v, w, Tb, B, C, E, theta, mu1, h, r, m, J, Fz)  # the common case
+        if broken and h > REFINE_MIN_STEP:  # rare: the refinement (recursive, so called, not inlined)
+            v_new, w_new = substep_refined(v, w, Tb, B, C, E, theta, mu1, h, r, m, J, Fz)
+        passed = switched
+        x, energy, travel, stopped, stop_x, stop_sub, switched = substep_accounting(
+            sub, v, v_new, x, energy, travel, stopped, stop_x, stop_sub, switched, change, h, v_stop, inv_2g_mu,
+            inv_2g_mu_b)
+        v, w = v_new, w_new
+        if switched and not passed:  # the road after the change point from the next substep on
             B, C, E, theta, mu1 = roads[1, 0], roads[1, 1], roads[1, 2], roads[1, 3], roads[1, 4]
-            change, inv_2g_mu, switched = math.inf, inv_2g_mu_b, True
     lam = longitudinal_slip(v, w, r)
     return v, w, x, energy, travel, stopped, stop_x, stop_sub, switched, lam, magic_formula(lam, B, C, E, theta)
 
 
 _car_substeps = compile_formula(car_substeps)
+_substep_accounting = compile_formula(substep_accounting)
+# the same formulas compiled on arrays: numba runs each statement as one loop over the cars
+_ros2_cars = compile_array_formula(ros2_substep)
+_slip_cars = compile_array_formula(longitudinal_slip)
+_mf_cars = compile_array_formula(magic_formula)
 
 
 @jit
@@ -192,6 +229,47 @@ def car_substeps_compiled(v, w, x, Tb, roads, change, stopped, substeps, h, v_st
     """:func:`car_substeps` compiled (numba, cached on disk)."""
     return _car_substeps(v, w, x, Tb, roads, change, stopped, substeps, h, v_stop, inv_2g_mu, inv_2g_mu_b, r, m, J,
                          Fz)
+
+
+# the rows of :func:`cars_substeps_compiled`'s output, the values :func:`car_substeps` returns
+CAR_OUTPUTS = ("v", "omega", "x", "energy", "travel", "stopped", "stop_x", "stop_sub", "switched", "slip", "mu")
+
+
+@jit
+def cars_substeps_compiled(v, w, x, Tb, roads, change, stopped, inv_2g_mu, substeps, h, v_stop, r, m, J, Fz, out):
+    """:func:`car_substeps` of ``n`` cars in one compiled call, the same arithmetic per car: each substep's ROS2
+    formula on arrays over the cars (:func:`fricenv.plants.rosenbrock.ros2_substep`), the refinement and
+    :func:`substep_accounting` car by car.
+
+    :param v: speeds, (n,); :param w: wheel speeds, (n,); :param x: distances, (n,); :param Tb: brake torques,
+        (n,); :param roads: (n, 2, 5), each car's ``roads`` of :func:`car_substeps`; :param change: (n,) change
+        points (inf once passed); :param stopped: (n,) bool; :param inv_2g_mu: (n, 2), each car's ``inv_2g_mu``
+        and ``inv_2g_mu_b``; the scalars as in :func:`car_substeps`.
+    :param out: (len(CAR_OUTPUTS), n) float array: row ``k`` receives the ``k``-th value of :func:`car_substeps`
+        (:data:`CAR_OUTPUTS`; the flags as 0.0 / 1.0).
+    """
+    n = v.shape[0]
+    B, C, E = roads[:, 0, 0].copy(), roads[:, 0, 1].copy(), roads[:, 0, 2].copy()
+    theta, mu1 = roads[:, 0, 3].copy(), roads[:, 0, 4].copy()
+    for i in range(n):
+        out[2, i], out[3, i], out[4, i], out[5, i] = x[i], 0.0, 0.0, stopped[i]
+        out[6, i], out[7, i], out[8, i] = math.nan, math.nan, 0.0
+    for sub in range(substeps):
+        v_new, w_new, broken = _ros2_cars(v, w, Tb, B, C, E, theta, mu1, h, r, m, J, Fz)
+        for i in range(n):
+            if broken[i] and h > REFINE_MIN_STEP:
+                v_new[i], w_new[i] = substep_refined(v[i], w[i], Tb[i], B[i], C[i], E[i], theta[i], mu1[i], h, r, m,
+                                                     J, Fz)
+            passed = out[8, i] != 0.0
+            out[2, i], out[3, i], out[4, i], out[5, i], out[6, i], out[7, i], out[8, i] = _substep_accounting(
+                sub, v[i], v_new[i], out[2, i], out[3, i], out[4, i], out[5, i] != 0.0, out[6, i], out[7, i], passed,
+                change[i], h, v_stop, inv_2g_mu[i, 0], inv_2g_mu[i, 1])
+            if out[8, i] != 0.0 and not passed:  # the road after the change point from the next substep on
+                B[i], C[i], E[i] = roads[i, 1, 0], roads[i, 1, 1], roads[i, 1, 2]
+                theta[i], mu1[i] = roads[i, 1, 3], roads[i, 1, 4]
+        v, w = v_new, w_new
+    lam = _slip_cars(v, w, r)
+    out[0], out[1], out[9], out[10] = v, w, lam, _mf_cars(lam, B, C, E, theta)
 
 
 guard_cache(globals(), ("fricenv.envs.episode",))

@@ -5,7 +5,8 @@ calls), with ``np`` rebound to :data:`FLOAT_NP` (numpy's ufuncs plus a scalar ``
 :mod:`fricenv.plants.tire` and :mod:`fricenv.plants.rosenbrock` run on floats in machine code without being written
 again. Compiled here: the ROS2 substep with the reference's refinement of unphysical substeps
 (:func:`substep_refined`, the scalar form of :func:`fricenv.plants.quarter_car.step` with ``substeps=1``) and its
-loop over ``n`` cars (:func:`substep_cars`). numba is imported by this module, which nothing imports at
+loop over ``n`` cars (:func:`substep_cars`). :func:`compile_array_formula` compiles the same functions for arrays
+(numpy itself for ``np``). numba is imported by this module, which nothing imports at
 ``import fricenv``; compiled code is cached on disk (``cache=True``, guarded by :func:`guard_cache`).
 """
 
@@ -25,7 +26,7 @@ from fricenv.plants.namespace import with_namespace
 from fricenv.plants.rosenbrock import REFINE_MIN_STEP, REFINE_PARTS
 from fricenv.plants.tire import longitudinal_slip, magic_formula
 
-__all__ = ["FLOAT_NP", "compile_formula", "guard_cache", "magic_formula_f", "slip_f", "substep_cars",
+__all__ = ["FLOAT_NP", "compile_array_formula", "compile_formula", "guard_cache", "magic_formula_f", "slip_f", "substep_cars",
            "substep_refined"]
 
 # the numpy error model: a float division by zero gives inf or NaN as in numpy (no Python exception check per
@@ -49,7 +50,8 @@ FLOAT_NP.__dict__.update({k: getattr(np, k) for k in ("arctan", "sin", "cos", "e
                                                       "isfinite")})
 FLOAT_NP.where = _where
 
-_COMPILED: dict = {}  # Python function -> its compiled copy
+_COMPILED: dict = {}  # Python function -> its compiled copy on floats
+_COMPILED_ARRAYS: dict = {}  # Python function -> its compiled copy on arrays
 
 
 def compile_formula(func):
@@ -57,6 +59,14 @@ def compile_formula(func):
     for numpy (:func:`~fricenv.plants.namespace.with_namespace`), so that the library's own numpy formulas run
     compiled on floats."""
     return with_namespace(func, FLOAT_NP, numba.njit(error_model="numpy"), _COMPILED)
+
+
+def compile_array_formula(func):
+    """numba-compile ``func`` (and every plain Python function of fricenv it calls) for arrays, with numpy itself
+    for ``np``: numba runs each statement of elementwise arithmetic as one loop over the elements, which keeps the
+    arithmetic of :func:`compile_formula`'s copy per element (IEEE operations and the same libm calls) and lets the
+    elements' independent evaluations overlap in the processor."""
+    return with_namespace(func, np, numba.njit(error_model="numpy"), _COMPILED_ARRAYS)
 
 
 _ros2 = compile_formula(rosenbrock.ros2_substep)

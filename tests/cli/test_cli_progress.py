@@ -63,13 +63,12 @@ def test_line_sink_writes_stage_and_throttled_progress_lines(monkeypatch):
     monkeypatch.setattr(progress.time, "monotonic", lambda: clock[0])
     out = io.StringIO()
     sink = progress.LineSink("fricenv paper x", out, interval=10.0)
-    with progress.use_sink(sink):
-        with progress.task("episodes", total=5) as advance:
-            for _ in range(5):
-                clock[0] += 4.0
-                with progress.task("inner"):  # nested: no start or end line of its own
-                    pass
-                advance()
+    with progress.use_sink(sink), progress.task("episodes", total=5) as advance:
+        for _ in range(5):
+            clock[0] += 4.0
+            with progress.task("inner"):  # nested: no start or end line of its own
+                pass
+            advance()
     lines = out.getvalue().splitlines()
     assert lines[0] == "fricenv paper x: episodes: started (5 steps)"
     assert lines[1:-1] == ["fricenv paper x: episodes: 3/5 (12 s)"]  # one line per 10 s, not one per step

@@ -84,8 +84,9 @@ def test_the_toy_effect_is_drawn_and_fitted_by_the_gap_tool(toy):
     """A log with a dragging brake: the validation draw makes the effect, and a candidate fit through the gap
     tool's windows and least squares recovers T_res within 15 %."""
     from fricenv.gap.quarter_car.candidates import fit_candidate
-    from fricenv.gap.quarter_car.diagnose import DiagnoseConfig, fit_nominal, fold_data
+    from fricenv.gap.quarter_car.diagnose import DiagnoseConfig, fit_nominal
     from fricenv.gap.quarter_car.simulate import simulate_log
+    from fricenv.gap.quarter_car.stats import fold_data
     from fricenv.gap.quarter_car.validate import _random_effect
     from fricenv.gap.quarter_car.windows import prepare
     from fricenv.plants.quarter_car import PAPER_PARAMS

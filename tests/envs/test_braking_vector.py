@@ -16,7 +16,8 @@ from fricenv.envs.braking import BrakingEnv
 from fricenv.envs.braking_sim import BrakingSim
 from fricenv.envs.braking_vector import BrakingVectorEnv
 from fricenv.envs.config import BrakingConfig
-from fricenv.plants import compiled
+from fricenv.envs.episode import CAR_OUTPUTS, car_substeps_compiled, cars_substeps_compiled
+from fricenv.plants import compiled, rosenbrock
 from fricenv.plants import quarter_car as qc
 from fricenv.plants.braking_plant import BatchPlant
 from fricenv.plants.tire import ROADS
@@ -26,6 +27,7 @@ SHORT_V0 = (4.0, 7.0)
 ROADS_PER_ENV = ["dry", "ice", "random", "wet->snow"]
 OBS_TOL = 1e-5  # float32 observations of the scalar (single env) and batched (vector env) paths
 STATE_TOL = 1e-12  # float64 truth of the two paths, relative (compiled and numpy transcendentals may round apart)
+P = qc.PAPER_PARAMS
 
 
 def _random_states(n: int, seed: int):
@@ -71,12 +73,44 @@ def test_compiled_substeps_equal_the_numpy_reference():
     assert np.max(np.abs(one[:, 1] - ref_w) / scale_w) < 1e-12
 
 
+def test_batched_compiled_substeps_are_the_one_car_substeps():
+    """The batched kernel (the ROS2 formula on arrays over the cars, the accounting car by car) gives every car
+    what the one-car kernel gives it: stops inside a substep, friction changes, wheel lock and refined substeps."""
+    n, h, substeps, v_stop = 3000, 0.002, 5, 0.5
+    v, w, Tb, _ = _random_states(n, 4)
+    rng = np.random.default_rng(5)
+    v[150:400] = v_stop + rng.uniform(0.0, 0.05, 250)  # stopping within the step
+    w[150:400] = v[150:400] / P.r * rng.uniform(0.0, 1.0, 250)
+    Tb[150:400] = rng.uniform(500.0, 3000.0, 250)
+    rows = np.array([(*r.as_array(), r.mu_locked) for r in ROADS.values()])
+    roads = rows[rng.integers(len(rows), size=(n, 2))]  # (n, 2, 5): the road in use and after the change point
+    x = rng.uniform(0.0, 50.0, n)
+    change = np.where(rng.random(n) < 0.5, x + rng.uniform(0.0, 0.2, n), np.inf)  # half pass it in this step
+    stopped = rng.random(n) < 0.1
+    inv = 1.0 / (2.0 * 9.81 * rng.uniform(0.1, 1.2, (n, 2)))
+    out = np.empty((len(CAR_OUTPUTS), n))
+    cars_substeps_compiled(v, w, x, Tb, roads, change, stopped, inv, substeps, h, v_stop, P.r, P.m, P.J, P.Fz, out)
+    one = np.array([car_substeps_compiled(v[i], w[i], x[i], Tb[i], roads[i], change[i], stopped[i], substeps, h,
+                                          v_stop, inv[i, 0], inv[i, 1], P.r, P.m, P.J, P.Fz) for i in range(n)],
+                   dtype=float).T
+    np.testing.assert_allclose(out, one, rtol=STATE_TOL, atol=STATE_TOL)
+    got = dict(zip(CAR_OUTPUTS, out))
+    assert np.isfinite(got["stop_x"]).sum() > 100 and got["switched"].sum() > 500  # stops and changes happened
+    assert np.sum(got["omega"] == 0.0) > 100  # locked wheels
+    broken = rosenbrock.ros2_substep(v, w, Tb, *roads[:, 0].T, h, P.r, P.m, P.J, P.Fz)[2]
+    assert broken.sum() > 10  # the refinement ran
+
+
 def test_scalar_core_path_equals_batched_path():
+    """One car stepped in floats, by the batched compiled kernel and by the plant's substeps with the accounting on
+    arrays (the path of any plant): the same episode."""
     cfg = BrakingConfig(observation="oracle")
     acts = np.random.default_rng(3).uniform(-1.2, 1.2, 400)
     runs = []
-    for scalar in (False, True):
-        sim = BrakingSim(1, cfg, road="ice->dry", v0=(5.0, 8.0), change_distance=(1.0, 3.0), scalar=scalar)
+    for kind in ("scalar", "compiled", "plant"):
+        plant = BatchPlant(1, cfg.dt / cfg.substeps) if kind == "plant" else None
+        sim = BrakingSim(1, cfg, road="ice->dry", v0=(5.0, 8.0), change_distance=(1.0, 3.0), scalar=kind == "scalar",
+                         plant=plant)
         sim.reset_cars(None, [np.random.default_rng(7)])
         rows = []
         for a in acts:
@@ -86,6 +120,7 @@ def test_scalar_core_path_equals_batched_path():
                 sim.reset_cars([0])
         runs.append(np.array(rows))
     np.testing.assert_allclose(runs[1], runs[0], rtol=STATE_TOL, atol=STATE_TOL)
+    np.testing.assert_allclose(runs[2], runs[0], rtol=STATE_TOL, atol=STATE_TOL)
     assert runs[0][:, 8].sum() >= 3  # several episodes ended (terminated column)
     assert runs[0][:, 13].sum() > 0  # the friction change happened (switched column)
     with pytest.raises(ValueError, match="n == 1"):

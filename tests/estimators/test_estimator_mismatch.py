@@ -54,3 +54,4 @@ def test_a_reinitialisation_in_a_slip_dip_keeps_the_speed(lag_stop):
     assert truth["v"][k] - wheel > 1.5  # the wheel is no speed to restart from here
     assert abs(x[0] - truth["v"][k]) <= 1.5
     assert x[0] * (1.0 - x[1]) == pytest.approx(wheel, abs=1e-9)  # eq. (7) holds at the restart
+

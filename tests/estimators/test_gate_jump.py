@@ -16,6 +16,7 @@ from estimators.base import Health
 from estimators.batched import make_batched
 from estimators.ekf_rls import QuarterCarEkfRls
 from estimators.jump import JUMP_MU_MAX, jump_test
+from estimators.registry import get_estimator
 from fricenv.plants import quarter_car as qc
 from fricenv.plants import sui_johansen as sj
 from fricenv.plants.tire import DRY, ICE
@@ -91,7 +92,7 @@ def test_batched_gate_takes_the_same_jumps():
     omega, a_x, T_b = (np.stack([log[:, j] for log in logs], axis=1) for j in range(3))
     batched = make_batched("ekf-rls", 3, P, DT)
     batched.reset(v0=omega[0] * P.r)
-    singles = [QuarterCarEkfRls(dt=DT, p=P) for _ in logs]
+    singles = [get_estimator("ekf-rls").make(P, DT) for _ in logs]
     for i, est in enumerate(singles):
         est.reset(v0=float(omega[0, i]) * P.r)
     jumps = np.zeros(3, dtype=int)

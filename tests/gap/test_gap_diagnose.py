@@ -357,7 +357,7 @@ def test_snow_nominal_open_loop_is_none():
 
 
 def _fit_from_residuals(resid):
-    from fricenv.gap.quarter_car.diagnose import CandidateFit
+    from fricenv.gap.quarter_car.stats import CandidateFit
 
     wm = np.mean(resid**2, axis=-1)
     return CandidateFit(effect="x", names=(), x=np.zeros(0), train_mse=0.0, test_mse=float(np.mean(wm)),
@@ -367,7 +367,7 @@ def _fit_from_residuals(resid):
 def test_paired_z_is_the_gain_over_its_noise_spread():
     from types import SimpleNamespace
 
-    from fricenv.gap.quarter_car.diagnose import paired_z
+    from fricenv.gap.quarter_car.stats import paired_z
 
     rng = np.random.default_rng(0)
     d = SimpleNamespace(horizon=10, channels=["omega"])
@@ -386,8 +386,8 @@ def test_paired_z_one_window_decides_neither_way():
     loss outweighed the other 50 windows' gain."""
     from types import SimpleNamespace
 
-    from fricenv.gap.quarter_car.diagnose import CandidateFit, DiagnoseConfig, paired_z
-    from fricenv.gap.quarter_car.stats import soft_cap
+    from fricenv.gap.quarter_car.diagnose import DiagnoseConfig
+    from fricenv.gap.quarter_car.stats import CandidateFit, paired_z, soft_cap
 
     def fit(resid):  # window errors soft-capped as the diagnosis' are (window_mse)
         wm = soft_cap(np.mean(resid**2, axis=-1))
@@ -412,7 +412,7 @@ def test_paired_z_discounts_a_nuisance_state_fitted_on_each_window():
     without the discount reads as z = sqrt(W) / 2 on pure noise."""
     from types import SimpleNamespace
 
-    from fricenv.gap.quarter_car.diagnose import paired_z
+    from fricenv.gap.quarter_car.stats import paired_z
 
     rng = np.random.default_rng(1)
     d = SimpleNamespace(horizon=10, channels=["omega"])
@@ -427,7 +427,8 @@ def test_paired_z_discounts_a_nuisance_state_fitted_on_each_window():
 
 
 def test_robust_gap_leaves_out_the_worst_windows_only():
-    from fricenv.gap.quarter_car.diagnose import TRIM_SHARE, gap_of, robust_gap
+    from fricenv.gap.quarter_car.diagnose import gap_of
+    from fricenv.gap.quarter_car.stats import TRIM_SHARE, robust_gap
 
     wm = np.ones(100)
     wm[: int(TRIM_SHARE * 100)] = 25.0  # lock-up windows no model predicts
@@ -443,7 +444,8 @@ def test_a_gap_only_in_the_lock_up_windows_is_not_real():
     """A nominal model within the noise on all windows but the few lock-ups it cannot time (held-out gap above
     gap_none, robust gap 0) fits within the noise: ``none``, not ``unexplained``; a gap spread over the windows is
     real, and so is any gap a significant candidate closes."""
-    from fricenv.gap.quarter_car.diagnose import TRIM_SHARE, gap_is_real
+    from fricenv.gap.quarter_car.diagnose import gap_is_real
+    from fricenv.gap.quarter_car.stats import TRIM_SHARE
 
     lock_ups = np.ones(100)
     lock_ups[: int(TRIM_SHARE * 100)] = 40.0
@@ -476,7 +478,7 @@ def test_least_squares_starts_come_from_distinct_roads():
 
 def _fit_with(effect, values, folds=None):
     from fricenv.effects.quarter_car import EFFECT_PARAMS
-    from fricenv.gap.quarter_car.diagnose import CandidateFit
+    from fricenv.gap.quarter_car.stats import CandidateFit
 
     names = ("B", "C", "E", "theta") + tuple(EFFECT_PARAMS[effect])
     road = list(WET.as_array())
@@ -513,7 +515,8 @@ def test_a_range_edge_in_one_fold_is_enough():
 
 
 def test_mu_change_starts_lie_at_distinct_places_and_find_the_change(diagnosed):
-    from fricenv.gap.quarter_car.diagnose import change_point_starts, fold_data, param_names
+    from fricenv.gap.quarter_car.diagnose import change_point_starts, param_names
+    from fricenv.gap.quarter_car.stats import fold_data
 
     _, dg = diagnosed("mu_change")
     fold = fold_data(dg.data, 0)

@@ -97,14 +97,9 @@ from fricenv.gap.quarter_car.params import ROAD_NAMES, param_names, road_of
 from fricenv.gap.quarter_car.periodic import periodic_line
 from fricenv.gap.quarter_car.selection import forward_select, split_params
 from fricenv.gap.quarter_car.stats import (
-    TRIM_SHARE,
-    WINDOW_MSE_CAP,
     CandidateFit,
     cross_fitted,
     fold_data,
-    improvement_z,
-    paired_t,
-    paired_z,
     robust_gap,
 )
 from fricenv.gap.quarter_car.verdict import at_range_edge, explains, gap_is_real, significant
@@ -115,9 +110,6 @@ from fricenv.plants import quarter_car as qc
 __all__ = [
     "FIT_LOSSES",
     "ROAD_NAMES",
-    "TRIM_SHARE",
-    "WINDOW_MSE_CAP",
-    "CandidateFit",
     "Data",
     "DiagnoseConfig",
     "Diagnosis",
@@ -130,15 +122,10 @@ __all__ = [
     "estimate_noise",
     "fit_candidate",
     "fit_time_split",
-    "fold_data",
     "gap_is_real",
     "gap_of",
-    "improvement_z",
     "load_params",
-    "paired_t",
-    "paired_z",
     "param_names",
-    "robust_gap",
     "score",
     "window_nuisances",
     "window_residuals",

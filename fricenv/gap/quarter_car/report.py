@@ -19,7 +19,8 @@ from fricenv.gap.core.report import (
     plot_regimes,
     report_dict,
 )
-from fricenv.gap.quarter_car.diagnose import TRIM_SHARE, Diagnosis
+from fricenv.gap.quarter_car.diagnose import Diagnosis
+from fricenv.gap.quarter_car.stats import TRIM_SHARE
 
 __all__ = ["CANDIDATE_KEYS", "REPORT_KEYS", "report_dict", "report_markdown", "summary_line", "write_report"]
 
