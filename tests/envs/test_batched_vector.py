@@ -36,8 +36,8 @@ def _lockstep(ours, ref, seed: int | None, steps: int) -> list[dict]:
     return ended
 
 
-@pytest.mark.parametrize("estimator", ["ekf-rls", "mhe"])
-@pytest.mark.parametrize("same_step", [False, True])
+@pytest.mark.parametrize("same_step, estimator", [(False, "ekf-rls"), (True, "ekf-rls"), (False, "mhe"),
+                                                  pytest.param(True, "mhe", marks=pytest.mark.slow)])
 def test_batched_estimator_vector_env_equals_wrapped_single_envs(same_step, estimator):
     kw = {"v0": SHORT_V0, "change_distance": (0.5, 2.0)}
     mode = "SameStep" if same_step else "NextStep"

@@ -34,8 +34,8 @@ CASES = [(road, profile) for road in (DRY, WET, SNOW, ICE) for profile in ("belo
 CASES += [(DRY, "modulated"), (WET, "modulated")]
 
 
-# The longest references (a lock-up on ice, the modulated wet stop) run with the slow tests.
-SLOW_CASES = {("ice", "lock_up"), ("wet", "modulated")}
+# The longest references (a lock-up on ice, the modulated wet and dry stops) run with the slow tests.
+SLOW_CASES = {("ice", "lock_up"), ("wet", "modulated"), ("dry", "modulated")}
 
 
 @pytest.mark.parametrize("road, profile", [pytest.param(r, prof, marks=pytest.mark.slow)
