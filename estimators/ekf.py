@@ -197,7 +197,8 @@ class QuarterCarEKF(Estimator):
         for label, given in (("P0_std", P0_std), ("Q_std", Q_std)):
             bad = [k for k in (given or {}) if k not in ("v", "slip") + PARAM_NAMES + EXTRA_NAMES]
             if bad:
-                raise EstimatorConfigError(f"{label} keys {bad} unknown; valid: v, slip, {', '.join(PARAM_NAMES)}")
+                raise EstimatorConfigError(f"{label} keys {bad} unknown; valid: v, slip, "
+                                           f"{', '.join(PARAM_NAMES + EXTRA_NAMES)}")
         p0 = {**DEFAULT_EKF_TUNING["P0_std"], **(P0_std or {})}
         q = {**DEFAULT_EKF_TUNING["Q_std"], **(Q_std or {})}
         names = self.model.names

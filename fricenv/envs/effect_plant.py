@@ -3,8 +3,8 @@ simulator under the braking episode (``gymnasium.make("fricenv/Braking-v0", effe
 
 The cars are the elements of one :class:`fricenv.effects.quarter_car.EffectSimulator` (its public API:
 ``ModelBatch.from_effects``, ``replace_element``, ``reset_elements``, ``step``, ``tire_force``, ``accel``) run with
-a sample time of one physics substep and one substep per sample, so the episode sees every substep (the stop and a friction change are located inside it, as on the nominal
-plant). The actuator effects are exact over a zero-order-held substep (the lag's exact solution, the delay's exact
+a sample time of one physics substep and one substep per sample, so the episode sees every substep (the stop and a
+friction change are located inside it, as on the nominal plant). The actuator effects are exact over a zero-order-held substep (the lag's exact solution, the delay's exact
 average), so this equals the effect simulator's own 10 ms samples of 5 substeps. A car's element is replaced at
 each of its episodes, with the episode's effects (fixed, or drawn from the car's generator by an
 :class:`~fricenv.envs.effect_spec.EffectRandomization`).
@@ -52,7 +52,6 @@ class EffectPlant:
         element = ModelBatch.from_effects(self.road[0], self.fixed, p)
         self.sim = EffectSimulator(ModelBatch.stack([element] * self.n), self.h, int(max_substeps) + 2, p, 1, t0=0.0)
         self._started = np.zeros(self.n, dtype=bool)
-        self.r_eff = self.sim.batch.r_eff.copy()
         self.v, self.omega, self.Tb = np.zeros(self.n), np.zeros(self.n), np.zeros(self.n)
 
     def new_episode(self, i: int, rng: np.random.Generator) -> None:
@@ -60,8 +59,12 @@ class EffectPlant:
         effects = self.randomization.draw(rng) if self.randomization is not None else self.fixed
         self.effects[i] = effects
         self.sim.replace_element(i, ModelBatch.from_effects(self.road[i], effects, self.p))
-        self.r_eff[i] = float(self.sim.batch.r_eff[i])
         self._started[i] = True
+
+    @property
+    def r_eff(self) -> np.ndarray:
+        """Rolling radius of every car [m] (its episode's ``radius_error``, else the nominal radius)."""
+        return self.sim.batch.r_eff
 
     def reset(self, idx, v, omega) -> None:
         """Set the speeds of cars ``idx`` (lag state 0, transient slip at the slip of the state)."""
@@ -83,9 +86,7 @@ class EffectPlant:
         self.Tb = np.array(np.broadcast_to(np.asarray(Tb, dtype=float), (self.n,)))
 
     def substep(self) -> tuple[np.ndarray, np.ndarray]:
-        """One substep of every car; new state arrays."""
-        if not np.all(self._started):
-            raise RuntimeError("EffectPlant: reset the car (new_episode) before stepping it")
+        """One substep of every car (each reset first, which :meth:`reset` checks); new state arrays."""
         v, w = self.sim.step(self.Tb)
         self.v, self.omega = v.copy(), w.copy()
         return self.v, self.omega

@@ -90,8 +90,8 @@ from fricenv.gap.quarter_car.data import Data
 from fricenv.gap.quarter_car.drift import drift_test, fit_time_split
 from fricenv.gap.quarter_car.excitation import excitation, untestable
 from fricenv.gap.quarter_car.findings import Findings
-from fricenv.gap.quarter_car.guard import guard
 from fricenv.gap.quarter_car.fitting import distinct_starts, fit_nominal, refine_noise, score
+from fricenv.gap.quarter_car.guard import guard
 from fricenv.gap.quarter_car.localise import localise, tests_table
 from fricenv.gap.quarter_car.params import ROAD_NAMES, param_names, road_of
 from fricenv.gap.quarter_car.periodic import periodic_line
