@@ -23,19 +23,21 @@ from typing import Any
 import numpy as np
 
 from fricenv.envs.actions import check_action
-from fricenv.envs.config import N_NOISE, REACH_SPEED_SLACK, BrakingConfig, observation_layout
+from fricenv.envs.config import N_NOISE, BrakingConfig, observation_layout
 from fricenv.envs.episode import (
+    ACCOUNTING_ROWS,
     CAR_OUTPUTS,
     NoiseBlocks,
     brake_torque,
     car_substeps_compiled,
+    cars_accounting,
     cars_substeps_compiled,
     clip_float,
     lock_count,
     measure,
+    start_accounting,
     step_reward,
 )
-from fricenv.envs.plant_substeps import PlantSubsteps
 from fricenv.envs.scenario import RESET_OPTION_KEYS, V0_DEFAULT, Scenario, limit_distance, resolve_scenario
 from fricenv.plants.braking_plant import BatchPlant, BrakingPlant
 from fricenv.plants.tire import MagicFormula
@@ -43,7 +45,7 @@ from fricenv.plants.tire import MagicFormula
 __all__ = ["BrakingSim"]
 
 
-class BrakingSim(PlantSubsteps):
+class BrakingSim:
     """``n`` quarter cars braking, each with its own scenario, noise generator and episode clock.
 
     Typical use::
@@ -64,8 +66,8 @@ class BrakingSim(PlantSubsteps):
     floats, several times faster for one car than numpy on 1-element arrays (``BrakingEnv`` uses it). ``plant=``
     takes any other :class:`~fricenv.plants.braking_plant.BrakingPlant`, e.g.
     :class:`fricenv.envs.effect_plant.EffectPlant` (the quarter car with unmodelled effects): its cars advance one
-    :meth:`~fricenv.plants.braking_plant.BrakingPlant.substep` at a time with the accounting on arrays
-    (:class:`fricenv.envs.plant_substeps.PlantSubsteps`). Per-car state (``v``, ``omega``, ``slip``, ``mu``,
+    :meth:`~fricenv.plants.braking_plant.BrakingPlant.substep` at a time, each substep's accounting in one compiled
+    call (:func:`fricenv.envs.episode.cars_accounting`, the nominal cars' own). Per-car state (``v``, ``omega``, ``slip``, ``mu``,
     ``x``, ``t``, ``torque``, ``locked``, ``lock_seen``, ``stop_distance``, ``limit``, ...) is public, read-only by
     convention.
 
@@ -102,7 +104,6 @@ class BrakingSim(PlantSubsteps):
         self._p = c.params
         self.plant = self._make_plant(plant)
         self._road_rows: dict[MagicFormula, tuple[float, ...]] = {}  # (B, C, E, theta, mu(1)) per road
-        self._reach_slack = REACH_SPEED_SLACK
         self._substeps, self._max_steps, self._lock_steps = c.substeps, c.max_steps, c.lock_steps
         # Observation scales with the torque entry's times t_max (the value scaled is T_b itself); scalar path:
         # (scale, low, high) per entry; noise standard deviations.
@@ -283,7 +284,7 @@ class BrakingSim(PlantSubsteps):
         if self.scalar:
             return self._step_scalar(float(action.item(0)))
         action = np.clip(np.asarray(action, dtype=float), -1.0, 1.0)
-        return self._step_compiled(action) if self._compiled else self._step_batch(action)
+        return self._step_compiled(action) if self._compiled else self._step_plant(action)
 
     def _step_compiled(self, action) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """:meth:`step` of ``n`` nominal cars: the substeps and their accounting of every car in one compiled call
@@ -294,19 +295,51 @@ class BrakingSim(PlantSubsteps):
         out = np.empty((len(CAR_OUTPUTS), self.n))  # rows of CAR_OUTPUTS; the new state arrays are its rows
         cars_substeps_compiled(v_start, w_start, self.x, self.torque, self._roads, self._next_change, stopped_before,
                                self._inv_2g_mu_ab, self._substeps, self._h, c.v_stop, p.r, p.m, p.J, p.Fz, out)
-        self.v, self.omega, self.x, energy, travel, stopped, stop_x, stop_sub, switched, self.slip, self.mu = out
-        self.stopped = stopped != 0.0
-        first = np.flatnonzero(self.stopped & ~stopped_before)  # the first stop of the episode, in this step
-        if first.size:
-            self.stop_distance[first] = stop_x[first]
-            self.stop_time[first] = (self.t[first] + stop_sub[first] / self._substeps) * c.dt
-        switch = np.flatnonzero(switched)
+        self.v, self.omega, self.slip, self.mu = out[0], out[1], out[9], out[10]
+        energy, travel = self._close_accounting(out[2:9], stopped_before)
+        switch = np.flatnonzero(out[8])
         if switch.size:
             self._switch_road(switch)
         np.copyto(plant.v, self.v)
         np.copyto(plant.omega, self.omega)
         self.t += 1
         return self._finish_step(v_start, w_start, energy, travel)
+
+    def _step_plant(self, action) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`step` of ``n`` cars of any plant (``action`` checked, clipped): the plant advanced one substep at a
+        time, each substep's accounting in one compiled call (:func:`~fricenv.envs.episode.cars_accounting`); a car
+        passing its change point drives on road b from the next substep."""
+        c, plant = self.config, self.plant
+        self.torque = brake_torque(action, self.torque, c)
+        plant.set_torque(self.torque)
+        v_start, w_start, stopped_before = self.v, self.omega, self.stopped
+        acc = np.empty((len(ACCOUNTING_ROWS), self.n))
+        start_accounting(self.x, stopped_before, acc)
+        v = v_start
+        for sub in range(self._substeps):
+            v_new = plant.substep()[0]
+            cars_accounting(sub, v, v_new, acc, self._next_change, self._h, c.v_stop, self._inv_2g_mu_ab)
+            switch = np.flatnonzero((acc[6] != 0.0) & ~self.switched)
+            if switch.size:
+                self._switch_road(switch)
+            v = v_new
+        self.v, self.omega = plant.v.copy(), plant.omega.copy()
+        self.slip = plant.slip()
+        self.mu = plant.friction(self.slip)
+        energy, travel = self._close_accounting(acc, stopped_before)
+        self.t += 1
+        return self._finish_step(v_start, w_start, energy, travel)
+
+    def _close_accounting(self, acc, stopped_before) -> tuple[np.ndarray, np.ndarray]:
+        """Take a control step's accounting (:data:`~fricenv.envs.episode.ACCOUNTING_ROWS`): distance, stop flag, the
+        first stop of the episode located inside its substep; return (energy, travel) [m] per car."""
+        self.x, energy, travel, stopped, stop_x, stop_sub = acc[0], acc[1], acc[2], acc[3], acc[4], acc[5]
+        self.stopped = stopped != 0.0
+        first = np.flatnonzero(self.stopped & ~stopped_before)  # the first stop of the episode, in this step
+        if first.size:
+            self.stop_distance[first] = stop_x[first]
+            self.stop_time[first] = (self.t[first] + stop_sub[first] / self._substeps) * self.config.dt
+        return energy, travel
 
     def _finish_step(self, v_start, w_start, energy, travel) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """The rest of a batched step after the substeps: wheel lock, measurement, reward, episode end."""

@@ -51,9 +51,6 @@ LOCK_SPEED_RATIO = 0.05  # wheel counts as locked while omega r < 0.05 v ...
 LOCK_TIME = 0.1  # ... for longer than this [s], above v_stop
 LOCK_PENALTY = 0.01  # reward subtracted per control step while locked [-]
 NOISE_BLOCK = 512  # control steps of noise drawn at once per car
-# Speed margin [m/s] of the per-step road-switch reach test: more than any tire force adds in one control step
-# (F_z theta / m * dt is about 0.1 m/s), so a car that cannot reach its change point is never tested for it.
-REACH_SPEED_SLACK = 1.0
 N_NOISE = 3  # noisy channels: wheel speed, wheel deceleration, a_x
 
 ACTION_MODES = ("torque", "torque_rate")

@@ -8,8 +8,9 @@ steps its cars with them in three drivers that differ only in control flow: ``n`
 :func:`cars_substeps_compiled` (the substeps of one control step of every car in one compiled call: the ROS2
 substep of :mod:`fricenv.plants.rosenbrock` compiled on arrays, the accounting car by car), the single nominal car
 (``Braking-v0``) through :func:`car_substeps_compiled` (:func:`car_substeps` compiled on floats), and ``n`` cars on
-any :class:`~fricenv.plants.braking_plant.BrakingPlant` substep by substep on arrays. The first two do each car's
-arithmetic in the same order (tested equal); the third gives the same episode to about 1e-12 (tested).
+any :class:`~fricenv.plants.braking_plant.BrakingPlant` one plant substep at a time with the same compiled
+accounting (:func:`cars_accounting`). The first two do each car's arithmetic in the same order (tested equal); the
+third gives the same episode to about 1e-12 (tested).
 
 Measurement model (an ABS ECU), per control step of ``dt``: wheel speed ``omega + e`` (variance
 ``OMEGA_NOISE_VAR``, Sui & Johansen Section V); wheel deceleration ``-r (omega_k - omega_{k-1}) / dt + e`` with the
@@ -33,9 +34,9 @@ from fricenv.plants.compiled import compile_array_formula, compile_formula, guar
 from fricenv.plants.rosenbrock import REFINE_MIN_STEP, ros2_substep
 from fricenv.plants.tire import longitudinal_slip, magic_formula
 
-__all__ = ["CAR_OUTPUTS", "TINY", "NoiseBlocks", "brake_torque", "car_substeps", "car_substeps_compiled",
-           "cars_substeps_compiled", "clip_float", "lock_count", "measure", "step_reward", "stop_crossing",
-           "substep_accounting"]
+__all__ = ["ACCOUNTING_ROWS", "CAR_OUTPUTS", "TINY", "NoiseBlocks", "brake_torque", "car_substeps",
+           "car_substeps_compiled", "cars_accounting", "cars_substeps_compiled", "clip_float", "lock_count", "measure",
+           "start_accounting", "step_reward", "stop_crossing", "substep_accounting"]
 
 TINY = 1e-300  # guard of the crossing interpolations
 
@@ -235,11 +236,39 @@ def car_substeps_compiled(v, w, x, Tb, roads, change, stopped, substeps, h, v_st
 CAR_OUTPUTS = ("v", "omega", "x", "energy", "travel", "stopped", "stop_x", "stop_sub", "switched", "slip", "mu")
 
 
+# the rows of :func:`cars_accounting`'s ``acc`` array (0.0 / 1.0 for the flags)
+ACCOUNTING_ROWS = ("x", "energy", "travel", "stopped", "stop_x", "stop_sub", "switched")
+
+
+@jit
+def cars_accounting(sub, v, v_new, acc, change, h, v_stop, inv_2g_mu):
+    """:func:`substep_accounting` of one substep of ``n`` cars, car by car, in place.
+
+    :param sub: index of the substep in the control step.
+    :param v: speeds before and :param v_new: after the substep, (n,).
+    :param acc: (len(ACCOUNTING_ROWS), n) float array, the accounting so far (:data:`ACCOUNTING_ROWS`), updated.
+    :param change: (n,) change points (inf once passed); :param h: substep [s]; :param v_stop: stop speed [m/s].
+    :param inv_2g_mu: (n, 2), each car's ``inv_2g_mu`` and ``inv_2g_mu_b`` of :func:`car_substeps`.
+    """
+    for i in range(v.shape[0]):
+        acc[0, i], acc[1, i], acc[2, i], acc[3, i], acc[4, i], acc[5, i], acc[6, i] = _substep_accounting(
+            sub, v[i], v_new[i], acc[0, i], acc[1, i], acc[2, i], acc[3, i] != 0.0, acc[4, i], acc[5, i],
+            acc[6, i] != 0.0, change[i], h, v_stop, inv_2g_mu[i, 0], inv_2g_mu[i, 1])
+
+
+@jit
+def start_accounting(x, stopped, acc):
+    """The accounting rows of ``n`` cars at the start of a control step (:data:`ACCOUNTING_ROWS`), into ``acc``."""
+    for i in range(x.shape[0]):
+        acc[0, i], acc[1, i], acc[2, i], acc[3, i] = x[i], 0.0, 0.0, stopped[i]
+        acc[4, i], acc[5, i], acc[6, i] = math.nan, math.nan, 0.0
+
+
 @jit
 def cars_substeps_compiled(v, w, x, Tb, roads, change, stopped, inv_2g_mu, substeps, h, v_stop, r, m, J, Fz, out):
     """:func:`car_substeps` of ``n`` cars in one compiled call, the same arithmetic per car: each substep's ROS2
     formula on arrays over the cars (:func:`fricenv.plants.rosenbrock.ros2_substep`), the refinement and
-    :func:`substep_accounting` car by car.
+    :func:`cars_accounting` car by car.
 
     :param v: speeds, (n,); :param w: wheel speeds, (n,); :param x: distances, (n,); :param Tb: brake torques,
         (n,); :param roads: (n, 2, 5), each car's ``roads`` of :func:`car_substeps`; :param change: (n,) change
@@ -251,20 +280,18 @@ def cars_substeps_compiled(v, w, x, Tb, roads, change, stopped, inv_2g_mu, subst
     n = v.shape[0]
     B, C, E = roads[:, 0, 0].copy(), roads[:, 0, 1].copy(), roads[:, 0, 2].copy()
     theta, mu1 = roads[:, 0, 3].copy(), roads[:, 0, 4].copy()
-    for i in range(n):
-        out[2, i], out[3, i], out[4, i], out[5, i] = x[i], 0.0, 0.0, stopped[i]
-        out[6, i], out[7, i], out[8, i] = math.nan, math.nan, 0.0
+    acc = out[2:9]  # the accounting rows of CAR_OUTPUTS
+    start_accounting(x, stopped, acc)
     for sub in range(substeps):
         v_new, w_new, broken = _ros2_cars(v, w, Tb, B, C, E, theta, mu1, h, r, m, J, Fz)
         for i in range(n):
             if broken[i] and h > REFINE_MIN_STEP:
                 v_new[i], w_new[i] = substep_refined(v[i], w[i], Tb[i], B[i], C[i], E[i], theta[i], mu1[i], h, r, m,
                                                      J, Fz)
-            passed = out[8, i] != 0.0
-            out[2, i], out[3, i], out[4, i], out[5, i], out[6, i], out[7, i], out[8, i] = _substep_accounting(
-                sub, v[i], v_new[i], out[2, i], out[3, i], out[4, i], out[5, i] != 0.0, out[6, i], out[7, i], passed,
-                change[i], h, v_stop, inv_2g_mu[i, 0], inv_2g_mu[i, 1])
-            if out[8, i] != 0.0 and not passed:  # the road after the change point from the next substep on
+        passed = acc[6] != 0.0
+        cars_accounting(sub, v, v_new, acc, change, h, v_stop, inv_2g_mu)
+        for i in range(n):
+            if acc[6, i] != 0.0 and not passed[i]:  # the road after the change point from the next substep on
                 B[i], C[i], E[i] = roads[i, 1, 0], roads[i, 1, 1], roads[i, 1, 2]
                 theta[i], mu1[i] = roads[i, 1, 3], roads[i, 1, 4]
         v, w = v_new, w_new
