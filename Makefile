@@ -18,11 +18,15 @@ install: $(STAMP)
 demo: $(STAMP)
 	$(BIN)/fricenv demo --out runs/demo
 
+# The tests run on two worker processes (pytest-xdist); the tests that start Ray share one worker (xdist_group
+# "ray"), so that no two Ray instances start side by side.
+TEST_WORKERS := -n 2 --dist loadgroup
+
 test: $(STAMP)
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q $(TEST_WORKERS)
 
 test-slow: $(STAMP)
-	$(BIN)/python -m pytest -q -m slow
+	$(BIN)/python -m pytest -q -m slow $(TEST_WORKERS)
 
 bench: $(STAMP)
 	$(BIN)/fricenv bench --json runs/bench.json

@@ -14,6 +14,7 @@ SCENARIOS = (Scenario("wet", 20.0), Scenario("dry->ice", 20.0))
 POLICIES = ("rule-abs", "locked")
 
 
+@pytest.mark.xdist_group("ray")
 @pytest.mark.slow  # Ray workers start and compile in a fresh environment: 80-100 s
 def test_rows_identical_in_process_pool_and_on_ray(local_ray):  # noqa: F811 - pytest fixture
     serial = evaluate(POLICIES, scenarios=SCENARIOS, seeds=[3, 8], workers=1, progress=False)

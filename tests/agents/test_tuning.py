@@ -125,6 +125,7 @@ def test_process_pool_workers_share_the_study(tmp_path):
     assert len({json.dumps(t["params"], sort_keys=True) for t in trials}) == 5  # the workers draw apart
 
 
+@pytest.mark.xdist_group("ray")
 @pytest.mark.slow  # Ray workers start and compile in a fresh environment: 80-100 s
 def test_ray_workers_share_the_study(tmp_path, local_ray):  # noqa: F811 - pytest fixture
     cfg = TuneSettings(out=str(tmp_path / "out"), n_trials=4, storage=str(tmp_path / "study.log"), workers=2,

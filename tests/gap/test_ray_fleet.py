@@ -15,6 +15,7 @@ from tests.gap.fleet_helpers import FAST, simulate_fleet
 from tests.gap.test_gap_pool import RecordingSink, _square_after
 
 ray = pytest.importorskip("ray", reason="ray is a dependency of fricenv (pyproject.toml)")
+pytestmark = pytest.mark.xdist_group("ray")  # one Ray instance at a time under `make test`'s two workers
 
 
 def _ray_children() -> list[str]:
