@@ -91,3 +91,56 @@ def test_the_oracle_applies_the_same_rule():
     candidates.test_against(off_peak.nominal, at_road, d)
     assert at_road.z_paired > CFG.sig_z  # what the paired test against the nominal model alone would accept
     assert true_model_oracle({"brake_gain": {"gain": 1.0}}, road, off_peak, CFG, noise)["detectable"] is False
+
+
+# ---------------------------------------------------------------- the same test for an effect added to a set
+DRAG = {"c0": 150.0, "c2": 0.5}
+
+
+def _set_fit(effects: list[str], x_effects: list[float], d):
+    return score("+".join(effects), effects, param_names(effects), np.r_[DRY, x_effects], d, 0.0)
+
+
+def test_an_addition_that_only_moves_the_sets_parameters_adds_nothing_of_its_own():
+    """A drag log. The set is drag at a c0 well off its value; the joint model is drag at its true values plus a
+    brake gain of exactly 1. The joint model beats the set by far, yet with its gain switched off it is the same
+    model: the addition's own share is 0, so the forward selection must not name the brake gain."""
+    from fricenv.gap.quarter_car.selection import without_added
+    from fricenv.gap.quarter_car.stats import paired_z
+
+    d = _data([make_effect("drag", **DRAG)])
+    off_set = _set_fit(["drag"], [60.0, DRAG["c2"]], d)
+    joint = _set_fit(["drag", "brake_gain"], [DRAG["c0"], DRAG["c2"], 1.0], d)
+    assert paired_z(off_set, joint, d) > CFG.sig_z  # what the test over the set alone would accept
+    switched_off = without_added(joint, ["drag"], d)
+    assert np.array_equal(switched_off.window_mse, _set_fit(["drag"], [DRAG["c0"], DRAG["c2"]], d).window_mse)
+    assert paired_z(switched_off, joint, d) == pytest.approx(0.0, abs=1e-9)
+
+
+def test_a_true_second_effect_keeps_its_own_share():
+    """Drag and a brake gain of 0.8 in the log: the joint model at the true values beats itself with the gain
+    switched off by far."""
+    from fricenv.gap.quarter_car.selection import without_added
+    from fricenv.gap.quarter_car.stats import paired_z
+
+    d = _data([make_effect("drag", **DRAG), make_effect("brake_gain", gain=0.8)])
+    joint = _set_fit(["drag", "brake_gain"], [DRAG["c0"], DRAG["c2"], 0.8], d)
+    assert paired_z(without_added(joint, ["drag"], d), joint, d) > CFG.sig_z
+
+
+def test_the_forward_selection_does_not_add_an_effect_that_adds_nothing(monkeypatch):
+    """The first test's models through the forward selection (its joint fit stubbed by the constructed joint
+    model): the step records the addition's test over the set and its own share, and the set stays drag."""
+    from fricenv.gap.quarter_car import selection
+    from fricenv.gap.quarter_car.context import FitContext
+
+    d = _data([make_effect("drag", **DRAG)])
+    off_set = _set_fit(["drag"], [60.0, DRAG["c2"]], d)
+    joint = _set_fit(["drag", "brake_gain"], [DRAG["c0"], DRAG["c2"], 1.0], d)
+    gain = _gain_fit(DRY, 1.0, d)
+    monkeypatch.setattr(selection, "_extend", lambda ctx, nominal, current, extra, known: [joint for _ in extra])
+    ctx = FitContext(d, (d,), CFG, 1)
+    whole, steps = selection.forward_select(ctx, off_set, off_set, [off_set, gain])
+    assert whole is off_set
+    assert len(steps) == 1 and steps[0]["effect"] == "brake_gain" and not steps[0]["added"]
+    assert steps[0]["z_over_set"] > CFG.sig_z and steps[0]["z_own"] == pytest.approx(0.0, abs=1e-9)
