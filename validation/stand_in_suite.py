@@ -1,6 +1,6 @@
 """The library stand-in's blind suite (the logs of ``fricenv gap validate``) with the oracle of what each log's data
-show (:mod:`validation.quarter_car_oracle`, at the noise levels the stand-in drew) and the three numbers of
-:mod:`validation.scores`.
+show (:mod:`validation.quarter_car_oracle`, at the noise levels the stand-in drew; on an out-of-library log, whether
+its noise-free truth beats the nominal model) and the three numbers of :mod:`validation.scores`.
 
 ``fricenv gap validate`` draws the same logs for the same seed and scores its verdicts; this command adds the
 oracle, which lives here, outside the library.
@@ -16,7 +16,16 @@ from collections.abc import Sequence
 
 from validation.measure_cli import measurement_parser
 
-__all__ = ["main", "measure"]
+__all__ = ["main", "measure", "out_of_library_oracle"]
+
+
+def out_of_library_oracle(truth: dict, dg, cfg, noise: dict[str, float]) -> dict:
+    """The oracle of an out-of-library stand-in log: ``truth_shown``, whether the stand-in's noise-free truth on the
+    log's rows beats the tool's nominal model at the drawn noise (:func:`validation.report_check.truth_shown`, as
+    for the independent simulator's logs)."""
+    from validation.report_check import truth_shown
+
+    return {"truth_shown": truth_shown(truth, dg, cfg, noise)}
 
 
 def measure(n: int, seed: int, jobs: int = 1, required_only_share: float = 0.0) -> dict:
@@ -27,7 +36,7 @@ def measure(n: int, seed: int, jobs: int = 1, required_only_share: float = 0.0) 
     from validation.scores import quarter_car_numbers
 
     s = validate(n, seed, jobs=jobs, drop_optional_share=required_only_share, show_progress=False,
-                 oracle=true_model_oracle)
+                 oracle=true_model_oracle, truth_oracle=out_of_library_oracle)
     s["scores"] = quarter_car_numbers(s["logs"])
     s["source"] = "validation.stand_in_suite"
     return s

@@ -3,9 +3,12 @@
 import numpy as np
 import pytest
 
-from fricenv.effects.quarter_car import EFFECTS
+from fricenv.effects.quarter_car import EFFECTS, BrakeFade
+from fricenv.gap.quarter_car.config import DiagnoseConfig
 from fricenv.gap.quarter_car.validate import (
     CATEGORIES,
+    OUT,
+    Case,
     draw_case,
     format_summary,
     run_case,
@@ -74,3 +77,15 @@ def test_validate_small_run_beats_chance_and_meets_ratio_and_parameter_targets()
     assert s["accuracy_detectable"] >= 0.6, summary
     assert s["median_gap_ratio_effect_logs"] <= 0.35, summary
     assert s["param_within_15pct"] >= 0.85, summary
+
+
+@pytest.mark.parametrize("k, shown", [(0.0, False), (1.5e-5, True)])
+def test_an_out_of_library_stand_in_log_is_judged_by_its_noise_free_truth(k, shown):
+    """The stand-in suite's oracle of an out-of-library log: a brake fade of size 0 (the stand-in is then the
+    nominal plant) is not shown by its data; one of 1.5e-5 1/J, beyond the draw's 3-6e-6, is."""
+    from fricenv.plants.tire import DRY
+    from validation.stand_in_suite import out_of_library_oracle
+
+    case = Case(OUT, (BrakeFade(k=k),), DRY, "abs", 5, False)
+    row = run_case(case, DiagnoseConfig(jobs=1), truth_oracle=out_of_library_oracle)
+    assert row["truth_shown"] is shown, (row["gap_before"], row["verdict"])

@@ -158,7 +158,8 @@ def simulate_log(effects: Sequence, road: MagicFormula, driver: str = "abs", see
     :param v0: initial speed [m/s] (random in ``V0_RANGE`` if None).
     :param write_v: include the ``v`` column; :param write_ax: include the ``a_x`` column.
     :param p: vehicle parameters; :param noise: measurement noise; :param substeps: physics substeps per sample.
-    :return: (log, truth) where truth has ``v``, ``omega``, ``T_applied``, ``effects``, ``road``, ``driver``.
+    :return: (log, truth) where truth has the noise-free ``t``, ``v``, ``omega``, ``a_x`` on the log's rows,
+        ``T_applied``, ``effects``, ``road``, ``driver``.
     """
     if driver not in DRIVERS:
         raise ValueError(f"unknown driver {driver!r}; valid drivers: {', '.join(DRIVERS)}")
@@ -173,7 +174,7 @@ def simulate_log(effects: Sequence, road: MagicFormula, driver: str = "abs", see
     sim = EffectSimulator(batch, dt, n, p, substeps)
     sim.reset(np.array([v0]), np.array([v0 / batch.r_eff[0]]))
     w_noise = np.sqrt(noise.omega_var)
-    rec = {name: [] for name in ("t", "T_b", "omega", "v", "a_x", "v_true", "omega_true", "T_applied")}
+    rec = {name: [] for name in ("t", "T_b", "omega", "v", "a_x", "v_true", "omega_true", "a_x_true", "T_applied")}
     for k in range(n):
         if sim.v[0] < V_END:
             break
@@ -183,7 +184,9 @@ def simulate_log(effects: Sequence, road: MagicFormula, driver: str = "abs", see
         rec["T_b"].append(cmd)
         rec["omega"].append(omega_meas)
         rec["v"].append(float(sim.v[0] + noise.v_std * rng.standard_normal()))
-        rec["a_x"].append(float(sim.accel()[0] + noise.a_x_std * rng.standard_normal()))
+        a_x = float(sim.accel()[0])
+        rec["a_x"].append(a_x + noise.a_x_std * rng.standard_normal())
+        rec["a_x_true"].append(a_x)
         rec["v_true"].append(float(sim.v[0]))
         rec["omega_true"].append(float(sim.omega[0]))
         sim.step(np.array([cmd]))
@@ -195,7 +198,8 @@ def simulate_log(effects: Sequence, road: MagicFormula, driver: str = "abs", see
                         a_x=arr["a_x"] if write_ax else None,
                         comments=(f"fricenv gap simulate: driver={driver}, road={road.name}, v0={v0:.3f}",
                                   f"effects: {names}"))
-    truth = {"v": arr["v_true"], "omega": arr["omega_true"], "T_applied": arr["T_applied"],
+    truth = {"t": arr["t"], "v": arr["v_true"], "omega": arr["omega_true"], "a_x": arr["a_x_true"],
+             "T_applied": arr["T_applied"],
              "effects": list(effects), "road": road, "driver": driver, "v0": v0}
     return log, truth
 

@@ -111,15 +111,18 @@ def true_noise(case: Case, noise: NoiseSpec = NoiseSpec()) -> dict[str, float]:
     return out
 
 
-def run_case(case: Case, cfg: DiagnoseConfig | None = None, via_file: bool = True, oracle=None) -> dict:
+def run_case(case: Case, cfg: DiagnoseConfig | None = None, via_file: bool = True, oracle=None,
+             truth_oracle=None) -> dict:
     """Simulate, (write and re-read,) diagnose blind, and score one case (default: one process per diagnosis).
 
     :param oracle: ``(effects, road, diagnosis, cfg, noise) -> dict`` whose entries join an effect log's row (the
         measurement harness's judgement of what the data show, given the truth and the noise the stand-in drew);
         None: the row has the verdict's scoring only.
+    :param truth_oracle: ``(truth, diagnosis, cfg, noise) -> dict`` whose entries join an out-of-library log's row,
+        ``truth`` the stand-in's noise-free ``t``, ``v_true``, ``omega_true``, ``a_x_true`` on the log's rows.
     """
     cfg = cfg or DiagnoseConfig(jobs=1)
-    log, _ = simulate_log(list(case.effects), case.road, case.driver, case.seed, DURATION,
+    log, truth = simulate_log(list(case.effects), case.road, case.driver, case.seed, DURATION,
                           write_v=not case.drop_optional, write_ax=not case.drop_optional)
     if via_file:  # through the log format, with neutral comments: the tool is told nothing
         with tempfile.TemporaryDirectory() as tmp:
@@ -148,15 +151,18 @@ def run_case(case: Case, cfg: DiagnoseConfig | None = None, via_file: bool = Tru
             out.update(oracle({case.category: out["true_params"]}, out["road"], dg, cfg, out["true_noise"]))
         if out["right"]:
             out["param_error"], out["param_errors"] = main_error(case.category, out["true_params"], dg.params)
+    elif case.category == OUT and truth_oracle is not None:
+        rows = {"t": truth["t"], "v_true": truth["v"], "omega_true": truth["omega"], "a_x_true": truth["a_x"]}
+        out.update(truth_oracle(rows, dg, cfg, out["true_noise"]))
     return out
 
 
-def _run_one(case: Case, cfg: DiagnoseConfig, oracle=None) -> dict:
+def _run_one(case: Case, cfg: DiagnoseConfig, oracle=None, truth_oracle=None) -> dict:
     """:func:`run_case`, a log the reader rejects counting as a wrong verdict (``"error"``); the diagnosis' own
     progress is not reported (one validation log is the step)."""
     try:
         with progress.use_sink(None):
-            return run_case(case, cfg, oracle=oracle)
+            return run_case(case, cfg, oracle=oracle, truth_oracle=truth_oracle)
     except ValueError as exc:  # LogFormatError included: a log the reader rejects counts as a wrong verdict
         expected = {NONE: "none", OUT: "unexplained"}.get(case.category, case.category)
         return {"category": case.category, "true_effect": case.effects[0].name if case.effects else "none",
@@ -169,7 +175,7 @@ def _run_one(case: Case, cfg: DiagnoseConfig, oracle=None) -> dict:
 
 def validate(n: int, seed=None, jobs: int = 1, drop_optional_share: float = 0.0,
              cfg: DiagnoseConfig | None = None, show_progress: bool = True, ray: str | None = None,
-             oracle=None) -> dict:
+             oracle=None, truth_oracle=None) -> dict:
     """Draw ``n`` random logs (categories in turn, shuffled), diagnose each blind, and summarise.
 
     :param n: number of logs.
@@ -179,6 +185,7 @@ def validate(n: int, seed=None, jobs: int = 1, drop_optional_share: float = 0.0,
     :param cfg: diagnosis settings.
     :param ray: None (``jobs`` local processes), ``"auto"`` or a Ray address (:func:`fricenv.gap.core.pool.map_tasks`).
     :param oracle: see :func:`run_case` (picklable: a module-level function).
+    :param truth_oracle: see :func:`run_case` (picklable: a module-level function).
     :return: the summary (see :func:`summarize`) with the per-log results under ``"logs"``.
     """
     if n < 1:
@@ -190,7 +197,7 @@ def validate(n: int, seed=None, jobs: int = 1, drop_optional_share: float = 0.0,
     cases = [draw_case(c, rng, bool(rng.random() < drop_optional_share)) for c in cats]
     t0 = time.perf_counter()
     with nullcontext() if show_progress else progress.use_sink(None):
-        results = map_tasks(_run_one, [(c, cfg, oracle) for c in cases], jobs, "validate", ray)
+        results = map_tasks(_run_one, [(c, cfg, oracle, truth_oracle) for c in cases], jobs, "validate", ray)
     summary = summarize(results)
     summary["wall_seconds"] = time.perf_counter() - t0
     summary["n"] = n
