@@ -206,20 +206,20 @@ def replace_verdict(dg, verdict):
 
 # ------------------------------------------------------------------------------------------- forward selection
 def _stub_selection(monkeypatch, gains: dict):
-    """Stub the joint fits: a set's held-out error is 2 minus the gains of its effects; z over the set before is
-    100 times the error drop."""
+    """Stub the joint fits: a set's held-out error is 2 minus the gains of its effects, also with an added effect
+    switched off; z over the set before is 100 times the error drop."""
     from fricenv.gap.quarter_car import selection
 
+    def set_fit(names):
+        mse = 2.0 - sum(gains[e] for e in names)
+        return CandidateFit(effect="+".join(names), names=("B", "C", "E", "theta"), x=np.ones(4), train_mse=mse,
+                            test_mse=mse, window_mse=np.full(4, mse))
+
     def fake_extend(ctx, nominal, current, extra, known):
-        out = []
-        for c in extra:
-            names = selection.effects_of(current) + [c.effect]
-            mse = 2.0 - sum(gains[e] for e in names)
-            out.append(CandidateFit(effect="+".join(names), names=("B", "C", "E", "theta"), x=np.ones(4),
-                                    train_mse=mse, test_mse=mse, window_mse=np.full(4, mse)))
-        return out
+        return [set_fit(selection.effects_of(current) + [c.effect]) for c in extra]
 
     monkeypatch.setattr(selection, "_extend", fake_extend)
+    monkeypatch.setattr(selection, "without_added", lambda joint, base, d: set_fit(list(base)))
     monkeypatch.setattr(selection, "paired_z", lambda a, b, d: 100.0 * (a.test_mse - b.test_mse))
     monkeypatch.setattr(selection, "at_range_edge", lambda f, p: [])
     singles = [CandidateFit(effect=e, names=("B", "C", "E", "theta"), x=np.ones(4), train_mse=2 - g,
