@@ -91,7 +91,7 @@ def test_a_candidate_whose_single_fit_failed_is_still_tried_and_added(monkeypatc
     monkeypatch.setattr(selection, "paired_z", lambda a, b, d: 100.0 * (a.test_mse - b.test_mse))
     monkeypatch.setattr(selection, "at_range_edge", lambda f, p: [])
     off = CandidateFit(effect="off", names=ROAD_NAMES, x=np.ones(4), train_mse=2.0, test_mse=2.0, window_mse=np.ones(4))
-    monkeypatch.setattr(selection, "without_added", lambda joint, base, d: off)  # each addition does its own share
+    monkeypatch.setattr(selection, "without_effects", lambda joint, d, keep: off)  # each addition does its own share
     singles = sorted((CandidateFit(effect=e, names=ROAD_NAMES, x=np.ones(4), train_mse=m, test_mse=m,
                                    window_mse=np.ones(4)) for e, m in single_mse.items()), key=lambda f: f.test_mse)
     whole, steps = selection.forward_select(_stub_context(), singles[0], singles[0], singles)

@@ -105,14 +105,13 @@ def test_an_addition_that_only_moves_the_sets_parameters_adds_nothing_of_its_own
     """A drag log. The set is drag at a c0 well off its value; the joint model is drag at its true values plus a
     brake gain of exactly 1. The joint model beats the set by far, yet with its gain switched off it is the same
     model: the addition's own share is 0, so the forward selection must not name the brake gain."""
-    from fricenv.gap.quarter_car.selection import without_added
     from fricenv.gap.quarter_car.stats import paired_z
 
     d = _data([make_effect("drag", **DRAG)])
     off_set = _set_fit(["drag"], [60.0, DRAG["c2"]], d)
     joint = _set_fit(["drag", "brake_gain"], [DRAG["c0"], DRAG["c2"], 1.0], d)
     assert paired_z(off_set, joint, d) > CFG.sig_z  # what the test over the set alone would accept
-    switched_off = without_added(joint, ["drag"], d)
+    switched_off = candidates.without_effects(joint, d, keep=["drag"])
     assert np.array_equal(switched_off.window_mse, _set_fit(["drag"], [DRAG["c0"], DRAG["c2"]], d).window_mse)
     assert paired_z(switched_off, joint, d) == pytest.approx(0.0, abs=1e-9)
 
@@ -120,12 +119,11 @@ def test_an_addition_that_only_moves_the_sets_parameters_adds_nothing_of_its_own
 def test_a_true_second_effect_keeps_its_own_share():
     """Drag and a brake gain of 0.8 in the log: the joint model at the true values beats itself with the gain
     switched off by far."""
-    from fricenv.gap.quarter_car.selection import without_added
     from fricenv.gap.quarter_car.stats import paired_z
 
     d = _data([make_effect("drag", **DRAG), make_effect("brake_gain", gain=0.8)])
     joint = _set_fit(["drag", "brake_gain"], [DRAG["c0"], DRAG["c2"], 0.8], d)
-    assert paired_z(without_added(joint, ["drag"], d), joint, d) > CFG.sig_z
+    assert paired_z(candidates.without_effects(joint, d, keep=["drag"]), joint, d) > CFG.sig_z
 
 
 def test_the_forward_selection_does_not_add_an_effect_that_adds_nothing(monkeypatch):

@@ -219,7 +219,7 @@ def _stub_selection(monkeypatch, gains: dict):
         return [set_fit(selection.effects_of(current) + [c.effect]) for c in extra]
 
     monkeypatch.setattr(selection, "_extend", fake_extend)
-    monkeypatch.setattr(selection, "without_added", lambda joint, base, d: set_fit(list(base)))
+    monkeypatch.setattr(selection, "without_effects", lambda joint, d, keep: set_fit(list(keep)))
     monkeypatch.setattr(selection, "paired_z", lambda a, b, d: 100.0 * (a.test_mse - b.test_mse))
     monkeypatch.setattr(selection, "at_range_edge", lambda f, p: [])
     singles = [CandidateFit(effect=e, names=("B", "C", "E", "theta"), x=np.ones(4), train_mse=2 - g,

@@ -97,13 +97,19 @@ def nested_nominal(nominal: CandidateFit, fits: Sequence[CandidateFit], d: Data,
     return better if better.train_mse < nominal.train_mse else nominal
 
 
-def without_effects(f: CandidateFit, d: Data) -> CandidateFit:
-    """The nominal model at ``f``'s own per-fold roads (its effects switched off, nothing refitted), cross-fitted
-    like ``f``: what ``f``'s road alone does on the held-out windows."""
-    names = param_names([])
+def without_effects(f: CandidateFit, d: Data, keep: Sequence[str] = ()) -> CandidateFit:
+    """``f`` with its effects switched off but ``keep``, at ``f``'s own per-fold values (nothing refitted),
+    cross-fitted like ``f``: what ``f``'s road alone (the nominal model) or ``f``'s values of the effects ``keep``
+    do on the held-out windows.
+
+    :param keep: effects of ``f`` left on, in ``f``'s order (a forward selection's set before its addition).
+    """
+    names = param_names(keep)
+    idx = [f.names.index(n) for n in names]
+    effect = "+".join(keep) or "nominal"
     if not f.x_folds:
-        return score("nominal", [], names, road_of(f.x), d, 0.0)
-    return cross_fitted([score("nominal", [], names, road_of(np.asarray(x)), fold_data(d, j), 0.0)
+        return score(effect, list(keep), names, f.x[idx], d, 0.0)
+    return cross_fitted([score(effect, list(keep), names, np.asarray(x)[idx], fold_data(d, j), 0.0)
                          for j, x in enumerate(f.x_folds)], d)
 
 

@@ -22,9 +22,9 @@ significantly on held-out data, up to ``MAX_EFFECTS``:
   less what the extra per-window nuisance states win on pure noise), a lower nuisance-adjusted held-out error, and no
   effect parameter at the far edge of its range.
 - **Nested test.** The joint model also beats itself with the added effect switched off (the set's effects and the
-  roads at the joint fit's own per-fold values, nothing refitted; :func:`without_added`) by ``cfg.sig_z``: only the
-  added effect's own share of the improvement counts, as for a single candidate against its own road
-  (:func:`fricenv.gap.quarter_car.candidates.without_effects`). A joint fit whose restart found a better optimum
+  roads at the joint fit's own per-fold values, nothing refitted:
+  :func:`fricenv.gap.quarter_car.candidates.without_effects` keeping the set) by ``cfg.sig_z``: only the added
+  effect's own share of the improvement counts, as for a single candidate against its own road. A joint fit whose restart found a better optimum
   of the set's own parameters would otherwise name an effect that does nothing (a ``brake_gain`` of 0.999 added to
   a ``drag`` whose joint fit simply fits the drag better).
 - **Confounded.** A candidate that is significant on its own against the nominal model, yet whose joint fit beats
@@ -37,20 +37,18 @@ from __future__ import annotations
 from collections.abc import Collection, Sequence
 from dataclasses import replace
 
-import numpy as np
-
 from fricenv.effects import registry
-from fricenv.gap.quarter_car.candidates import run_fits, test_against
+from fricenv.gap.quarter_car.candidates import run_fits, test_against, without_effects
 from fricenv.gap.quarter_car.config import DiagnoseConfig
 from fricenv.gap.quarter_car.context import FitContext
 from fricenv.gap.quarter_car.data import Data
-from fricenv.gap.quarter_car.fitting import fit_context, score
-from fricenv.gap.quarter_car.params import param_names, road_of
-from fricenv.gap.quarter_car.stats import CandidateFit, cross_fitted, fold_data, paired_z
+from fricenv.gap.quarter_car.fitting import fit_context
+from fricenv.gap.quarter_car.params import road_of
+from fricenv.gap.quarter_car.stats import CandidateFit, cross_fitted, paired_z
 from fricenv.gap.quarter_car.verdict import at_range_edge
 
 __all__ = ["MAX_EFFECTS", "SCREEN_SHARE", "TRIED_PER_STEP", "confounded", "effects_of", "forward_select",
-           "split_params", "without_added"]
+           "split_params"]
 
 MAX_EFFECTS = 3  # largest selected set [-]
 TRIED_PER_STEP = 6  # candidates fitted jointly with the set per forward step (expected, then best single first) [-]
@@ -69,19 +67,6 @@ def split_params(f: CandidateFit) -> list[dict]:
     allp = f.effect_params()
     return [{"effect": e, "params": {k: allp[k] for k in registry.get(e).param_names if k in allp}}
             for e in effects_of(f)]
-
-
-def without_added(joint: CandidateFit, base: Sequence[str], d: Data) -> CandidateFit:
-    """The set ``base`` at ``joint``'s own per-fold parameters (its roads and the set's effects; the effect the
-    joint model adds switched off, nothing refitted), cross-fitted like ``joint``: what the joint fit's values of
-    the set alone do on the held-out windows."""
-    names = param_names(base)
-    keep = [joint.names.index(n) for n in names]
-    effect = "+".join(base)
-    if not joint.x_folds:
-        return score(effect, list(base), names, joint.x[keep], d, 0.0)
-    return cross_fitted([score(effect, list(base), names, np.asarray(x)[keep], fold_data(d, j), 0.0)
-                         for j, x in enumerate(joint.x_folds)], d)
 
 
 def _seeds(current: CandidateFit, c: CandidateFit, d: Data, restart: bool = False) -> dict:
@@ -181,7 +166,7 @@ def forward_select(ctx: FitContext, nominal: CandidateFit, first: CandidateFit, 
     :param expected: effects always tried first (a calibration the log's provenance predicts).
     :param known: sets already fitted (frozenset of effect names -> cross-fitted model), not refitted.
     :return: (the whole set's cross-fitted model, one record per step tried: the effect, its paired z over the
-        set before it, its own share ``z_own`` (:func:`without_added`) where the joint model passed the test over
+        set before it, its own share ``z_own`` (the nested test) where the joint model passed the test over
         the set, whether it was added, and ``confounded_with`` where it applies).
     """
     current, steps, known, d, cfg = first, [], dict(known or {}), ctx.d, ctx.cfg
@@ -193,7 +178,7 @@ def forward_select(ctx: FitContext, nominal: CandidateFit, first: CandidateFit, 
         z = [paired_z(current, j, d) for j in joints]
         passed = [i for i, j in enumerate(joints) if z[i] > cfg.sig_z and j.adjusted_mse < current.adjusted_mse
                   and not at_range_edge(j, ctx.p)]
-        z_own = {i: paired_z(without_added(joints[i], effects_of(current), d), joints[i], d) for i in passed}
+        z_own = {i: paired_z(without_effects(joints[i], d, keep=effects_of(current)), joints[i], d) for i in passed}
         ok = [i for i in passed if z_own[i] > cfg.sig_z]
         new = [{"effect": c.effect, "z_over_set": z[i], "added": False} for i, c in enumerate(tried)]
         for i, zi in z_own.items():
