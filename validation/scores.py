@@ -6,7 +6,8 @@ writes:
   the diagnosis' significance test (``detectable``, :func:`validation.quarter_car_oracle.true_model_oracle`); a
   log with several effects when every effect is shown (``shown``, :func:`validation.report_check.shown_effects`); an
   out-of-library log when its noise-free truth beats the nominal model (``truth_shown``; a real-like export's on
-  its resampled rows), and where no such oracle ran (the library stand-in's out-of-library logs) it counts as shown;
+  its resampled rows), and where that oracle could not run (an export whose rows differ from its truth's,
+  ``truth_error``) it counts as shown;
 - the right verdicts on those logs (several effects: every effect named);
 - the share of all logs with at least one named effect that is not in the log.
 

@@ -26,8 +26,8 @@ from fricenv.plants.namespace import with_namespace
 from fricenv.plants.rosenbrock import REFINE_MIN_STEP, REFINE_PARTS
 from fricenv.plants.tire import longitudinal_slip, magic_formula
 
-__all__ = ["FLOAT_NP", "compile_array_formula", "compile_formula", "guard_cache", "magic_formula_f", "slip_f", "substep_cars",
-           "substep_refined"]
+__all__ = ["FLOAT_NP", "compile_array_formula", "compile_formula", "guard_cache", "magic_formula_f", "slip_f",
+           "substep_cars", "substep_refined"]
 
 # the numpy error model: a float division by zero gives inf or NaN as in numpy (no Python exception check per
 # division, which also costs a branch in every division of the hot loop)

@@ -47,7 +47,7 @@ class DiagnoseConfig:
     joint: bool = True  # also fit the two best significant candidates together
     drift_check: bool = True  # refit the verdict's model on each half of the log; a drift makes it unexplained
     # On a log whose nominal model fits within the noise, a candidate is significant only if its evidence survives
-    # the noise covariance read from the nominal residual (fricenv.gap.quarter_car.guard)
+    # the noise covariance read from the candidate's own held-out residual (fricenv.gap.quarter_car.guard)
     false_discovery_guard: bool = True
     drift_z: float = 3.0  # paired z of the early/late refit over the constant model for a drift (one test) [-]
     candidates: tuple[str, ...] = tuple(EFFECTS)  # effects to try

@@ -123,7 +123,7 @@ def run_case(case: Case, cfg: DiagnoseConfig | None = None, via_file: bool = Tru
     """
     cfg = cfg or DiagnoseConfig(jobs=1)
     log, truth = simulate_log(list(case.effects), case.road, case.driver, case.seed, DURATION,
-                          write_v=not case.drop_optional, write_ax=not case.drop_optional)
+                              write_v=not case.drop_optional, write_ax=not case.drop_optional)
     if via_file:  # through the log format, with neutral comments: the tool is told nothing
         with tempfile.TemporaryDirectory() as tmp:
             path = os.path.join(tmp, "log.csv")
