@@ -263,7 +263,8 @@ def _testable_relaxation(x: Excitation) -> str | None:
 
 def _testable_radius(x: Excitation) -> str | None:
     if not (x.has_v or x.has_a_x):
-        return "neither v nor a_x logged: a rolling radius is read from the speed, which omega alone cannot give"
+        return ("neither v nor a_x logged: from t, T_b and omega a rolling radius r_e gives the data of a brake gain "
+                "(r/r_e)^2, up to the wheel-inertia term (fricenv.gap.quarter_car.alternatives)")
     return always_testable(x)
 
 

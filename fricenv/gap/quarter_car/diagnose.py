@@ -63,7 +63,10 @@ Method (every error measure is computed on data not used for fitting):
    are fitted all the same, since that power analysis is linearised, and one that turns out significant (or
    selected) leaves the list for a caveat (``where["caveats"]``). After the verdict, a
    forward selection (:mod:`fricenv.gap.quarter_car.selection`) adds the next candidate (any fitted one) while the joint model
-   beats the set so far on held-out data, up to three (``effects``; ``gap_after`` is the whole set's).
+   beats the set so far on held-out data, up to three (``effects``; ``gap_after`` is the whole set's). A named
+   effect that an untested one would imitate on this log's channels comes with that effect's equivalent size
+   (:mod:`fricenv.gap.quarter_car.alternatives`, ``where["alternatives"]``: a brake gain without ``v`` and ``a_x``
+   may be a rolling-radius error).
 """
 
 from __future__ import annotations
@@ -76,6 +79,7 @@ from fricenv import progress
 from fricenv.gap.core.noise import estimate_noise, gap_of
 from fricenv.gap.core.pool import default_jobs, map_tasks, shared_pool
 from fricenv.gap.core.verdict import decide_verdict
+from fricenv.gap.quarter_car.alternatives import alternatives
 from fricenv.gap.quarter_car.candidates import (
     fit_candidate,
     nested_nominal,
@@ -298,6 +302,7 @@ def diagnose(log: QuarterCarLog, p: qc.QuarterCarParams = qc.PAPER_PARAMS,
         s.periodic["remains_with_effects"] = periodic_line(whole, d) is not None
     not_testable = not_testable.shown({f.effect for f in s.significant} | {e["effect"] for e in effects})
     findings = _findings(nominal, s, d, cfg, not_testable, steps, expected)
+    findings.alternatives = alternatives(effects, not_testable, p)
     if s.guard is not None:
         findings.extra["false_discovery_guard"] = s.guard
     findings.extra.update(time_base={"origin": "first_sample", "offset_s": float(log.t_offset)},

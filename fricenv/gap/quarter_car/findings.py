@@ -24,6 +24,8 @@ class Findings:
     :param drift_test: the drift test of the model that closes the gap, when it ran.
     :param joint_fit: the joint fit of the two best eligible candidates, when it ran.
     :param expected_effects: effects the log's provenance predicts (a calibration, not a discovery), with why.
+    :param alternatives: untested effects that would give the same data as a named one
+        (:func:`fricenv.gap.quarter_car.alternatives.alternatives`).
     :param extra: entries a caller adds to ``where`` (the log's time base, its warnings, ...), written last.
     """
 
@@ -37,12 +39,14 @@ class Findings:
     drift_test: dict | None = None
     joint_fit: dict | None = None
     expected_effects: dict | None = None
+    alternatives: list | None = None
     extra: dict = field(default_factory=dict)
 
     def as_where(self) -> dict:
         """report.json's ``where``: optional parts only where they ran or found something."""
         optional = {"drift_test": self.drift_test, "joint_fit": self.joint_fit,
-                    "caveats": self.not_testable.caveats or None, "expected_effects": self.expected_effects}
+                    "caveats": self.not_testable.caveats or None, "expected_effects": self.expected_effects,
+                    "alternatives": self.alternatives or None}
         where = {**self.localisation, "tests": self.tests, "robust_gap_before": self.robust_gap_before,
                  "not_testable": self.not_testable, "detectable": self.not_testable.detectable,
                  "sensors": self.sensors, "forward_selection": self.forward_selection, "periodic": self.periodic}

@@ -145,6 +145,10 @@ def _testability_lines(w: dict) -> list[str]:
     if w.get("caveats"):
         lines += ["", "Tested in part (a verdict of `none` says less about them):", ""]
         lines += [f"- `{e}`: {why}" for e, why in w["caveats"].items()]
+    if w.get("alternatives"):
+        lines += ["", "Could also be (this log's channels cannot tell them apart):", ""]
+        lines += [f"- `{a['effect']}` (" + ", ".join(f"{k} = {x:.4g}" for k, x in a["params"].items())
+                  + f") instead of `{a['instead_of']}`: {a['why']}" for a in w["alternatives"]]
     confounded = [(st["effect"], st["confounded_with"]) for st in w.get("forward_selection", [])
                   if st.get("confounded_with")]
     if confounded:
