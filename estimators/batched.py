@@ -29,7 +29,7 @@ import numpy as np
 
 from estimators.base import Health
 from estimators.curve_shape import ShapeFit
-from estimators.ekf_rls import KS0, PHI_MIN_SLIP, RLS_P0, QuarterCarEkfRls
+from estimators.ekf_rls import KS0, PHI_MIN_SLIP, RLS_P0, QuarterCarEkfRls, speed_step
 from estimators.jump import jump_test
 from estimators.mhe_batched import BATCHED_MHE
 from fricenv.plants.quarter_car import QuarterCarParams
@@ -112,7 +112,8 @@ def _core_rows(omega, a_x, T_b, k, gated, gc, gx, gP, started, rejected, gj, y, 
                s_den, mu_peak, torque_prev, H, A, Q, out) -> None:
     """Steps 1-4 of :class:`~estimators.ekf_rls.EkfRlsCore` for every sub-env, in place; ``out`` gets (S, F,
     health) per sub-env. ``k``: (dt, R_w, d, m_eff, m, I_w, C_s, a_x loop factor, dead zone, lam, F_z, phi_min
-    slip, a_x noise variance). Plain Python compiled by :func:`_core_kernel`."""
+    slip, a_x noise variance, rules (B1)-(B2) on (1) or off (0), (B2)'s margin). Plain Python compiled by
+    :func:`_core_kernel`."""
     dt, R_w, d, m_eff, corr, db, lam, Fz = k[0], k[1], k[2], k[3], k[7], k[8], k[9], k[10]
     T, U = np.empty((3, 3)), np.empty((3, 3))
     for i in range(omega.shape[0]):
@@ -132,7 +133,7 @@ def _core_rows(omega, a_x, T_b, k, gated, gc, gx, gP, started, rejected, gj, y, 
             c_new = c[i] + corr * (abs(a_x[i]) - R_g[i] - c[i])
             dead = np.sign(c[i]) * max(abs(c[i]) - db, 0.0) + np.sign(c_new) * max(abs(c_new) - db, 0.0)
             rate = max(R_g[i] + 0.5 * dead, 0.0)
-            y[i] = max(y[i] - dt * rate * min(max((y[i] - wr) / d, -1.0), 1.0), 0.0)
+            y[i] = speed_step(y[i], wr, rate, dt, d, k[13] > 0.0 and torque < 0.0, k[14])
             c[i] = c_new
         R_g[i] = abs(torque) / (m_eff * R_w)  # eq. (5)
         S = (wr - y[i]) / max(max(y[i], wr), SLIP_SPEED_FLOOR)  # 2. slip, eq. (3)
@@ -163,7 +164,7 @@ def _core_kernel():
 
         jit = numba.njit(cache=True, error_model="numpy")
         gate_row = types.FunctionType(_gate_row.__code__, {**globals(), "jump_test": jit(jump_test)}, "_gate_row")
-        deps = {"_gate_row": jit(gate_row), "_ekf_row": jit(_ekf_row)}
+        deps = {"_gate_row": jit(gate_row), "_ekf_row": jit(_ekf_row), "speed_step": jit(speed_step)}
         _COMPILED_CORE.append(jit(types.FunctionType(_core_rows.__code__, {**globals(), **deps}, "_core_rows")))
     return _COMPILED_CORE[0]
 
@@ -232,7 +233,8 @@ class BatchedEkfRls:
         self._no_gate = _NoGate(self.n)
         cfg = self.cfg
         self.consts = np.array([self.dt, cfg.R_w, cfg.d, cfg.m_eff, cfg.m, cfg.I_w, cfg.C_s, c.corr_factor,
-                                cfg.deadband, cfg.forgetting, c.Fz_total, PHI_MIN_SLIP, c.R[0, 0]])
+                                cfg.deadband, cfg.forgetting, c.Fz_total, PHI_MIN_SLIP, c.R[0, 0],
+                                float(cfg.braking_reference), cfg.overshoot_margin])
         self.y = np.full(self.n, np.nan)
         self.c, self.R_g = np.zeros(self.n), np.zeros(self.n)
         self.x, self.P = np.zeros((self.n, 3)), np.zeros((self.n, 3, 3))

@@ -181,7 +181,8 @@ def _entries() -> tuple[EstimatorEntry, ...]:
         EstimatorEntry("mhe", "default", "regularized MHE (EKF arrival, process noise, gate), theta, brake gain, "
                        "deceleration bias", _build_mhe, absorb, cls=RegularizedMHE, observation=True),
         EstimatorEntry("ekf-rls", "default", "EKF/RLS, torque feedforward with an a_x loop, Magic Formula family map",
-                       _build_ekf_rls, MappingProxyType({"correction_gain": ENV_CORRECTION_GAIN}), estimated=(),
+                       _build_ekf_rls, MappingProxyType({"correction_gain": ENV_CORRECTION_GAIN,
+                                                         "braking_reference": True}), estimated=(),
                        cls=QuarterCarEkfRls, values=EKF_RLS_VALUES,
                        assumed_shape=_shape_dict(DRY), observation=True),
         EstimatorEntry("ekf", "full", "augmented EKF, theta, B, C, E, brake gain, deceleration bias", _build_ekf,

@@ -48,8 +48,9 @@ def _estimator(setup: str, name: str):
     from fricenv.plants.two_axle import TABLE_I
 
     options = {"ax_std": AX_STD_NOISY} if "noisy" in setup else {}
-    if name == "ekf-rls":  # the paper's figures: the torque feedforward alone (the registry's env entry closes the loop)
-        options["correction_gain"] = DEFAULT_CORRECTION_GAIN
+    if name == "ekf-rls":  # the paper's figures: eq. (4) on the torque feedforward alone (the registry's env entry
+        # closes the a_x loop and adds the braking rules)
+        options.update(correction_gain=DEFAULT_CORRECTION_GAIN, braking_reference=False)
     params = TABLE_I if setup.startswith("two-axle") else PAPER_PARAMS
     return get_estimator(name, ESTIMATORS).make(params, **options)
 

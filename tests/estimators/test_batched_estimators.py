@@ -1,5 +1,5 @@
 """The batched EKF/RLS (compiled) equals N single estimators (to 1e-9) across per-env resets, outliers and invalid
-samples and friction jumps, with and without the wheel-speed gate."""
+samples, friction jumps and a wheel past the car's speed, with and without the wheel-speed gate."""
 
 from __future__ import annotations
 
@@ -30,6 +30,7 @@ def _signals(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarr
     lock = np.arange(1, STEPS - 300 + 1)  # a wheel that locks at 800 rad/s^2 (a friction drop): the gate's jump rule
     omega[300:, 5] = np.maximum(omega[299, 5] - 8.0 * lock, 0.0) + rng.normal(0, 0.05, lock.size)
     omega[50, 2] = np.nan  # an invalid sample
+    omega[120:126, 0] = v[120:126, 0] * 1.06 / PAPER_PARAMS.r  # a wheel past the car: the braking rules (B1)-(B2)
     return omega, a_x, T_b
 
 

@@ -123,3 +123,29 @@ def test_bad_samples_and_config():
         QuarterCarEkfRls(correction_gain=-1.0)
     with pytest.raises(EstimatorConfigError, match="deadband"):
         QuarterCarEkfRls(correction_deadband=-0.1)
+
+
+def _overshoot_stop(braking_reference: bool) -> tuple[np.ndarray, np.ndarray]:
+    """A car braking at 6 m/s^2 from 25 m/s, its wheel at slip 0.05 except for 6 samples in which it runs 6 % past
+    the car's speed (a tire winding back as the brake releases). Returns (true speed, estimated speed)."""
+    from estimators.registry import make_estimator
+
+    est = make_estimator("ekf-rls", PAPER_PARAMS, 0.01, outlier_gate=None, braking_reference=braking_reference)
+    t = np.arange(300) * 0.01
+    v = 25.0 - 6.0 * t
+    omega = v * (1.0 - 0.05) / PAPER_PARAMS.r
+    omega[100:106] = v[100:106] * 1.06 / PAPER_PARAMS.r
+    torque = PAPER_PARAMS.r * 6.0 * PAPER_PARAMS.m  # the torque that decelerates the car at 6 m/s^2 at steady slip
+    est.reset(v0=float(v[0]))
+    v_hat = np.array([est.update((omega[k], -6.0), (torque,)).values["v"] for k in range(t.size)])
+    return v, v_hat
+
+
+def test_while_braking_a_wheel_past_the_car_does_not_raise_the_speed_estimate():
+    """(B1)-(B2) of the velocity filter: under a brake the estimate never rises and keeps falling at the car's rate
+    through a wheel that overshoots; eq. (4) as the paper writes it follows that wheel up at the braking rate."""
+    v, v_hat = _overshoot_stop(braking_reference=True)
+    assert np.all(np.diff(v_hat) <= 1e-12)
+    assert np.max(np.abs(v_hat - v)[100:]) < 0.05
+    v, v_paper = _overshoot_stop(braking_reference=False)
+    assert np.max(v_paper[100:106] - v[100:106]) > 0.2  # the paper's filter reads the overshoot as the car's speed
