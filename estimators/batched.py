@@ -42,16 +42,19 @@ _INVALID, _OUTLIER, _REINIT = int(Health.INVALID_INPUT), int(Health.OUTLIER), in
 _OK, _NOT_EXCITED = int(Health.OK), int(Health.NOT_EXCITED)
 
 
-def _gate_row(i, omega, torque_prev, gc, x, P, started, rejected, jump) -> tuple[float, int]:
+def _gate_row(i, omega, torque_prev, ceiling, gc, x, P, started, rejected, jump) -> tuple[float, int]:
     """:class:`~estimators.ekf_rls.WheelSpeedGate` for sub-env ``i``: the wheel speed to use and the health it
     implies (``_OK`` when accepted). ``gc`` from :meth:`BatchedGate.constants`; ``jump[i]``: (armed, reference
-    speed, sign) of the friction-jump rule (:mod:`estimators.jump`). Plain Python compiled by :func:`_core_kernel`."""
+    speed, sign) of the friction-jump rule (:mod:`estimators.jump`); ``ceiling``: rule (B3)'s bound on a braked
+    wheel's prediction (inf: none). Plain Python compiled by :func:`_core_kernel`."""
     dt, I_w, R, b_var0, q_b, bound, max_rej = gc[0], gc[1], gc[2], gc[3], gc[4], gc[5], gc[6]
     if not started[i]:
         started[i], x[i, 0], x[i, 1] = True, omega, 0.0
         P[i, 0, 0], P[i, 0, 1], P[i, 1, 0], P[i, 1, 1] = R, 0.0, 0.0, b_var0
         return omega, _OK
     x0, x1 = x[i, 0] - dt * x[i, 1] + dt * torque_prev / I_w, x[i, 1]  # F x + (dt T / I_w, 0)
+    if torque_prev < 0.0 and x0 > ceiling:  # (B3)
+        x0 = ceiling
     p00 = P[i, 0, 0] - dt * P[i, 1, 0] - dt * (P[i, 0, 1] - dt * P[i, 1, 1])  # F P F^T + Q
     p01, p10, p11 = P[i, 0, 1] - dt * P[i, 1, 1], P[i, 1, 0] - dt * P[i, 1, 1], P[i, 1, 1] + q_b
     e, S = omega - x0, p00 + R
@@ -112,7 +115,7 @@ def _core_rows(omega, a_x, T_b, k, gated, gc, gx, gP, started, rejected, gj, y, 
                s_den, mu_peak, torque_prev, H, A, Q, out) -> None:
     """Steps 1-4 of :class:`~estimators.ekf_rls.EkfRlsCore` for every sub-env, in place; ``out`` gets (S, F,
     health) per sub-env. ``k``: (dt, R_w, d, m_eff, m, I_w, C_s, a_x loop factor, dead zone, lam, F_z, phi_min
-    slip, a_x noise variance, rules (B1)-(B2) on (1) or off (0), (B2)'s margin). Plain Python compiled by
+    slip, a_x noise variance, rules (B1)-(B3) on (1) or off (0), their margin). Plain Python compiled by
     :func:`_core_kernel`."""
     dt, R_w, d, m_eff, corr, db, lam, Fz = k[0], k[1], k[2], k[3], k[7], k[8], k[9], k[10]
     T, U = np.empty((3, 3)), np.empty((3, 3))
@@ -122,7 +125,8 @@ def _core_rows(omega, a_x, T_b, k, gated, gc, gx, gP, started, rejected, gj, y, 
             continue
         torque, w, health = -T_b[i], omega[i], _OK
         if gated:
-            w, health = _gate_row(i, omega[i], torque_prev[i], gc, gx, gP, started, rejected, gj)
+            ceiling = (y[i] + k[14]) / R_w if k[13] > 0.0 and not np.isnan(y[i]) else np.inf  # (B3)
+            w, health = _gate_row(i, omega[i], torque_prev[i], ceiling, gc, gx, gP, started, rejected, gj)
             if health == _REINIT:  # the gate restarted: the RLS forgets the old road (as EkfRlsCore.step)
                 P_rls[i] = RLS_P0
         torque_prev[i] = torque

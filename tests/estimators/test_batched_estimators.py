@@ -30,7 +30,7 @@ def _signals(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarr
     lock = np.arange(1, STEPS - 300 + 1)  # a wheel that locks at 800 rad/s^2 (a friction drop): the gate's jump rule
     omega[300:, 5] = np.maximum(omega[299, 5] - 8.0 * lock, 0.0) + rng.normal(0, 0.05, lock.size)
     omega[50, 2] = np.nan  # an invalid sample
-    omega[120:126, 0] = v[120:126, 0] * 1.06 / PAPER_PARAMS.r  # a wheel past the car: the braking rules (B1)-(B2)
+    omega[120:126, 0] = v[120:126, 0] * 1.06 / PAPER_PARAMS.r  # a wheel past the car: the braking rules (B1)-(B3)
     return omega, a_x, T_b
 
 
