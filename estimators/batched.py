@@ -2,7 +2,7 @@
 
 :class:`BatchedEkfRls` is N :class:`estimators.ekf_rls.QuarterCarEkfRls` side by side (one per sub-env of a vector
 env): the same four steps (velocity filter eqs. (4)-(6), slip eq. (3), force EKF eqs. (7)-(8) in Joseph form, RLS
-eqs. (10)-(14), the friction map) and the same wheel-speed outlier gate (:class:`estimators.ekf_rls.WheelSpeedGate`:
+eqs. (10)-(14), the friction map) and the same wheel-speed outlier gate (:class:`estimators.speed_reference.WheelSpeedGate`:
 NIS test of :func:`estimators.outliers.gate`, the prediction in place of a rejected speed, the covariance held,
 the ``max_rejections + 1``-th rejection in a row restarting the gate), written as one loop over the sub-envs
 (:func:`_core_rows`, compiled with numba on first use and cached on disk: numpy calls on arrays of 32 cost more in
@@ -29,9 +29,10 @@ import numpy as np
 
 from estimators.base import Health
 from estimators.curve_shape import ShapeFit
-from estimators.ekf_rls import KS0, PHI_MIN_SLIP, RLS_P0, QuarterCarEkfRls, speed_step
+from estimators.ekf_rls import KS0, PHI_MIN_SLIP, RLS_P0, QuarterCarEkfRls
 from estimators.jump import jump_test
 from estimators.mhe_batched import BATCHED_MHE
+from estimators.speed_reference import speed_step
 from fricenv.plants.quarter_car import QuarterCarParams
 from fricenv.plants.tire import SLIP_SPEED_FLOOR
 
@@ -43,7 +44,7 @@ _OK, _NOT_EXCITED = int(Health.OK), int(Health.NOT_EXCITED)
 
 
 def _gate_row(i, omega, torque_prev, ceiling, gc, x, P, started, rejected, jump) -> tuple[float, int]:
-    """:class:`~estimators.ekf_rls.WheelSpeedGate` for sub-env ``i``: the wheel speed to use and the health it
+    """:class:`~estimators.speed_reference.WheelSpeedGate` for sub-env ``i``: the wheel speed to use and the health it
     implies (``_OK`` when accepted). ``gc`` from :meth:`BatchedGate.constants`; ``jump[i]``: (armed, reference
     speed, sign) of the friction-jump rule (:mod:`estimators.jump`); ``ceiling``: rule (B3)'s bound on a braked
     wheel's prediction (inf: none). Plain Python compiled by :func:`_core_kernel`."""
@@ -186,7 +187,7 @@ class _NoGate:
 
 
 class BatchedGate:
-    """The state of N one-wheel :class:`~estimators.ekf_rls.WheelSpeedGate` filters, (omega, b) per sub-env; the
+    """The state of N one-wheel :class:`~estimators.speed_reference.WheelSpeedGate` filters, (omega, b) per sub-env; the
     gate's step is part of the compiled update (:func:`_gate_row`).
 
     :param template: a single wheel-speed gate whose constants (F, Q, R, b's initial spread, gate) are used.

@@ -35,27 +35,9 @@ Steps per sample (Section III of the paper), for n wheels (quarter car n = 1, tw
    open-loop, seed 0, ``validation.estimator_mismatch``) the rms speed error falls from 2.06 to 0.20 m/s (brake
    gain 1.25), 3.55 to 0.28 (drag), 0.45 to 0.19 (80 ms lag), 0.38 to 0.19 (60 ms delay), for 0.10 -> 0.14 on
    the nominal plant; K = 30 was no better. The paper's figures (``fricenv paper ekf-rls``) keep K = 0.
-   **While braking, a wheel faster than the car is no reference** (``braking_reference``, the registry's
-   ``ekf-rls``). Eq. (4) raises the estimate at the rate R towards a wheel faster than it, which is right in traction
-   but not under a brake: a braked car does not speed up, and a tire with a relaxation length winds up as the brake
-   applies and spins the wheel past the car's speed as it releases (slip -0.04 to -0.09 on an ABS stop on dry with
-   sigma 0.6 m, while the tire still brakes). Following that wheel up at about 1 g added 0.2-0.4 m/s per ABS cycle
-   to the estimate. With the rule, while the torque brakes:
-
-   (B1) the estimate never rises (a step of eq. (4) upwards is 0);
-   (B2) a wheel faster than the estimate by more than its noise margin (``REF_MARGIN_STD`` wheel-speed noise std's,
-        the margin of the EKF's reference speed, :mod:`estimators.mismatch`) is not taken as the car's speed:
-        the estimate falls at the rate R, as while the wheel slips;
-   (B3) the wheel-speed gate (:class:`WheelSpeedGate`) predicts a braked wheel at most at the speed estimate plus
-        that margin. As the brake releases, the wheel spins up until it meets the car's speed and stops there; the
-        gate's tire-torque state carried the spin-up on past the car, read the stop as two outliers and then as a
-        friction jump (:mod:`estimators.jump`): 0.4-1.2 % of the samples of nominal stops were flagged.
-
-   Measured by ``fricenv paper robustness --seeds 3`` (rms speed error after the first 0.5 s over dry, wet and snow,
-   ABS and open-loop stops): nominal plant 0.15 -> 0.12 m/s, relaxation length 0.3 m 0.75 -> 0.25, 0.6 m 0.94 ->
-   0.31 (worst sample 2.83 -> 1.29 m/s), the other cells of the effect grid equal or better but the 4 % radius
-   error (0.80 -> 0.83); outlier and re-initialisation flags on the worst nominal stop 1.2 -> 0.4 %. The paper's
-   rows (``fricenv paper ekf-rls``) keep eq. (4) and the gate as they are.
+   While braking, the registry's ``ekf-rls`` does not let a wheel faster than the car pull the estimate up, and its
+   wheel-speed gate predicts a braked wheel at most at the car's speed (``braking_reference``, rules (B1)-(B3) of
+   :mod:`estimators.speed_reference`).
 2. Slip per wheel, eq. (3): ``S = (omega R_w - y) / max(y, omega R_w)`` (positive in traction).
 3. Tire force, EKF of eqs. (7)-(8) on ``(a_x, a_omega_i, F_i)`` with the tire stiffness prediction
    ``F_i(k+1) = C_s S_i(k)`` and the measurement ``z = a_x = sum F_i / m`` (generic steps from
@@ -87,9 +69,9 @@ import numpy as np
 from estimators.base import Estimate, Estimator, EstimatorConfigError, Health, check_dt
 from estimators.curve_shape import DEFAULT_BANK, ShapeBank, ShapeFit, ShapeFitParams
 from estimators.ekf import ekf_predict, ekf_update
-from estimators.jump import JUMP_MU_MAX, jump_test
-from estimators.outliers import DEFAULT_GATE, GateParams, Verdict, check_gate, gate, nis
+from estimators.outliers import DEFAULT_GATE, GateParams, Verdict, check_gate
 from estimators.slope_maps import PAPER_MAP, MagicFormulaFamilyMap
+from estimators.speed_reference import WheelSpeedGate, speed_step
 from estimators.tuning import REF_MARGIN_STD
 from fricenv.plants.quarter_car import PAPER_PARAMS, QuarterCarParams
 from fricenv.plants.sui_johansen import OMEGA_NOISE_STD
@@ -117,7 +99,6 @@ RLS_P0 = 10.0  # initial RLS covariance [(1/unit slip)^2]
 KS0 = 10.0  # initial slip slope [1/unit slip]
 Q_STD = {"a_x": 0.5, "a_w": 50.0, "F": 300.0}  # EKF process noise per sample [m/s^2, rad/s^2, N]
 AX_STD_MIN = 0.01  # floor of the a_x noise standard deviation in the EKF [m/s^2]
-WHEEL_B_STD = 100.0  # random walk of the tire torque over inertia in the wheel-speed gate, per sample [rad/s^2]
 
 
 @dataclass(frozen=True)
@@ -162,110 +143,6 @@ class EkfRlsConfig:
     def m_eff(self) -> float:
         """Mass of eq. (5)'s 466.5 = m_eff R_w: the car plus the wheels' rotary inertia [kg]."""
         return self.m + len(self.Fz) * self.I_w / self.R_w**2
-
-
-def speed_step(y: float, x_ref: float, rate: float, dt: float, d: float, braking: bool, margin: float) -> float:
-    """The velocity filter from one sample to the next: eq. (4) ``y' = -R Sat(y - x_ref)`` with Sat of eq. (6),
-    and rules (B1)-(B2) when ``braking`` (module docstring). Plain arithmetic: the batched estimator compiles it.
-
-    :param y: speed estimate [m/s]; :param x_ref: reference wheel surface speed [m/s]; :param rate: R [m/s^2].
-    :param dt: sample time [s]; :param d: Sat width [m/s].
-    :param braking: the torque brakes and the rules are on; :param margin: (B2)'s margin [m/s].
-    :return: the next estimate, at least 0 [m/s].
-    """
-    step = -dt * rate * min(max((y - x_ref) / d, -1.0), 1.0)
-    if braking:
-        if x_ref > y + margin:  # (B2): a wheel past the car, not a reference
-            step = -dt * rate
-        elif step > 0.0:  # (B1): a braked car does not speed up
-            step = 0.0
-    return max(y + step, 0.0)
-
-
-class WheelSpeedGate:
-    """The outlier gate on the wheel speeds (:mod:`estimators.outliers`): one small Kalman filter per wheel.
-
-    Per wheel, state (omega, b) with b = F R_w / I_w the tire's torque over the inertia, a random walk, and the
-    wheel equation ``omega(k+1) = omega(k) + dt (T(k) / I_w - b(k))`` (the force EKF's eq. (7) row, with the known
-    torque), measured with noise ``omega_std``. A wheel speed whose NIS fails the gate is replaced by the
-    prediction (the filters run on it as if it had not come) and the covariance is held at its last one-step value
-    (the random walk of b would open the gate to a dropout within 7 samples); the ``max_rejections + 1``-th in a row
-    restarts that wheel's filter from the measurement, and so does a second rejected sample that a friction jump
-    explains (:mod:`estimators.jump`), with b at the tire term it implies.
-
-    :param n: number of wheels.
-    :param I_w: wheel inertia [kg m^2].
-    :param R_w: wheel radius [m].
-    :param Fz: load per wheel [N] (scale of b's initial spread: the tire torque at mu = 1).
-    :param dt: sample time [s].
-    :param omega_std: wheel-speed noise standard deviation assumed [rad/s].
-    :param params: the gate.
-    """
-
-    def __init__(self, n: int, I_w: float, R_w: float, Fz: np.ndarray, dt: float, omega_std: float,
-                 params: GateParams):
-        self.n, self.I_w, self.dt = n, float(I_w), float(dt)
-        self.params = params
-        self.R = float(omega_std) ** 2
-        self.b_std0 = np.asarray(Fz, dtype=float) * R_w / I_w  # [rad/s^2]
-        self.b_bound = JUMP_MU_MAX * self.b_std0  # largest tire term a road can produce (estimators.jump) [rad/s^2]
-        self.Q = np.diag([0.0, WHEEL_B_STD**2])
-        self.F = np.array([[1.0, -self.dt], [0.0, 1.0]])
-        self.reset()
-
-    def reset(self) -> None:
-        self.x: list[np.ndarray] | None = None  # per wheel (omega, b)
-        self.P: list[np.ndarray] = []
-        self.rejected = [0] * self.n
-        self.jump = np.zeros((self.n, 3))  # per wheel: armed, reference speed, sign (estimators.jump)
-
-    def _start(self, i: int, omega: float, b: float = 0.0) -> None:
-        self.x[i] = np.array([omega, b])
-        self.P[i] = np.diag([self.R, self.b_std0[i] ** 2])
-
-    def __call__(self, omega: np.ndarray, torque_prev: np.ndarray,
-                 ceiling: np.ndarray | None = None) -> tuple[np.ndarray, list[Verdict]]:
-        """Gate this sample's wheel speeds, given the torques held since the last one.
-
-        :param ceiling: per wheel, the highest wheel speed a braked wheel is predicted at (rule (B3)); None: none.
-
-        :return: the wheel speeds to use (predictions in place of rejected ones) and one verdict per wheel.
-        """
-        if self.x is None:
-            self.x, self.P = [None] * self.n, [None] * self.n
-            for i in range(self.n):
-                self._start(i, float(omega[i]))
-            return omega, [Verdict.ACCEPT] * self.n
-        used = omega.astype(float).copy()
-        verdicts = []
-        for i in range(self.n):
-            x = self.F @ self.x[i] + np.array([self.dt * torque_prev[i] / self.I_w, 0.0])
-            if ceiling is not None and torque_prev[i] < 0 and x[0] > ceiling[i]:  # (B3)
-                x[0] = ceiling[i]
-            P = self.F @ self.P[i] @ self.F.T + self.Q
-            e = float(omega[i]) - x[0]
-            S = P[0, 0] + self.R
-            before = self.rejected[i]
-            verdict, self.rejected[i] = gate(nis(e, S), before, self.params)
-            b_restart = 0.0  # the tire term a restart starts from: 0, or the one a friction jump implies
-            if verdict != Verdict.ACCEPT:  # a friction jump (estimators.jump): restart at the implied tire term
-                ref = self.x[i][0] if before == 0 else self.jump[i, 1]
-                jump, chain, b = jump_test(before, bool(self.jump[i, 0] > 0), self.jump[i, 2], ref, float(omega[i]),
-                                           float(torque_prev[i]), e, self.dt, self.I_w, float(self.b_bound[i]))
-                self.jump[i] = (float(chain), float(omega[i]), np.sign(e))
-                if jump:
-                    verdict, self.rejected[i], b_restart = Verdict.REINIT, 0, b
-            if verdict == Verdict.REJECT:  # the covariance is held: a bad run must not widen the gate to itself
-                self.x[i], used[i] = x, x[0]
-            elif verdict == Verdict.REINIT:
-                self._start(i, float(omega[i]), b_restart)
-                self.jump[i, 0] = 0.0
-            else:
-                K = P[:, 0] / S
-                self.x[i] = x + K * e
-                self.P[i] = P - np.outer(K, P[0])
-            verdicts.append(verdict)
-        return used, verdicts
 
 
 class EkfRlsCore:

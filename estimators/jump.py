@@ -1,6 +1,6 @@
 """Friction jumps seen by the wheel-speed gate: a run of rejected wheel speeds that a road can explain.
 
-The wheel-speed gate of the EKF/RLS (:class:`estimators.ekf_rls.WheelSpeedGate`, batched in
+The wheel-speed gate of the EKF/RLS (:class:`estimators.speed_reference.WheelSpeedGate`, batched in
 :mod:`estimators.batched`) predicts each wheel speed with the wheel equation
 
     (J1)  omega(k+1) = omega(k) + dt (T(k) / I_w - b(k)),     b = F R_w / I_w (the tire's torque over the inertia)

@@ -41,8 +41,8 @@ def _radius_from_gain(params: Mapping[str, float], p: QuarterCarParams) -> dict[
 ALTERNATIVES: dict[tuple[str, str], tuple[Callable[[Mapping[str, float], QuarterCarParams], dict], str]] = {
     ("brake_gain", "radius_error"): (
         _radius_from_gain,
-        "without v or a_x a rolling radius r_e gives the data of a brake gain (r/r_e)^2 on a road of theta r/r_e "
-        "(they differ in the wheel-inertia term alone): log v or a_x to tell them apart"),
+        ("without v or a_x a rolling radius r_e gives the data of a brake gain (r/r_e)^2 on a road of theta r/r_e "
+         "(they differ in the wheel-inertia term alone): log v or a_x to tell them apart")),
 }
 
 

@@ -14,7 +14,7 @@ from fricenv.gap.quarter_car.changepoint import fit_change_point
 from fricenv.gap.quarter_car.config import DiagnoseConfig
 from fricenv.gap.quarter_car.data import Data
 from fricenv.gap.quarter_car.fitting import effect_start_matrix, fit, score
-from fricenv.gap.quarter_car.params import ROAD_NAMES, param_names, road_of
+from fricenv.gap.quarter_car.params import ROAD_NAMES, param_names
 from fricenv.gap.quarter_car.stats import (
     CandidateFit,
     cross_fitted,
