@@ -24,6 +24,7 @@ from estimators.ekf import QuarterCarEKF
 from estimators.ekf_rls import QuarterCarEkfRls
 from estimators.mhe import RegularizedMHE
 from estimators.outliers import DEFAULT_GATE
+from estimators.registry import make_estimator
 from fricenv.plants.sui_johansen import OMEGA_NOISE_VAR
 
 __all__ = ["STUDY_ESTIMATORS", "StudyRow", "format_table", "main", "spike_indices", "study"]
@@ -66,7 +67,7 @@ def spike_indices(n: int, rng: np.random.Generator, fraction: float = SPIKE_FRAC
 
 def _logs(estimator: str, seed: int):
     """(log, true speed, estimated parameters) of every study log of an estimator for one seed."""
-    if estimator == "ekf-rls":
+    if estimator.startswith("ekf-rls"):
         pc = scenarios.ekf_rls_scenario(noisy=True, seed=seed, omega_noise_var=OMEGA_NOISE_VAR)
         return [pc]
     return [scenarios.mhe_case(case, seed=seed) for case in MHE_STUDY_CASES]
@@ -75,11 +76,13 @@ def _logs(estimator: str, seed: int):
 def _factory(estimator: str, estimated: tuple[str, ...], gated: bool = True):
     opt = {"outlier_gate": DEFAULT_GATE if gated else None}
     makers = {"ekf": lambda: QuarterCarEKF(estimated=estimated, **opt),
-              "mhe": lambda: RegularizedMHE(estimated=estimated, **opt), "ekf-rls": lambda: QuarterCarEkfRls(**opt)}
+              "mhe": lambda: RegularizedMHE(estimated=estimated, **opt), "ekf-rls": lambda: QuarterCarEkfRls(**opt),
+              "ekf-rls-env": lambda: make_estimator("ekf-rls", **opt)}
     return makers[estimator]()
 
 
-STUDY_ESTIMATORS = ("ekf", "ekf-rls", "mhe")
+# ``ekf-rls-env``: the EKF/RLS as the braking env runs it (the registry's entry: its a_x loop and braking rules)
+STUDY_ESTIMATORS = ("ekf", "ekf-rls", "mhe", "ekf-rls-env")
 
 
 def _run_one(est, pc, omega: np.ndarray) -> tuple[float, np.ndarray]:
