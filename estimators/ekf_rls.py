@@ -198,9 +198,9 @@ class EkfRlsCore:
         cfg, n = self.cfg, self.n
         verdicts = [Verdict.ACCEPT] * n
         if self.wheel_gate is not None:  # outliers: the gate's prediction replaces a rejected wheel speed
-            ceiling = None  # (B3): a braked wheel is predicted at most at the car's speed estimate plus the margin
+            ceiling = np.inf  # (B3): a braked wheel is predicted at most at the car's speed estimate plus the margin
             if cfg.braking_reference and self.y is not None:
-                ceiling = np.full(n, (self.y + cfg.overshoot_margin) / cfg.R_w)
+                ceiling = (self.y + cfg.overshoot_margin) / cfg.R_w
             omega, verdicts = self.wheel_gate(omega, self.torque_prev, ceiling)
         restarted = Verdict.REINIT in verdicts  # a friction jump (estimators.jump) or a lost track: the RLS forgets
         self.P_rls = RLS_P0 if restarted else self.P_rls  # the old road at once, the shape fit withholds it (step 6)

@@ -3,10 +3,11 @@ gate, and what they do while the torque brakes.
 
 **While braking, a wheel faster than the car is no reference** (``braking_reference`` of
 :class:`~estimators.ekf_rls.EkfRlsConfig`; on in the registry's ``ekf-rls``). Eq. (4) raises the estimate at the
-rate R towards a wheel faster than it, which is right in traction but not under a brake: a braked car does not speed up, and a tire with a relaxation length winds up as the brake
-applies and spins the wheel past the car's speed as it releases (slip -0.04 to -0.09 on an ABS stop on dry with
-sigma 0.6 m, while the tire still brakes). Following that wheel up at about 1 g added 0.2-0.4 m/s per ABS cycle
-to the estimate. With the rule, while the torque brakes:
+rate R towards a wheel faster than it, which is right in traction but not under a brake: a braked car does not
+speed up, and a tire with a relaxation length winds up as the brake applies and spins the wheel past the car's speed
+as it releases, while the tire still brakes (ABS stops with sigma 0.6 m, dry and wet, seeds 0-2: slip down to -0.13
+to -0.17 above 10 m/s, to -0.45 below). Following that wheel up at about 1 g added 0.2-0.4 m/s per ABS cycle to
+the estimate. With the rule, while the torque brakes:
 
 (B1) the estimate never rises (a step of eq. (4) upwards is 0);
 (B2) a wheel faster than the estimate by more than its noise margin (``REF_MARGIN_STD`` wheel-speed noise std's,
@@ -15,12 +16,13 @@ to the estimate. With the rule, while the torque brakes:
 (B3) the wheel-speed gate (:class:`WheelSpeedGate`) predicts a braked wheel at most at the speed estimate plus
      that margin. As the brake releases, the wheel spins up until it meets the car's speed and stops there; the
      gate's tire-torque state carried the spin-up on past the car, read the stop as two outliers and then as a
-     friction jump (:mod:`estimators.jump`): 0.4-1.2 % of the samples of nominal stops were flagged.
+     friction jump (:mod:`estimators.jump`): up to 1.2 % of a nominal stop's samples were flagged (0.4 % on
+     average).
 
 Measured by ``fricenv paper robustness --seeds 3`` (rms speed error after the first 0.5 s over dry, wet and snow,
 ABS and open-loop stops): nominal plant 0.15 -> 0.12 m/s, relaxation length 0.3 m 0.75 -> 0.25, 0.6 m 0.94 ->
-0.31 (worst sample 2.83 -> 1.29 m/s), the other cells of the effect grid equal or better but the 4 % radius
-error (0.80 -> 0.83); outlier and re-initialisation flags on the worst nominal stop 1.2 -> 0.4 %. The paper's
+0.32 (worst sample 2.83 -> 1.29 m/s), the other cells of the effect grid equal or better in the rms but the 4 %
+radius error (0.80 -> 0.83); outlier and re-initialisation flags on the worst nominal stop 1.2 -> 0.4 %. The paper's
 rows (``fricenv paper ekf-rls``) keep eq. (4) and the gate as they are.
 """
 
@@ -96,10 +98,10 @@ class WheelSpeedGate:
         self.P[i] = np.diag([self.R, self.b_std0[i] ** 2])
 
     def __call__(self, omega: np.ndarray, torque_prev: np.ndarray,
-                 ceiling: np.ndarray | None = None) -> tuple[np.ndarray, list[Verdict]]:
+                 ceiling: float = np.inf) -> tuple[np.ndarray, list[Verdict]]:
         """Gate this sample's wheel speeds, given the torques held since the last one.
 
-        :param ceiling: per wheel, the highest wheel speed a braked wheel is predicted at (rule (B3)); None: none.
+        :param ceiling: the highest wheel speed a braked wheel is predicted at (rule (B3)) [rad/s]; inf: none.
 
         :return: the wheel speeds to use (predictions in place of rejected ones) and one verdict per wheel.
         """
@@ -112,8 +114,8 @@ class WheelSpeedGate:
         verdicts = []
         for i in range(self.n):
             x = self.F @ self.x[i] + np.array([self.dt * torque_prev[i] / self.I_w, 0.0])
-            if ceiling is not None and torque_prev[i] < 0 and x[0] > ceiling[i]:  # (B3)
-                x[0] = ceiling[i]
+            if torque_prev[i] < 0 and x[0] > ceiling:  # (B3)
+                x[0] = ceiling
             P = self.F @ self.P[i] @ self.F.T + self.Q
             e = float(omega[i]) - x[0]
             S = P[0, 0] + self.R

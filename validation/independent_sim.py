@@ -88,8 +88,8 @@ from validation.true_noise import real_like_noise, white_noise
 
 __all__ = ["CATEGORIES", "DRIVERS", "EFFECT_PARAMS", "H_STEP", "LIBRARY_EFFECTS", "OUT_OF_LIBRARY_EFFECTS", "ROADS",
            "V_STOP", "Effect", "G", "IndependentCase", "Road", "Vehicle", "case_noise", "draw_independent_case",
-           "initial_state", "integrate", "make_model", "measure", "simulate_case", "stopping_distance", "write_independent_log",
-           "write_real_log"]
+           "initial_state", "integrate", "make_model", "measure", "simulate_case", "stopping_distance",
+           "write_independent_log", "write_real_log"]
 
 
 # ----------------------------------------------------------------------------------------------------- cases

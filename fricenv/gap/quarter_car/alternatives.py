@@ -17,8 +17,8 @@ transients carry only faintly: on the logs of the independent simulator's ``--om
 4621) that carry either effect, both fitted, the two fits' held-out z differed by less than 0.5 on 9 of 12. The
 library leaves the radius untested there (:func:`fricenv.effects.library._testable_radius`), and a named
 ``brake_gain`` of ``g`` comes with the radius that gives the same data, ``r_e = r / sqrt(g)``: on the radius-error
-logs named ``brake_gain`` (seed 4620 logs 0 and 15, seed 4621 log 3) that radius is 1.6 %, 0.1 % and 0.3 % from
-the true one.
+logs named ``brake_gain`` (seed 4620 logs 0 and 15; seed 4621 log 3, with the radius tested) that radius is 1.6 %,
+0.1 % and 0.3 % from the true one.
 """
 
 from __future__ import annotations

@@ -24,9 +24,9 @@ significantly on held-out data, up to ``MAX_EFFECTS``:
 - **Nested test.** The joint model also beats itself with the added effect switched off (the set's effects and the
   roads at the joint fit's own per-fold values, nothing refitted:
   :func:`fricenv.gap.quarter_car.candidates.without_effects` keeping the set) by ``cfg.sig_z``: only the added
-  effect's own share of the improvement counts, as for a single candidate against its own road. A joint fit whose restart found a better optimum
-  of the set's own parameters would otherwise name an effect that does nothing (a ``brake_gain`` of 0.999 added to
-  a ``drag`` whose joint fit simply fits the drag better).
+  effect's own share of the improvement counts, as for a single candidate against its own road. A joint fit whose
+  restart found a better optimum of the set's own parameters would otherwise name an effect that does nothing (a
+  ``brake_gain`` of 0.999 added to a ``drag`` whose joint fit simply fits the drag better).
 - **Confounded.** A candidate that is significant on its own against the nominal model, yet whose joint fit beats
   neither the set nor the candidate alone significantly, carries the same signature as the set on this log: its
   step says ``confounded_with`` (the set's effects) instead of naming it as absent.
