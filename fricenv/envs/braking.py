@@ -77,7 +77,7 @@ class BrakingEnv(gym.Env):
     | wheel lock        | ``- lock_penalty`` (default 0.01) for every step the wheel is locked  |
 
     The efficiency term is <= 0 in every step (the car can never decelerate faster than ``g mu_max``) and is 0
-    only when the tire works at its friction peak. On one road its episode sum is ``1 - d_stop / L``, i.e.
+    only when the tire works at its friction peak. On one road of the nominal plant its episode sum is ``1 - d_stop / L``, i.e.
     ``1 - ratio``: maximising the return minimises the stopping distance. The lock term makes a locked wheel
     cost more than any distance it could save (on snow, whose friction keeps rising to slip 1, it is what keeps
     the wheel rolling). Lock is penalised, not terminated.
@@ -110,7 +110,8 @@ class BrakingEnv(gym.Env):
 
     Every step: ``v`` [m/s], ``slip``, ``mu``, ``distance`` [m], ``road``, ``torque`` [N m], ``locked``, ``time``
     [s]. At episode end also ``stopping_distance`` [m], ``limit_distance`` [m] (the physical limit
-    ``(v0^2 - v_stop^2) / (2 g mu_max)``, piecewise over a friction change), ``ratio`` (stopping / limit),
+    ``(v0^2 - v_stop^2) / (2 g mu_max)``, piecewise over a friction change; with ``effects``, the limit of that plant:
+    :func:`~fricenv.envs.scenario.effect_limit_distance`), ``ratio`` (stopping / limit),
     ``lock_seen``, ``stopped``, ``v0``. A truncated episode (no stop) has ``stopping_distance`` and ``ratio``
     None: its final info holds no NaN, so two identical envs compare equal (Gymnasium's ``data_equivalence``).
 

@@ -38,7 +38,14 @@ from fricenv.envs.episode import (
     start_accounting,
     step_reward,
 )
-from fricenv.envs.scenario import RESET_OPTION_KEYS, V0_DEFAULT, Scenario, limit_distance, resolve_scenario
+from fricenv.envs.scenario import (
+    RESET_OPTION_KEYS,
+    V0_DEFAULT,
+    Scenario,
+    effect_limit_distance,
+    limit_distance,
+    resolve_scenario,
+)
 from fricenv.plants.braking_plant import BatchPlant, BrakingPlant
 from fricenv.plants.tire import MagicFormula
 
@@ -212,6 +219,14 @@ class BrakingSim:
         c = self.config
         self.limit[idx] = limit_distance(self.v0[idx], c.v_stop, self.mu_peak_a[idx], self.mu_peak_b[idx],
                                          self.change_distance[idx], self._p.g)
+        for i in idx:  # a plant's effects may move the limit: a friction change in time, drag
+            terms = self.plant.limit_terms(int(i))
+            if terms is not None:
+                theta_after = terms.pop("theta_after")
+                self.limit[i] = effect_limit_distance(
+                    self.v0[i], c.v_stop, self.mu_peak_a[i], self.mu_peak_b[i], self.change_distance[i],
+                    mu_factor_a=theta_after / self.road_a[i, 3], mu_factor_b=theta_after / self.road_b[i, 3],
+                    m=self._p.m, g=self._p.g, **terms)
         self.road[idx] = self.road_a[idx]
         self._set_plant_road(idx)
         self.mu_peak[idx] = self.mu_peak_a[idx]

@@ -105,6 +105,18 @@ class EffectPlant:
     def accel(self) -> np.ndarray:
         return self.sim.accel()
 
+    def limit_terms(self, i: int) -> dict[str, float] | None:
+        """What in car ``i``'s episode moves the physical limit: a friction change in time (``t_change``,
+        ``theta_after``) and drag (``c0``, ``c2``); None without them. The other library effects (the brake's lag,
+        delay and gain, the rolling radius, a relaxation length) leave the tire's peak and the forces on the car
+        as they are."""
+        b = self.sim.batch
+        terms = {"t_change": float(b.t_change[i]), "theta_after": float(b.theta_after[i]),
+                 "c0": float(b.c0[i]), "c2": float(b.c2[i])}
+        if not np.isfinite(terms["t_change"]) and terms["c0"] == 0.0 and terms["c2"] == 0.0:
+            return None
+        return terms
+
 
 def effect_plant_or_none(n: int, config, effects=None, effects_randomization=None) -> EffectPlant | None:
     """The plant for a braking env's ``effects``/``effects_randomization`` arguments: None (the nominal plant,

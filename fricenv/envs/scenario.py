@@ -1,5 +1,6 @@
 """Braking scenarios: the road (a preset, a friction change between two presets, or a random draw), where it changes,
-the initial speed, and the physical-limit stopping distance of each scenario."""
+the initial speed, and the physical-limit stopping distance of each scenario (of the plant with its effects, when
+they move the limit)."""
 
 from __future__ import annotations
 
@@ -16,6 +17,7 @@ __all__ = [
     "SCENARIO_SEPARATOR",
     "V0_DEFAULT",
     "Scenario",
+    "effect_limit_distance",
     "limit_distance",
     "resolve_scenario",
     "valid_road_names",
@@ -134,3 +136,83 @@ def limit_distance(v0, v_stop, mu_a, mu_b, change_distance, g: float = qc.PAPER_
     vd2 = v0**2 - 2.0 * g * mu_a * d_fin
     second = d_fin + (vd2 - v_stop**2) / (2.0 * g * mu_b)
     return np.where(first <= d, first, second)
+
+
+def effect_limit_distance(v0: float, v_stop: float, mu_a: float, mu_b: float, change_distance: float, *,
+                          t_change: float = math.inf, mu_factor_a: float = 1.0, mu_factor_b: float = 1.0,
+                          c0: float = 0.0, c2: float = 0.0, m: float = qc.PAPER_PARAMS.m,
+                          g: float = qc.PAPER_PARAMS.g) -> float:
+    """Physical-limit stopping distance [m] of a plant whose effects move the limit: a friction change in time and
+    drag. The limit car brakes at the peak friction of the road under it the whole way, and drag helps it:
+
+    ``m v' = -(m g mu_peak(t, x) + c0 + c2 v^2)``                                                     (L1)
+
+    with ``mu_peak`` = ``mu_a`` before ``change_distance`` and ``mu_b`` after it, each times its factor
+    (``mu_factor_a``, ``mu_factor_b``: ``theta_after / theta`` of that road) from ``t_change`` on (time 0 at the start
+    of the stop). Between the two events (L1) has constant coefficients, ``v' = -(a + b v^2)`` with
+    ``a = g mu_peak + c0 / m``, ``b = c2 / m``, solved in closed form:
+
+    ``x(v1 -> v2) = ln((a + b v1^2) / (a + b v2^2)) / (2 b)``,
+    ``t(v1 -> v2) = (atan(k v1) - atan(k v2)) / sqrt(a b)``, ``k = sqrt(b / a)``                     (L2)
+
+    (``(v1^2 - v2^2) / (2 a)`` and ``(v1 - v2) / a`` without drag). With neither effect this is
+    :func:`limit_distance`. Drag's ``c0`` acts while the car moves, as :func:`fricenv.effects.library.drag_force`.
+
+    :param v0: initial speed [m/s]; :param v_stop: stop speed [m/s].
+    :param mu_a: peak friction before the road's change; :param mu_b: after it.
+    :param change_distance: where the road changes [m] (inf: never).
+    :param t_change: when the friction changes [s] (inf: never).
+    :param mu_factor_a: factor on ``mu_a`` from ``t_change``; :param mu_factor_b: on ``mu_b``.
+    :param c0: constant drag [N]; :param c2: quadratic drag [N s^2/m^2]; :param m: vehicle mass [kg].
+    :raises ValueError: a phase in which nothing decelerates the car (the limit is infinite).
+    """
+    b = c2 / m
+    t, x, v = 0.0, 0.0, float(v0)
+    on_b, after = change_distance <= 0.0, t_change <= 0.0
+    while True:
+        mu = (mu_b * mu_factor_b if after else mu_b) if on_b else (mu_a * mu_factor_a if after else mu_a)
+        a = g * mu + c0 / m
+        if not a > 0.0:
+            raise ValueError(f"no limit stop: nothing decelerates the car (peak friction {mu}, drag c0 {c0} N)")
+        d_end = _phase_distance(a, b, v, v_stop)
+        d_road = math.inf if on_b else change_distance - x
+        t_left = math.inf if after else t_change - t
+        v_time = _speed_after_time(a, b, v, t_left) if t_left < _phase_time(a, b, v, v_stop) else -math.inf
+        d_time = _phase_distance(a, b, v, v_time) if v_time > v_stop else math.inf
+        if d_end <= min(d_road, d_time):
+            return x + d_end
+        if d_road <= d_time:  # the road changes first
+            v_road = _speed_after_distance(a, b, v, d_road)
+            t, x, v, on_b = t + _phase_time(a, b, v, v_road), change_distance, v_road, True
+        else:  # the friction changes first
+            t, x, v, after = t_change, x + d_time, v_time, True
+
+
+def _phase_distance(a: float, b: float, v1: float, v2: float) -> float:
+    """Distance of ``v' = -(a + b v^2)`` from speed v1 down to v2 (L2) [m]."""
+    if b > 0.0:
+        return math.log((a + b * v1 * v1) / (a + b * v2 * v2)) / (2.0 * b)
+    return (v1 * v1 - v2 * v2) / (2.0 * a)
+
+
+def _phase_time(a: float, b: float, v1: float, v2: float) -> float:
+    """Time of ``v' = -(a + b v^2)`` from speed v1 down to v2 (L2) [s]."""
+    if b > 0.0:
+        k = math.sqrt(b / a)
+        return (math.atan(k * v1) - math.atan(k * v2)) / math.sqrt(a * b)
+    return (v1 - v2) / a
+
+
+def _speed_after_time(a: float, b: float, v1: float, dt: float) -> float:
+    """Speed of ``v' = -(a + b v^2)`` ``dt`` after speed v1 (before it reaches 0) [m/s]."""
+    if b > 0.0:
+        k = math.sqrt(b / a)
+        return math.tan(math.atan(k * v1) - math.sqrt(a * b) * dt) / k
+    return v1 - a * dt
+
+
+def _speed_after_distance(a: float, b: float, v1: float, d: float) -> float:
+    """Speed of ``v' = -(a + b v^2)`` ``d`` metres after speed v1 (0 if it stops before) [m/s]."""
+    if b > 0.0:
+        return math.sqrt(max(((a + b * v1 * v1) * math.exp(-2.0 * b * d) - a) / b, 0.0))
+    return math.sqrt(max(v1 * v1 - 2.0 * a * d, 0.0))

@@ -20,6 +20,9 @@ member                 meaning
 ``tire_force()``       longitudinal tire force F_x [N] of every car now
 ``slip()``             wheel slip of every car now (:func:`fricenv.plants.tire.longitudinal_slip`)
 ``accel()``            longitudinal acceleration [m/s^2] of every car now, as an accelerometer reads it
+``limit_terms(i)``     what in car ``i``'s episode moves the physical limit (the keywords of
+                       :func:`fricenv.envs.scenario.effect_limit_distance` but the road's factors: ``t_change``,
+                       ``theta_after``, ``c0``, ``c2``), or None: the road's peak friction alone sets it
 =====================  =====================================================================================
 
 Implementations: :class:`BatchPlant` (the nominal quarter car, ``n`` cars, each substep
@@ -65,6 +68,8 @@ class BrakingPlant(Protocol):
 
     def accel(self): ...
 
+    def limit_terms(self, i: int) -> dict[str, float] | None: ...
+
 
 class BatchPlant:
     """``n`` nominal quarter cars (eq. (1)), one ROS2 substep of all of them per :meth:`substep` call (compiled,
@@ -88,6 +93,9 @@ class BatchPlant:
 
     def new_episode(self, i: int, rng: np.random.Generator) -> None:
         """Nothing to draw: the nominal plant has no random parameters."""
+
+    def limit_terms(self, i: int) -> None:
+        """The road's peak friction alone sets the nominal car's physical limit."""
 
     def set_road(self, idx, road) -> None:
         """Road rows (B, C, E, theta) of cars ``idx``."""
