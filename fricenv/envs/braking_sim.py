@@ -38,14 +38,7 @@ from fricenv.envs.episode import (
     start_accounting,
     step_reward,
 )
-from fricenv.envs.scenario import (
-    RESET_OPTION_KEYS,
-    V0_DEFAULT,
-    Scenario,
-    effect_limit_distance,
-    limit_distance,
-    resolve_scenario,
-)
+from fricenv.envs.scenario import RESET_OPTION_KEYS, V0_DEFAULT, Scenario, episode_limits, resolve_scenario
 from fricenv.plants.braking_plant import BatchPlant, BrakingPlant
 from fricenv.plants.tire import MagicFormula
 
@@ -217,16 +210,8 @@ class BrakingSim:
         """Cars ``idx`` at the start of their drawn scenario: free rolling at ``v0``, clocks and figures cleared,
         the first measurement taken."""
         c = self.config
-        self.limit[idx] = limit_distance(self.v0[idx], c.v_stop, self.mu_peak_a[idx], self.mu_peak_b[idx],
-                                         self.change_distance[idx], self._p.g)
-        for i in idx:  # a plant's effects may move the limit: a friction change in time, drag
-            terms = self.plant.limit_terms(int(i))
-            if terms is not None:
-                theta_after = terms.pop("theta_after")
-                self.limit[i] = effect_limit_distance(
-                    self.v0[i], c.v_stop, self.mu_peak_a[i], self.mu_peak_b[i], self.change_distance[i],
-                    mu_factor_a=theta_after / self.road_a[i, 3], mu_factor_b=theta_after / self.road_b[i, 3],
-                    m=self._p.m, g=self._p.g, **terms)
+        self.limit[idx] = episode_limits(self.plant, idx, self.v0[idx], c.v_stop, self.road_a[idx], self.road_b[idx],
+                                         self.mu_peak_a[idx], self.mu_peak_b[idx], self.change_distance[idx], self._p)
         self.road[idx] = self.road_a[idx]
         self._set_plant_road(idx)
         self.mu_peak[idx] = self.mu_peak_a[idx]

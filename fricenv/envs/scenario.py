@@ -18,6 +18,7 @@ __all__ = [
     "V0_DEFAULT",
     "Scenario",
     "effect_limit_distance",
+    "episode_limits",
     "limit_distance",
     "resolve_scenario",
     "valid_road_names",
@@ -187,6 +188,29 @@ def effect_limit_distance(v0: float, v_stop: float, mu_a: float, mu_b: float, ch
         else:  # the friction changes first
             t, x, v, after = t_change, x + d_time, v_time, True
 
+
+
+def episode_limits(plant, idx, v0, v_stop: float, road_a, road_b, mu_a, mu_b, change_distance,
+                   p: qc.QuarterCarParams = qc.PAPER_PARAMS) -> np.ndarray:
+    """The physical limit [m] of the episodes of cars ``idx`` of ``plant``: :func:`limit_distance` of their
+    scenarios, or :func:`effect_limit_distance` for a car whose effects move it (the plant's ``limit_terms``).
+
+    :param plant: a :class:`~fricenv.plants.braking_plant.BrakingPlant`; :param idx: the cars (array of indices).
+    :param v0: their initial speeds [m/s]; :param v_stop: the stop speed [m/s].
+    :param road_a: their road rows (B, C, E, theta) before the road's change, (k, 4); :param road_b: after it.
+    :param mu_a: their peak friction before the change; :param mu_b: after it.
+    :param change_distance: where their roads change [m]; :param p: vehicle parameters (m, g).
+    """
+    limits = np.array(limit_distance(v0, v_stop, mu_a, mu_b, change_distance, p.g), dtype=float, ndmin=1)
+    for j, i in enumerate(np.atleast_1d(idx)):
+        terms = plant.limit_terms(int(i))
+        if terms is not None:
+            theta_after = terms.pop("theta_after")
+            limits[j] = effect_limit_distance(
+                float(v0[j]), v_stop, float(mu_a[j]), float(mu_b[j]), float(change_distance[j]),
+                mu_factor_a=theta_after / road_a[j, 3], mu_factor_b=theta_after / road_b[j, 3], m=p.m, g=p.g,
+                **terms)
+    return limits
 
 def _phase_distance(a: float, b: float, v1: float, v2: float) -> float:
     """Distance of ``v' = -(a + b v^2)`` from speed v1 down to v2 (L2) [m]."""
