@@ -1,0 +1,11 @@
+"""A 60 ms brake delay is within reach of a slip controller whose gains are chosen for it (validation.slip_gains)."""
+
+from agents.controllers import SlipControllerParams
+from validation.slip_gains import score
+
+
+def test_gains_chosen_for_a_60_ms_delay_reach_what_the_nominal_gains_do_not():
+    nominal, nominal_locks = score("brake_delay", "high", SlipControllerParams(), [0])
+    chosen, chosen_locks = score("brake_delay", "high", SlipControllerParams(kp=20.0, ki=25.0), [0])
+    assert nominal > 1.10 and chosen < 1.05
+    assert nominal_locks == chosen_locks == 0
