@@ -68,7 +68,7 @@ def _gate_row(i, omega, torque_prev, ceiling, gc, x, P, started, rejected, jump)
         return omega, _OK
     ref = x[i, 0] if rejected[i] == 0 else jump[i, 1]
     is_jump, chain, b = jump_test(rejected[i], jump[i, 0] > 0, jump[i, 2], ref, omega, torque_prev, e, dt, I_w,
-                                     gc[7])
+                                     gc[7], gc[8])
     jump[i, 0], jump[i, 1], jump[i, 2] = 1.0 if chain else 0.0, omega, np.sign(e)
     if is_jump or rejected[i] >= max_rej:  # a friction jump, or the (max_rejections + 1)-th in a row: restart
         rejected[i], x[i, 0], x[i, 1], jump[i, 0] = 0, omega, b if is_jump else 0.0, 0.0
@@ -183,7 +183,7 @@ class _NoGate:
         self.jump = np.zeros((n, 3))
 
     def constants(self) -> np.ndarray:
-        return np.zeros(8)
+        return np.zeros(9)
 
 
 class BatchedGate:
@@ -209,10 +209,11 @@ class BatchedGate:
         self.jump[mask] = 0.0
 
     def constants(self) -> np.ndarray:
-        """(dt, I_w, R, b's initial variance, q_b, NIS bound, max rejections, jump bound) for the compiled step."""
+        """(dt, I_w, R, b's initial variance, q_b, NIS bound, max rejections, jump bound, rest band) for the
+        compiled step."""
         t = self.t
         return np.array([t.dt, t.I_w, t.R, t.b_std0[0] ** 2, t.Q[1, 1], t.params.bound, t.params.max_rejections,
-                         t.b_bound[0]])
+                         t.b_bound[0], t.rest_band])
 
 
 class BatchedEkfRls:

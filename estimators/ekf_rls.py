@@ -167,8 +167,10 @@ class EkfRlsCore:
         self.A[0, 1 + n:] = 1.0 / cfg.m
         for i in range(n):
             self.A[1 + i, 1 + n + i] = -cfg.R_w / cfg.I_w
+        # (J3) of estimators.jump: a braked wheel within the noise margin of 0 is at rest
+        rest_band = REF_MARGIN_STD * cfg.omega_std if cfg.braking_reference else 0.0
         self.wheel_gate = None if cfg.outlier_gate is None else WheelSpeedGate(
-            n, cfg.I_w, cfg.R_w, self.Fz, self.dt, cfg.omega_std, cfg.outlier_gate)
+            n, cfg.I_w, cfg.R_w, self.Fz, self.dt, cfg.omega_std, cfg.outlier_gate, rest_band)
         self.reset()
 
     def reset(self, v0: float | None = None) -> None:

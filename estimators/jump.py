@@ -29,6 +29,16 @@ zero at speed, implies a tire force many times the load. A run of equal bad read
 zero below about 5 m/s) does look like a wheel that locked, and is then taken as one: for a brake controller the
 safe reading.
 
+(J3) **A braked wheel at rest stays at rest.** (J2) reads the torque commanded as the torque the brake
+applies. While the wheel turns it does; at rest the brake holds the wheel and applies only what the tire
+pulls (it never turns the wheel backwards), so a command above what a road can hold implies no tire term
+at all. A sample within ``rest_band`` of 0 after one within it, while the torque brakes, is therefore
+physical whatever (J2) gives, with the implied term held to the bound. A wheel that a lagging brake holds
+locked while the command falls is thus a run of physical samples, restarted at the second; without the
+rule the run's third sample broke it and the gate rejected the locked wheel ``max_rejections`` times (80
+ms brake lag, dry ABS stop, seed 1: 10 samples). The step into rest is still judged by (J2), so a dropout
+to zero at speed stays a spike. ``rest_band`` 0 is the rule off.
+
 :func:`jump_test` is plain Python compiled into the batched gate (:func:`estimators.batched._gate_row`), so the
 single and the batched gates run the same rule.
 """
@@ -44,7 +54,8 @@ __all__ = ["JUMP_MU_MAX", "jump_test"]
 
 
 def jump_test(rejected_before: int, armed: bool, prev_sign: float, omega_ref: float, omega: float, torque: float,
-              e: float, dt: float, I_w: float, b_bound: float) -> tuple[bool, bool, float]:
+              e: float, dt: float, I_w: float, b_bound: float,
+              rest_band: float = 0.0) -> tuple[bool, bool, float]:
     """Decide whether a rejected wheel speed is a friction jump, (J2) and the rule of the module docstring.
 
     :param rejected_before: samples rejected in a row just before this one.
@@ -57,9 +68,14 @@ def jump_test(rejected_before: int, armed: bool, prev_sign: float, omega_ref: fl
     :param dt: sample time [s].
     :param I_w: wheel inertia [kg m^2].
     :param b_bound: largest |b| a road can produce [rad/s^2].
+    :param rest_band: a braked wheel within this of 0 on this and the reference sample is at rest, (J3)
+        [rad/s].
     :return: (a jump, the run up to this sample is physical (the next call's ``armed``), the implied term b
         [rad/s^2]).
     """
     b = (omega_ref + dt * torque / I_w - omega) / dt  # (J2)
-    chain = abs(b) <= b_bound and (rejected_before == 0 or armed)  # every sample of the run so far is physical
+    physical = abs(b) <= b_bound
+    if rest_band > 0.0 and torque < 0.0 and abs(omega) <= rest_band and abs(omega_ref) <= rest_band:  # (J3)
+        physical, b = True, min(max(b, -b_bound), b_bound)
+    chain = physical and (rejected_before == 0 or armed)  # every sample of the run so far is physical
     return rejected_before >= 1 and chain and np.sign(e) == prev_sign, chain, b

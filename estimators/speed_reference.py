@@ -74,12 +74,14 @@ class WheelSpeedGate:
     :param dt: sample time [s].
     :param omega_std: wheel-speed noise standard deviation assumed [rad/s].
     :param params: the gate.
+    :param rest_band: a braked wheel this close to 0 is at rest, (J3) of :mod:`estimators.jump` (0: the rule
+        off) [rad/s].
     """
 
     def __init__(self, n: int, I_w: float, R_w: float, Fz: np.ndarray, dt: float, omega_std: float,
-                 params: GateParams):
+                 params: GateParams, rest_band: float = 0.0):
         self.n, self.I_w, self.dt = n, float(I_w), float(dt)
-        self.params = params
+        self.params, self.rest_band = params, float(rest_band)
         self.R = float(omega_std) ** 2
         self.b_std0 = np.asarray(Fz, dtype=float) * R_w / I_w  # [rad/s^2]
         self.b_bound = JUMP_MU_MAX * self.b_std0  # largest tire term a road can produce (estimators.jump) [rad/s^2]
@@ -125,7 +127,8 @@ class WheelSpeedGate:
             if verdict != Verdict.ACCEPT:  # a friction jump (estimators.jump): restart at the implied tire term
                 ref = self.x[i][0] if before == 0 else self.jump[i, 1]
                 jump, chain, b = jump_test(before, bool(self.jump[i, 0] > 0), self.jump[i, 2], ref, float(omega[i]),
-                                           float(torque_prev[i]), e, self.dt, self.I_w, float(self.b_bound[i]))
+                                           float(torque_prev[i]), e, self.dt, self.I_w,
+                                           float(self.b_bound[i]), self.rest_band)
                 self.jump[i] = (float(chain), float(omega[i]), np.sign(e))
                 if jump:
                     verdict, self.rejected[i], b_restart = Verdict.REINIT, 0, b

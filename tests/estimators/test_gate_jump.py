@@ -115,3 +115,55 @@ def test_the_restart_drops_the_old_roads_peak_friction_at_once(seed):
     restart = K_JUMP + 2
     assert health[restart] == int(Health.REINITIALISED) and values["mu"][restart - 1] > 0.8  # still dry's
     assert np.all(np.abs(values["mu"][restart + 1:] - ICE.mu_max) <= 0.05), values["mu"][restart + 1:]
+
+
+def test_jump_test_a_braked_wheel_held_at_rest():
+    """(J3): at rest the brake applies only what the tire pulls; a command above the bound implies no tire
+    term."""
+    # a drop to 0 at speed (stays a spike) and a wheel at rest without a brake (no rest rule) are not physical
+    dt, I_w, bound, band = 0.01, 1.0, 1650.0, 1.34
+    # 0.02 -> -0.66 rad/s under 1735.6 N m commanded: (J2) gives b = -1667, beyond the bound
+    assert not jump_test(1, True, -1.0, 0.02, -0.66, -1735.6, -6.0, dt, I_w, bound)[1]  # the rule off
+    jump, chain, b = jump_test(1, True, -1.0, 0.02, -0.66, -1735.6, -6.0, dt, I_w, bound, band)
+    assert chain and jump and b == -bound
+    assert not jump_test(1, True, -1.0, 30.0, 0.0, -900.0, -5.0, dt, I_w, bound, band)[1]
+    assert not jump_test(1, True, -1.0, 0.02, -0.66, 1735.6, -6.0, dt, I_w, bound, band)[1]
+
+
+def _lagging_brake_stop():
+    """The robustness matrix's ABS stop on dry with an 80 ms brake lag, seed 1: the brake holds the wheel
+    locked at 2.62-2.72 s while the command falls from 1736 to 483 N m."""
+    from agents.robustness import simulate_stop
+    from fricenv.effects.grid import GridCell
+
+    return simulate_stop(GridCell("brake_lag", "high"), "dry", "abs", 1)
+
+
+def test_a_wheel_a_lagging_brake_holds_at_rest_is_restarted_not_rejected_ten_times():
+    stop = _lagging_brake_stop()
+    held = (stop.t >= 2.615) & (stop.t <= 2.725)
+    assert np.all(stop.slip[held] == 1.0)  # locked through the window
+    flags = {}
+    for braking_reference in (True, False):
+        est = get_estimator("ekf-rls").make(P, DT, braking_reference=braking_reference)
+        est.reset(v0=float(stop.omega[0]) * P.r)
+        samples = zip(stop.omega, stop.a_x, stop.T_b)
+        health = np.array([int(est.update((w, a), (T,)).health) for w, a, T in samples])
+        flags[braking_reference] = health[held]
+    assert list(flags[True][:2]) == [int(Health.OUTLIER), int(Health.REINITIALISED)]
+    assert not np.isin(flags[True][2:], BAD).any()
+    assert list(flags[False][:10]) == [int(Health.OUTLIER)] * 10  # the paper's gate: the whole run rejected
+
+
+def test_batched_gate_holds_the_wheel_at_rest_as_the_single_one():
+    stop = _lagging_brake_stop()
+    batched = make_batched("ekf-rls", 1, P, DT)
+    batched.reset(v0=np.array([stop.omega[0] * P.r]))
+    single = get_estimator("ekf-rls").make(P, DT)
+    single.reset(v0=float(stop.omega[0]) * P.r)
+    for w, a, T in zip(stop.omega, stop.a_x, stop.T_b):
+        values, health = batched.update(np.array([w]), np.array([a]), np.array([T]))
+        ref = single.update((w, a), (T,))
+        assert health[0] == int(ref.health)
+        for key in single.names:
+            np.testing.assert_allclose(values[key][0], ref.values[key], rtol=1e-9, atol=1e-9)

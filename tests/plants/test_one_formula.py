@@ -18,8 +18,10 @@ from fricenv.plants.tire import ROADS, ecu_slip, longitudinal_slip, magic_formul
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
 LIBRARY = ("fricenv", "estimators", "agents")
-# The Magic Formula's building block: an arctangent (numpy's, math's or CasADi's spelling).
+# An arctangent (numpy's, math's or CasADi's spelling).
 ARCTAN = re.compile(r"\b(arctan|atan)\s*\(")
+# The Magic Formula's sine or slope of ``C`` times an arctangent.
+C_ARCTAN = re.compile(r"\bC\s*\*\s*(?:\w+\.)*(?:arctan|atan)\s*\(")
 P = qc.PAPER_PARAMS
 
 
@@ -28,9 +30,34 @@ def _library_files():
         yield from sorted((ROOT / package).rglob("*.py"))
 
 
+def _writes_the_magic_formula(text: str) -> bool:
+    """Whether ``text`` writes the Magic Formula: ``C`` times an arctangent (its sine and its slope), or an
+    arctangent inside an arctangent's argument (``atan(B lam - E (B lam - atan(B lam)))``). Other physics may
+    use an arctangent (the time of a stop under quadratic drag, :func:`fricenv.envs.scenario.
+    effect_limit_distance`)."""
+    if C_ARCTAN.search(text):
+        return True
+    for match in ARCTAN.finditer(text):
+        depth, i = 1, match.end()
+        while depth and i < len(text):
+            if ARCTAN.match(text, i):
+                return True
+            depth += {"(": 1, ")": -1}.get(text[i], 0)
+            i += 1
+    return False
+
+
+def test_the_magic_formula_detector():
+    by_hand = "theta * math.sin(C * math.atan(B * lam - E * (B * lam - math.atan(B * lam))))"
+    assert _writes_the_magic_formula(by_hand)
+    assert _writes_the_magic_formula("np.arctan(bs - E * (bs - np.arctan(bs)))")
+    assert _writes_the_magic_formula("angle = C * np.arctan(inner)")
+    assert not _writes_the_magic_formula("(math.atan(k * v1) - math.atan(k * v2)) / math.sqrt(a * b)")
+
+
 def test_the_magic_formula_is_written_in_one_library_file():
-    """Every arctangent of the library (the Magic Formula's sin(C atan(...)) and its slope) is in tire.py."""
-    holders = {str(f.relative_to(ROOT)) for f in _library_files() if ARCTAN.search(f.read_text())}
+    """The Magic Formula (its sin(C atan(...)) and its slope) is written in tire.py alone."""
+    holders = {str(f.relative_to(ROOT)) for f in _library_files() if _writes_the_magic_formula(f.read_text())}
     assert holders == {"fricenv/plants/tire.py"}
 
 
