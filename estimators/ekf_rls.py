@@ -140,6 +140,12 @@ class EkfRlsConfig:
         return REF_MARGIN_STD * self.omega_std * self.R_w
 
     @property
+    def rest_band(self) -> float:
+        """(J3) of :mod:`estimators.jump`, with the braking rules: a braked wheel within the wheel-speed noise
+        margin of 0 is at rest [rad/s]; 0 (the rule off) without them."""
+        return REF_MARGIN_STD * self.omega_std if self.braking_reference else 0.0
+
+    @property
     def m_eff(self) -> float:
         """Mass of eq. (5)'s 466.5 = m_eff R_w: the car plus the wheels' rotary inertia [kg]."""
         return self.m + len(self.Fz) * self.I_w / self.R_w**2
@@ -167,10 +173,8 @@ class EkfRlsCore:
         self.A[0, 1 + n:] = 1.0 / cfg.m
         for i in range(n):
             self.A[1 + i, 1 + n + i] = -cfg.R_w / cfg.I_w
-        # (J3) of estimators.jump: a braked wheel within the noise margin of 0 is at rest
-        rest_band = REF_MARGIN_STD * cfg.omega_std if cfg.braking_reference else 0.0
         self.wheel_gate = None if cfg.outlier_gate is None else WheelSpeedGate(
-            n, cfg.I_w, cfg.R_w, self.Fz, self.dt, cfg.omega_std, cfg.outlier_gate, rest_band)
+            n, cfg.I_w, cfg.R_w, self.Fz, self.dt, cfg.omega_std, cfg.outlier_gate, cfg.rest_band)
         self.reset()
 
     def reset(self, v0: float | None = None) -> None:

@@ -77,10 +77,10 @@ class BrakingEnv(gym.Env):
     | wheel lock        | ``- lock_penalty`` (default 0.01) for every step the wheel is locked  |
 
     The efficiency term is <= 0 in every step (the car can never decelerate faster than ``g mu_max``) and is 0
-    only when the tire works at its friction peak. On one road of the nominal plant its episode sum is ``1 - d_stop / L``, i.e.
-    ``1 - ratio``: maximising the return minimises the stopping distance. The lock term makes a locked wheel
-    cost more than any distance it could save (on snow, whose friction keeps rising to slip 1, it is what keeps
-    the wheel rolling). Lock is penalised, not terminated.
+    only when the tire works at its friction peak. On one road of the nominal plant its episode sum is
+    ``1 - d_stop / L``, i.e. ``1 - ratio``: maximising the return minimises the stopping distance. The lock term
+    makes a locked wheel cost more than any distance it could save (on snow, whose friction keeps rising to slip 1,
+    it is what keeps the wheel rolling). Lock is penalised, not terminated.
 
     ## Wheel lock
 

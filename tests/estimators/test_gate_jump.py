@@ -120,12 +120,11 @@ def test_the_restart_drops_the_old_roads_peak_friction_at_once(seed):
 def test_jump_test_a_braked_wheel_held_at_rest():
     """(J3): at rest the brake applies only what the tire pulls; a command above the bound implies no tire
     term."""
-    # a drop to 0 at speed (stays a spike) and a wheel at rest without a brake (no rest rule) are not physical
     dt, I_w, bound, band = 0.01, 1.0, 1650.0, 1.34
     # 0.02 -> -0.66 rad/s under 1735.6 N m commanded: (J2) gives b = -1667, beyond the bound
     assert not jump_test(1, True, -1.0, 0.02, -0.66, -1735.6, -6.0, dt, I_w, bound)[1]  # the rule off
     jump, chain, b = jump_test(1, True, -1.0, 0.02, -0.66, -1735.6, -6.0, dt, I_w, bound, band)
     assert chain and jump and b == -bound
+    # a drop to 0 at speed stays a spike; a wheel at rest without a brake is not held by one
     assert not jump_test(1, True, -1.0, 30.0, 0.0, -900.0, -5.0, dt, I_w, bound, band)[1]
     assert not jump_test(1, True, -1.0, 0.02, -0.66, 1735.6, -6.0, dt, I_w, bound, band)[1]
-
