@@ -103,6 +103,19 @@ def test_lag_against_a_reference_finds_the_filter_delay_and_no_delay_without_fil
     assert lag_against(noisy, ref, FS, (0.3, 4.0), 0.15) <= 0.5 / FS
 
 
+def test_lag_against_gives_no_bound_where_the_reference_does_not_follow_the_channel():
+    """A reference unrelated to the channel (a torque that barely moves the car) bounds nothing: ``inf`` with a
+    required fit, where the plain least squares reads a lag it cannot know (0 here)."""
+    sig = _braking(11)
+    rng = np.random.default_rng(4)
+    filtered = _lowpass(sig["ax"] + rng.normal(0.0, 0.1, sig["ax"].size))
+    unrelated = rng.normal(0.0, 1.0, sig["ax"].size)
+    assert np.isfinite(lag_against(filtered, unrelated, FS, (0.3, 4.0), 0.15))
+    assert lag_against(filtered, unrelated, FS, (0.3, 4.0), 0.15, min_fit=0.5) == np.inf
+    assert lag_against(filtered, sig["ax"], FS, (0.3, 4.0), 0.15, min_fit=0.5) == pytest.approx(_true_lag(),
+                                                                                                abs=0.5 / FS)
+
+
 def test_shared_lag_takes_the_smallest_upper_bound_and_leaves_unflagged_channels():
     rng = np.random.default_rng(5)
     conds = {"v": condition_channel(_lowpass(rng.normal(0.0, 0.1, 3000)), 1e-3),
@@ -260,3 +273,20 @@ def test_the_filter_certainty_is_the_logs_even_where_no_lag_is_read():
     out = shared_lag({"v": unsure, "a_x": sure}, FS, 2.0, 1.0, bounds={"a_x": 0.0})
     for c in ("v", "a_x"):
         assert out[c].certain and out[c].lag_s == 0.0 and out[c].summary()["filter_evidence"] == "quiet start"
+
+
+def test_a_filter_the_torque_cannot_bound_is_read_from_the_noise_on_a_real_like_export():
+    """A nominal stop on ice (sine-modulated torque, 0.22 s of free rolling) exported at 29 Hz with the logger's
+    5 Hz IMU filter on ``v`` and ``a_x`` (validation/real_artifacts.py): the torque barely moves the car on ice, so
+    it cannot bound the filter's lag (its deceleration explains 26 % of ``a_x``'s motion). Read as a bound of 0
+    it vetoed the filter the noise shows, and the filter's lag was named a relaxation length (z 12.5); without
+    the bound the channels are read as filtered and the verdict is ``none``."""
+    from validation.independent_model import Road
+    from validation.independent_sim import IndependentCase, diagnose_case
+
+    case = IndependentCase("none", (), Road(4.001966911605736, 2.0, 1.0, 0.10745352459361933, "ice"), "sine",
+                           24.19004498203084, 0.22354702982765248, ("v", "a_x"), 0.04914974621819358,
+                           0.09811256299955115, 1685753236, real={"rate_hz": 28.993353591426118})
+    row = diagnose_case(case)
+    assert row["sensors"]["v"]["filtered"] and row["sensors"]["a_x"]["filtered"]
+    assert row["verdict"] == "none", row["verdict"]

@@ -51,6 +51,11 @@ LAG_BAND_HZ = 2.0
 LAG_USE_HZ = 1.0
 LAG_XCORR_BAND = (0.3, 4.0)  # band in which a_x is aligned with the torque's deceleration [Hz]
 LAG_MAX_S = 0.15  # longest sensor lag looked for [s]
+# The torque's deceleration bounds a_x's sensor lag only where it explains at least this share of a_x's motion in
+# LAG_XCORR_BAND: on ice the torque barely moves the car, and a sine driver's log at 29 Hz read a bound of 0 at a
+# fit of 0.26, which vetoed a 5 Hz filter its noise showed (real-like tuning seed 3010: fits 0.62-1.00 where a
+# filter was read) [-]
+LAG_XCORR_MIN_FIT = 0.5
 MIN_HORIZON = 3  # shortest prediction window [samples] (a 0.1 s window at 25 Hz would hold 2.5)
 MIN_WINDOWS = 6  # fewest prediction windows a diagnosis needs (3 per fold for the cross-fitting) [-]
 # Transient slip at a window start: False = the slip of the window's start state (the wheel-speed nuisance fit then
@@ -101,12 +106,13 @@ def _torque_lag(log: QuarterCarLog, cond: dict, p: qc.QuarterCarParams) -> dict:
     """An upper bound of ``a_x``'s sensor lag: its delay behind the deceleration that the logged torque and the
     unfiltered wheel speed give, ``a_x ~ -(T_b + J omega') / (r m)`` (wheel and vehicle equations (1)-(2) without
     the small drag; ``omega'`` by a centred Savitzky-Golay derivative). An actuator effect (lag, delay) delays the
-    applied torque further, never less, so this bounds the filter's lag from above (:func:`lag_against`)."""
+    applied torque further, never less, so this bounds the filter's lag from above (:func:`lag_against`), where that
+    deceleration explains ``LAG_XCORR_MIN_FIT`` of ``a_x``'s motion (else no bound)."""
     if "a_x" not in cond or len(log) < 4 * SAVGOL[0]:
         return {}
     wd = savgol_filter(cond["omega"].filled, SAVGOL[0], SAVGOL[1], deriv=1, delta=log.dt)
     ref = -(np.asarray(log.T_b, dtype=float) + p.J * wd) / (p.r * p.m)
-    return {"a_x": lag_against(cond["a_x"].values, ref, 1.0 / log.dt, LAG_XCORR_BAND, LAG_MAX_S)}
+    return {"a_x": lag_against(cond["a_x"].values, ref, 1.0 / log.dt, LAG_XCORR_BAND, LAG_MAX_S, LAG_XCORR_MIN_FIT)}
 
 
 def _window_counts(meas: dict, starts: np.ndarray, H: int) -> np.ndarray:

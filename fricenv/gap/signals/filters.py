@@ -140,23 +140,35 @@ def deconvolved(x: np.ndarray, fs: float, fc: float, order: int = 2, digital: bo
     return np.where(np.isfinite(x), u, np.nan)
 
 
-def lag_against(y: np.ndarray, ref: np.ndarray, fs: float, band: tuple[float, float], max_lag: float) -> float:
+def lag_against(y: np.ndarray, ref: np.ndarray, fs: float, band: tuple[float, float], max_lag: float,
+                min_fit: float = 0.0) -> float:
     """The delay of channel ``y`` behind a reference ``ref`` of the same motion from unfiltered channels: the shift
     in ``[0, max_lag]`` (steps of a tenth of a sample) after which ``y``, band-passed to ``band`` [Hz] without phase
-    (forward-backward Butterworth), is closest to a multiple of the band-passed reference (least squares) [s]."""
+    (forward-backward Butterworth), is closest to a multiple of the band-passed reference (least squares) [s].
+
+    :param min_fit: the share of the band-passed ``y``'s power that the reference must explain at that shift; below
+        it the reference does not follow the channel's motion and says nothing of its delay: ``inf`` (no bound).
+    """
     from scipy.signal import butter, sosfiltfilt
 
     sos = butter(2, band, btype="band", fs=fs, output="sos")
     yb, rb = sosfiltfilt(sos, fill_missing(y)), sosfiltfilt(sos, fill_missing(ref))
     shifts = np.arange(0.0, max_lag * fs + 1e-9, 0.1)
     cost = np.full(shifts.size, np.inf)
+    power = np.full(shifts.size, np.inf)
     for i, sh in enumerate(shifts):
         ya = advanced(np.where(np.isfinite(y), yb, np.nan), sh)
         ok = np.isfinite(ya)
         den = float(np.dot(rb[ok], rb[ok]))
         if np.count_nonzero(ok) > 10 and den > 0:
             cost[i] = float(np.mean((ya[ok] - np.dot(ya[ok], rb[ok]) / den * rb[ok]) ** 2))
-    return float(shifts[int(np.argmin(cost))] / fs) if np.isfinite(cost).any() else float("inf")
+            power[i] = float(np.mean(ya[ok] ** 2))
+    if not np.isfinite(cost).any():
+        return float("inf")
+    best = int(np.argmin(cost))
+    if power[best] > 0 and 1.0 - cost[best] / power[best] < min_fit:
+        return float("inf")
+    return float(shifts[best] / fs)
 
 
 def shared_lag(conds: dict[str, ChannelCondition], fs: float, f_lo: float, f_use: float,
