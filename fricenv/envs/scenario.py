@@ -189,7 +189,6 @@ def effect_limit_distance(v0: float, v_stop: float, mu_a: float, mu_b: float, ch
             t, x, v, after = t_change, x + d_time, v_time, True
 
 
-
 def episode_limits(plant, idx, v0, v_stop: float, road_a, road_b, mu_a, mu_b, change_distance,
                    p: qc.QuarterCarParams = qc.PAPER_PARAMS) -> np.ndarray:
     """The physical limit [m] of the episodes of cars ``idx`` of ``plant``: :func:`limit_distance` of their
@@ -205,12 +204,13 @@ def episode_limits(plant, idx, v0, v_stop: float, road_a, road_b, mu_a, mu_b, ch
     for j, i in enumerate(np.atleast_1d(idx)):
         terms = plant.limit_terms(int(i))
         if terms is not None:
-            theta_after = terms.pop("theta_after")
+            theta_after = terms["theta_after"]
             limits[j] = effect_limit_distance(
                 float(v0[j]), v_stop, float(mu_a[j]), float(mu_b[j]), float(change_distance[j]),
                 mu_factor_a=theta_after / road_a[j, 3], mu_factor_b=theta_after / road_b[j, 3], m=p.m, g=p.g,
-                **terms)
+                t_change=terms["t_change"], c0=terms["c0"], c2=terms["c2"])
     return limits
+
 
 def _phase_distance(a: float, b: float, v1: float, v2: float) -> float:
     """Distance of ``v' = -(a + b v^2)`` from speed v1 down to v2 (L2) [m]."""
