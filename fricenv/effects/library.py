@@ -306,7 +306,9 @@ for _entry in (
     QuarterCarEffect(BrakeGain, (Param("gain", "-", (0.3, 3.0), 1.0, 2e-3, 0.05),),
                      "braking below the friction peak (the torque sets the deceleration there)",
                      _starts("gain", 0.8, 0.9, 1.1, 1.25), draw=_draw_brake_gain),
-    QuarterCarEffect(RelaxationLength, (Param("sigma", "m", (0.01, 3.0), 0.0, 5e-3, 0.1),),
+    # A car tire's longitudinal relaxation length is a few tens of centimetres: a fit beyond 1 m imitates a lag or a
+    # filter (docs/design-notes.md); the fit's own range is wider, so that a joint fit can pass through.
+    QuarterCarEffect(RelaxationLength, (Param("sigma", "m", (0.01, 3.0), 0.0, 5e-3, 0.1, physical=(0.01, 1.0)),),
                      "fast slip transients (brake steps, ABS cycles)", _starts("sigma", 0.1, 0.3, 0.6, 1.2),
                      window_states=1, draw=_uniform(RelaxationLength, "sigma", 0.2, 0.6), testable=_testable_relaxation),
     QuarterCarEffect(RadiusError, (Param("r_eff", "m", (0.25, 0.45), lambda road, p: p.r, 2e-4, 0.005),),

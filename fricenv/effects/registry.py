@@ -51,7 +51,9 @@ class Param:
 
     :param name: registry parameter name (unique over all effects: the fits concatenate parameter vectors).
     :param unit: SI unit, for reports.
-    :param bounds: the fit's physical range (``(-inf, inf)`` for a log time: then the training windows bound it).
+    :param bounds: the fit's range (``(-inf, inf)`` for a log time: then the training windows bound it).
+    :param physical: the range a verdict may name, where narrower than ``bounds`` (default: ``bounds``): a fit may
+        pass beyond it on its way, but a value beyond it stretches the effect to imitate something else.
     :param off: the value that switches the effect off; a callable ``(road (4,) or (n, 4), p) -> value`` when it
         depends on the road or the vehicle (the rolling radius, the theta after a change).
     :param fd_step: finite-difference step of the fit Jacobian (absolute).
@@ -69,6 +71,11 @@ class Param:
     x_scale: float = 1.0
     field: str | None = ""
     log_time: bool = False
+    physical: tuple[float, float] | None = None
+
+    @property
+    def physical_range(self) -> tuple[float, float]:
+        return self.physical if self.physical is not None else self.bounds
 
     @property
     def batch_field(self) -> str | None:

@@ -489,9 +489,10 @@ def _fit_with(effect, values, folds=None):
 
 
 @pytest.mark.parametrize("effect,values,edge", [
-    ("relaxation_length", {"sigma": 2.9995}, ["sigma"]),  # a 3 m relaxation length: pressed against the range
+    ("relaxation_length", {"sigma": 0.9995}, ["sigma"]),  # a 1 m relaxation length: at the physical range's edge
+    ("relaxation_length", {"sigma": 1.6}, ["sigma"]),  # beyond it (inside the fit's range)
     ("relaxation_length", {"sigma": 0.01}, []),  # the off side: no relaxation
-    ("relaxation_length", {"sigma": 0.98}, []),
+    ("relaxation_length", {"sigma": 0.95}, []),
     ("brake_lag", {"tau": 1e-3}, []),
     ("brake_lag", {"tau": 0.4}, ["tau"]),
     ("brake_gain", {"gain": 0.3}, ["gain"]),  # gain switches off at 1: both bounds are far
@@ -510,8 +511,28 @@ def test_a_range_edge_in_one_fold_is_enough():
     from fricenv.gap.quarter_car.diagnose import at_range_edge
     from fricenv.plants.quarter_car import PAPER_PARAMS
 
-    fit = _fit_with("relaxation_length", {"sigma": 1.6}, folds=[{"sigma": 0.2}, {"sigma": 3.0}])
+    fit = _fit_with("relaxation_length", {"sigma": 0.6}, folds=[{"sigma": 0.2}, {"sigma": 1.0}])
     assert at_range_edge(fit, PAPER_PARAMS) == ["sigma"]
+
+
+@pytest.mark.slow
+def test_a_brake_delay_stretched_to_a_relaxation_length_beyond_a_metre_is_not_named(tmp_path):
+    """Real-like log 15 of seed 4625 (`validation.independent_sim --real`): a 57 ms brake delay on ice, sine-modulated
+    torque, v and a_x at 29 Hz. A relaxation length of 1.15 m imitated it best (z 31) and was named with a brake lag.
+    Longer than any car tire's, it lies beyond the effect's physical range, and the verdict names no relaxation
+    length."""
+    import warnings
+
+    from validation import independent_sim as ind
+
+    case = ind.draw_cases(30, 4625, True)[15]
+    assert case.category == "brake_delay"
+    path, _ = ind._diagnosable_log(str(tmp_path), case)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        dg = diagnose_file(path, cfg=CFG)
+    assert "relaxation_length" not in {e["effect"] for e in dg.effects}
+    assert dg.where["tests"]["relaxation_length"]["at_range_edge"] == ["sigma"]
 
 
 def test_mu_change_starts_lie_at_distinct_places_and_find_the_change(diagnosed):

@@ -30,24 +30,27 @@ def significant(f: CandidateFit, nominal: CandidateFit, cfg: DiagnoseConfig) -> 
 
 
 def at_range_edge(f: CandidateFit, p: qc.QuarterCarParams) -> list[str]:
-    """Effect parameters of ``f`` that sit at a bound of their physical range (the registry's bounds) in any fold's fit.
+    """Effect parameters of ``f`` that reach the far edge of their physical range (the registry's
+    :attr:`~fricenv.effects.registry.Param.physical_range`) in any fold's fit: pressed against it, or beyond it.
 
-    The bound on the side where the effect switches off (a lag of 1 ms, no drag) does not count: there the effect
-    is simply absent. A parameter pressed against the far bound (a 3 m relaxation length) means the effect is being
-    stretched to imitate something it is not, so such a candidate cannot be the verdict.
+    The edge on the side where the effect switches off (a lag of 1 ms, no drag) does not count: there the effect
+    is simply absent. A parameter at or beyond the far edge (a relaxation length of 1 m or more) means the effect is
+    being stretched to imitate something it is not, so such a candidate cannot be the verdict.
     """
     off = ModelBatch.nominal(road_of(f.x), 1, p)
     out = []
     for i, name in enumerate(f.names):
         if name in ROAD_NAMES:
             continue
-        lo, hi = effect_param(name).bounds
+        lo, hi = effect_param(name).physical_range
         if not (np.isfinite(lo) and np.isfinite(hi)):
             continue
         tol = RANGE_EDGE * (hi - lo)
         off_value = float(off.param(name)[0])
-        edges = [b for b, off_side in ((lo, off_value <= lo + tol), (hi, off_value >= hi - tol)) if not off_side]
-        if any(abs(x[i] - b) <= tol for x in (f.x_folds or (f.x,)) for b in edges):
+        xs = [x[i] for x in (f.x_folds or (f.x,))]
+        low = off_value > lo + tol and any(x <= lo + tol for x in xs)
+        high = off_value < hi - tol and any(x >= hi - tol for x in xs)
+        if low or high:
             out.append(name)
     return out
 
