@@ -131,6 +131,17 @@ def test_shared_lag_takes_the_smallest_upper_bound_and_leaves_unflagged_channels
     np.testing.assert_array_equal(shifted.values, advanced(conds["v"].values, shifted.lag_s * FS))
 
 
+def test_a_signal_line_at_the_low_end_of_the_band_does_not_lengthen_the_filter_lag():
+    """A speed swinging at 3.2 Hz (a sine-modulated brake) puts a line into the bands read from 2 and 3 Hz, which
+    lowers their fitted cut-off (86.6 ms read from them alone, twice the filter's lag); the band from 4.5 Hz is clear
+    of it."""
+    rng = np.random.default_rng(11)
+    t = np.arange(3000) / FS
+    conds = {"v": condition_channel(_lowpass(rng.normal(0.0, 0.1, t.size) + 0.2 * np.sin(2 * np.pi * 3.2 * t)), 1e-3)}
+    assert conds["v"].filtered
+    assert shared_lag(conds, FS, 2.0, 1.0)["v"].lag_s == pytest.approx(_true_lag(), rel=0.2)
+
+
 def test_prepare_realigns_a_filtered_log_and_leaves_an_unfiltered_one_unchanged():
     sig = _braking(21)
     cfg = DiagnoseConfig(jobs=1)

@@ -27,7 +27,8 @@ LAG_MIN_SAMPLES = 0.25  # a shared lag below this is none (shared_lag) [samples]
 # simulator), an IMU driver's filter lags by several tens of milliseconds
 LAG_MIN_S = 0.02
 DECONV_MAX_GAIN = 10.0  # largest gain of the inverse sensor filter (deconvolved) [-]
-LAG_BAND_STEP = 1.5  # shared_lag also fits the roll-off above this multiple of the band's bottom [-]
+LAG_BAND_STEP = 1.5  # ratio of the successive band bottoms shared_lag fits the roll-off above [-]
+LAG_BANDS = 3  # band bottoms f_lo LAG_BAND_STEP^k, k < LAG_BANDS, each fitted by shared_lag [-]
 
 
 def advanced(x: np.ndarray, shift: float) -> np.ndarray:
@@ -179,7 +180,7 @@ def shared_lag(conds: dict[str, ChannelCondition], fs: float, f_lo: float, f_use
     inflates the noise level read from the model's residual until real effects drown, and imitates a brake delay).
 
     Each channel that looks filtered (``filtered``, the difference test of :func:`condition_channel`) has its
-    roll-off fitted above ``f_lo`` and above ``LAG_BAND_STEP f_lo`` (:func:`filter_lag`, cut-off at least the
+    roll-off fitted above ``f_lo LAG_BAND_STEP^k``, ``k < LAG_BANDS`` (:func:`filter_lag`, cut-off at least the
     band's bottom; the fit of smaller lag is kept). The signal's own power can only add to the low end of the band,
     which lowers a fitted cut-off and lengthens the lag, never the reverse, so every estimate is an upper bound of
     the lag. When at least one channel shows a roll-off (the
@@ -211,7 +212,7 @@ def shared_lag(conds: dict[str, ChannelCondition], fs: float, f_lo: float, f_use
     fits = {}
     for c, k in conds.items():
         found = [filter_lag(k.values, fs, lo, f_use, min_cutoff=lo, families=(False, True))
-                 for lo in (f_lo, LAG_BAND_STEP * f_lo) if lo < LAG_TOP * fs] if k.filtered else []
+                 for lo in f_lo * LAG_BAND_STEP ** np.arange(LAG_BANDS) if lo < LAG_TOP * fs] if k.filtered else []
         found = [f for f in found if f is not None]
         if found:
             fits[c] = min(found, key=lambda f: f["lag_s"])
