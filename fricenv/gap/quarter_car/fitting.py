@@ -221,8 +221,9 @@ def refine_noise(nominal: CandidateFit, d: Data) -> None:
     A channel that looks low-pass filtered (:mod:`fricenv.gap.signals.sensors`) has a difference-based estimate far below
     its real noise: it takes the residual's level (:func:`robust_rms` where the filter is certain, so that a model
     error at a few brake transitions does not set it), times the square root of the residual's integrated
-    autocorrelation time (its windows hold that many times fewer independent samples). No channel goes below its
-    quantisation floor ``q / sqrt(12)`` or ``NOISE_FLOOR``."""
+    autocorrelation time (its windows hold that many times fewer independent samples), unless its filter is known
+    and undone (``white``, :func:`fricenv.gap.signals.filters.undone`): its noise is white again, and read as an
+    unfiltered channel's. No channel goes below its quantisation floor ``q / sqrt(12)`` or ``NOISE_FLOOR``."""
     train = np.flatnonzero(~d.test)
     _, r_ch = window_residuals([], nominal.names, nominal.x, d, train, per_channel=True)
     sensors = d.sensors or {}
@@ -233,7 +234,7 @@ def refine_noise(nominal: CandidateFit, d: Data) -> None:
         rms = float(np.sqrt(np.nanmean(r ** 2))) * d.sigma[c] * dof
         info = sensors.get(c, {})
         floor = max(NOISE_FLOOR[c], info.get("quantisation_step", 0.0) / np.sqrt(12.0))
-        if info.get("filtered") and np.isfinite(rms):
+        if info.get("filtered") and not info.get("white") and np.isfinite(rms):
             tau = correlation_time(r)
             info["correlation_time"] = tau
             # a filter seen on the quiet start (or stated) is certain: a model error at a few windows must not set it;

@@ -11,12 +11,15 @@ A sensor's low-pass also delays the channel (tens of milliseconds for an IMU dri
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
+from fricenv.gap.core.noise import estimate_noise
 from fricenv.gap.signals.sensors import ChannelCondition, fill_missing
 
 __all__ = ["LAG_TOP", "advanced", "deconvolved", "filter_lag", "filter_of_lag", "group_delay", "lag_against",
-           "shared_lag"]
+           "shared_lag", "undone", "undone_noise"]
 
 LAG_ORDERS = (1, 2, 3, 4)  # Butterworth orders tried for a sensor filter's noise roll-off [-]
 LAG_TOP = 0.45  # the roll-off is read up to this share of the sample rate [-]
@@ -141,6 +144,32 @@ def deconvolved(x: np.ndarray, fs: float, fc: float, order: int = 2, digital: bo
     return np.where(np.isfinite(x), u, np.nan)
 
 
+def undone(k: ChannelCondition, fs: float, fc: float, order: int = 2, digital: bool = False) -> ChannelCondition:
+    """Channel ``k`` with a sensor filter known exactly (stated) undone (:func:`deconvolved`), ``white`` set: its
+    noise is white again, so its level is read from the undone samples (:func:`undone_noise`, at least the level
+    ``k`` had), as an unfiltered channel's is, not from a model's residual."""
+    values = deconvolved(k.values, fs, fc, order, digital)
+    level = undone_noise(values, fs, fc, order, digital)
+    return replace(k, values=values, filled=fill_missing(values), white=True,
+                   noise=max(level, k.noise) if np.isfinite(level) else k.noise)
+
+
+def undone_noise(x: np.ndarray, fs: float, fc: float, order: int = 2, digital: bool = False) -> float:
+    """The white-noise std of a channel before its sensor filter, from the channel with the filter undone (``x``,
+    :func:`deconvolved` with the same filter): the difference-based estimate
+    (:func:`fricenv.gap.core.noise.estimate_noise`) over the square root of the share of a white noise's
+    second-difference power that the deconvolution keeps (it zeroes the band where the filter's gain is below
+    ``1 / DECONV_MAX_GAIN``, which holds most of that power: at 50 Hz, a 5 Hz second-order filter leaves a
+    twentieth of it)."""
+    f = np.linspace(0.0, 0.5 * fs, 1025)
+    kept = np.abs(_response(f, fc, order, fs, digital)) * DECONV_MAX_GAIN >= 1.0
+    weight = (2.0 * np.sin(np.pi * f / fs)) ** 4  # second differences: |1 - exp(-i 2 pi f / fs)|^4
+    share = float(np.sum(weight * kept) / np.sum(weight))
+    fresh = np.asarray(x, dtype=float)
+    raw = estimate_noise(fresh[np.isfinite(fresh)])
+    return raw / np.sqrt(share) if share > 0.0 and np.isfinite(raw) else float("nan")
+
+
 def lag_against(y: np.ndarray, ref: np.ndarray, fs: float, band: tuple[float, float], max_lag: float,
                 min_fit: float = 0.0) -> float:
     """The delay of channel ``y`` behind a reference ``ref`` of the same motion from unfiltered channels: the shift
@@ -207,8 +236,6 @@ def shared_lag(conds: dict[str, ChannelCondition], fs: float, f_lo: float, f_use
         channel whose signal lies far below it (a speed) is advanced, which leaves its noise as small as the filter
         made it.
     """
-    from dataclasses import replace
-
     fits = {}
     for c, k in conds.items():
         found = [filter_lag(k.values, fs, lo, f_use, min_cutoff=lo, families=(False, True))
@@ -229,15 +256,14 @@ def shared_lag(conds: dict[str, ChannelCondition], fs: float, f_lo: float, f_use
     for c, k in conds.items():
         if not k.filtered:
             continue
-        values = k.values
         if moved and c in deconvolve and certain:
             fc, order, digital = filter_of_lag(fits.get(c) or next(iter(fits.values()), None), lag, fs)
-            values = deconvolved(k.values, fs, fc, order, digital)
+            k = replace(k, values=deconvolved(k.values, fs, fc, order, digital))
         elif moved:
-            values = advanced(k.values, lag * fs)
+            k = replace(k, values=advanced(k.values, lag * fs))
         # one logger filters its channels alike: the filter's certainty is the log's, not each channel's
-        out[c] = replace(k, values=values, filled=fill_missing(values), filter=fits.get(c),
-                         lag_s=lag if moved else 0.0, certain=certain)
+        out[c] = replace(k, filled=fill_missing(k.values), filter=fits.get(c), lag_s=lag if moved else 0.0,
+                         certain=certain)
     return out
 
 

@@ -72,6 +72,7 @@ class ChannelCondition:
     filter: dict | None = None  # the sensor filter read from the noise roll-off (filter_lag), None: none seen
     lag_s: float = 0.0  # the sensor filter's lag the channel was realigned by [s] (0: not)
     stated: bool = False  # the filter is the one the column map states (fricenv.logs.sensor_filter), not read
+    white: bool = False  # a filter known exactly (stated) is undone: the noise is white again (filters.undone)
 
     def summary(self) -> dict:
         """The report's per-channel line (``where["sensors"]``)."""
@@ -81,6 +82,8 @@ class ChannelCondition:
             out["filter"] = dict(self.filter)
         if self.lag_s > 0:
             out["lag_s"] = self.lag_s
+        if self.white:
+            out["white"] = True
         if self.filtered:
             out["filter_evidence"] = "column map" if self.stated else "quiet start" if self.certain else "roll-off"
         return out

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from dataclasses import replace
 
-from fricenv.gap.signals.filters import advanced, deconvolved, group_delay
+from fricenv.gap.signals.filters import advanced, group_delay, undone
 from fricenv.gap.signals.sensors import ChannelCondition, fill_missing
 from fricenv.logs.sensor_filter import SensorFilter
 
@@ -41,8 +41,8 @@ def apply_stated(conds: dict[str, ChannelCondition], stated: dict[str, SensorFil
             continue
         lag = group_delay(f.cutoff_hz, f.order, fs, f_use, False)
         k = conds[c]
-        values = (deconvolved(k.values, fs, f.cutoff_hz, f.order, False) if c in deconvolve
-                  else advanced(k.values, lag * fs))
-        out[c] = replace(k, values=values, filled=fill_missing(values), filtered=True, certain=True, stated=True,
+        k = (undone(k, fs, f.cutoff_hz, f.order, False) if c in deconvolve
+             else replace(k, values=advanced(k.values, lag * fs)))
+        out[c] = replace(k, filled=fill_missing(k.values), filtered=True, certain=True, stated=True,
                          filter={"lag_s": lag, **f.as_dict(), "digital": False}, lag_s=lag)
     return out
