@@ -159,8 +159,8 @@ def undone_noise(x: np.ndarray, fs: float, fc: float, order: int = 2, digital: b
     :func:`deconvolved` with the same filter): the difference-based estimate
     (:func:`fricenv.gap.core.noise.estimate_noise`) over the square root of the share of a white noise's
     second-difference power that the deconvolution keeps (it zeroes the band where the filter's gain is below
-    ``1 / DECONV_MAX_GAIN``, which holds most of that power: at 50 Hz, a 5 Hz second-order filter leaves a
-    twentieth of it)."""
+    ``1 / DECONV_MAX_GAIN``, which holds most of that power: at 100 Hz, a 5 Hz second-order filter leaves about a
+    hundredth of it)."""
     f = np.linspace(0.0, 0.5 * fs, 1025)
     kept = np.abs(_response(f, fc, order, fs, digital)) * DECONV_MAX_GAIN >= 1.0
     weight = (2.0 * np.sin(np.pi * f / fs)) ** 4  # second differences: |1 - exp(-i 2 pi f / fs)|^4
