@@ -41,8 +41,11 @@ def apply_stated(conds: dict[str, ChannelCondition], stated: dict[str, SensorFil
             continue
         lag = group_delay(f.cutoff_hz, f.order, fs, f_use, False)
         k = conds[c]
-        k = (undone(k, fs, f.cutoff_hz, f.order, False) if c in deconvolve
-             else replace(k, values=advanced(k.values, lag * fs)))
-        out[c] = replace(k, filled=fill_missing(k.values), filtered=True, certain=True, stated=True,
+        if c in deconvolve:
+            k = undone(k, fs, f.cutoff_hz, f.order, False)
+        else:
+            values = advanced(k.values, lag * fs)
+            k = replace(k, values=values, filled=fill_missing(values))
+        out[c] = replace(k, filtered=True, certain=True, stated=True,
                          filter={"lag_s": lag, **f.as_dict(), "digital": False}, lag_s=lag)
     return out
