@@ -50,15 +50,17 @@ class DiagnoseConfig:
     # the noise covariance read from the candidate's own held-out residual (fricenv.gap.quarter_car.guard)
     false_discovery_guard: bool = True
     drift_z: float = 3.0  # paired z of the early/late refit over the constant model for a drift (one test) [-]
+    drift_alpha: float = 0.01  # two-sided level of the early/late parameter-shift test, over the model's parameters [-]
     candidates: tuple[str, ...] = tuple(EFFECTS)  # effects to try
     # Prediction windows simulated by the compiled (numba) kernel; False runs the numpy EffectSimulator path (the
     # reference path, kept to time the speed-up and to check the kernel against it)
     compiled: bool = True
 
     def check(self) -> None:
-        """Reject unknown candidates and losses (at diagnosis time: effects may be registered after import).
+        """Reject unknown candidates and losses (at diagnosis time: effects may be registered after import), and a
+        drift test's level outside (0, 1).
 
-        :raises ValueError: with the valid names.
+        :raises ValueError: with the valid names or range.
         """
         unknown = [c for c in self.candidates if c not in EFFECTS]
         if unknown:
@@ -68,6 +70,8 @@ class DiagnoseConfig:
                              f"got {self.fit_jacobian!r}")
         if self.fit_loss not in FIT_LOSSES:
             raise ValueError(f"DiagnoseConfig.fit_loss must be one of {', '.join(FIT_LOSSES)}, got {self.fit_loss!r}")
+        if not 0.0 < self.drift_alpha < 1.0:
+            raise ValueError(f"DiagnoseConfig.drift_alpha must lie in (0, 1), got {self.drift_alpha!r}")
 
 
 DEFAULT_CONFIG = DiagnoseConfig()

@@ -53,9 +53,11 @@ Method (every error measure is computed on data not used for fitting):
 8. **Drift test.** The verdict's model is refitted on the early and on the late half of the log separately (each
    half cross-fitted within itself). A library effect has constant parameters, so if the split model beats the
    constant one significantly (paired z above ``drift_z``) and halves the robust gap it leaves (when that gap is
-   above the noise), the effect only imitates the cause (brake fade looks like a brake gain that drifts down) and
-   the verdict is ``unexplained``. The constant model is refitted from the split fits first, so that a better
-   optimum is not mistaken for a drift (``where["drift_test"]``). A set that the forward selection makes the verdict
+   above the noise), or if a parameter's early and late estimates differ beyond their jackknife standard errors
+   (Student's t at ``drift_alpha``, :func:`fricenv.gap.quarter_car.drift.parameter_shift`) by at least half the
+   effect's size, the effect only imitates the cause (brake fade looks like a brake gain that drifts down) and the
+   verdict is ``unexplained``. The constant model is refitted from the split fits first, so that a better optimum
+   is not mistaken for a drift (``where["drift_test"]``). A set that the forward selection makes the verdict
    where no single effect closed the gap is tested the same way.
 9. **Testability and several effects.** Candidates the log cannot show (each effect's registry rule, e.g. a
    relaxation length without slip transients) are not fitted and are listed in ``where["not_testable"]``, as are

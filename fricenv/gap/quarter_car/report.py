@@ -20,9 +20,22 @@ from fricenv.gap.core.report import (
     report_dict,
 )
 from fricenv.gap.quarter_car.diagnose import Diagnosis
+from fricenv.gap.quarter_car.drift import SHIFT_SHARE
 from fricenv.gap.quarter_car.stats import TRIM_SHARE
 
 __all__ = ["CANDIDATE_KEYS", "REPORT_KEYS", "report_dict", "report_markdown", "summary_line", "write_report"]
+
+
+def _shift_text(dt: dict) -> str:
+    """The parameter-shift test per parameter (jackknife t, share of the effect's size) and its limits."""
+    if not dt.get("shift"):
+        return ""
+    def num(x, fmt: str) -> str:
+        return format(x, fmt) if x is not None and np.isfinite(x) else "n/a"
+
+    ts = ", ".join(f"{k} t {num(v.get('t'), '.1f')}, share {num(v.get('share'), '.2f')}"
+                   for k, v in dt["shift"].items())
+    return f" (parameter shift: {ts}; a drift past |t| {dt['shift_limit']:.2f} and a share {SHIFT_SHARE})"
 
 
 def _z(z: float | None) -> str:
@@ -95,7 +108,7 @@ def report_markdown(dg: Diagnosis, report: dict, images: Sequence[str] = (PLOT_T
                           for k in dt["params_early"])
         lines += ["", (f"Drift test of `{dt['model']}` (refitted on the early and the late half of the log, each half "
                        f"held out as above): z paired {dt['z_paired']:.1f}, robust gap {dt['robust_gap']:.3f} -> "
-                       f"{dt['robust_gap_split']:.3f}; early -> late: {moved}. "
+                       f"{dt['robust_gap_split']:.3f}; early -> late: {moved}{_shift_text(dt)}. "
                        + ("Its parameters drift: the gap is caused by something this constant library effect only "
                           "imitates, hence `unexplained`." if dt["drifts"] else "No significant drift."))]
     if w.get("periodic"):
