@@ -11,11 +11,12 @@ from dataclasses import replace
 import numpy as np
 
 from fricenv.effects import registry
+from fricenv.effects.quarter_car import ModelBatch
 from fricenv.gap.core.pool import map_tasks
 from fricenv.gap.quarter_car.config import DiagnoseConfig
 from fricenv.gap.quarter_car.data import Data
 from fricenv.gap.quarter_car.fitting import fit, score
-from fricenv.gap.quarter_car.params import ROAD_NAMES
+from fricenv.gap.quarter_car.params import ROAD_NAMES, road_of
 from fricenv.gap.quarter_car.stats import (
     CandidateFit,
     cross_fitted,
@@ -50,6 +51,26 @@ def _fixed_of(model: CandidateFit) -> dict | None:
     return {q: float(model.x[model.names.index(q)]) for q in held} or None
 
 
+def _late_half(d: Data) -> np.ndarray:
+    """Whether each window lies in the log's late half."""
+    return np.arange(len(d.starts)) >= len(d.starts) // 2
+
+
+def _half_fits(model: CandidateFit, d: Data, cfg: DiagnoseConfig, jobs: int, group: np.ndarray, k: int,
+               what: str) -> tuple[list[np.ndarray], list[tuple[np.ndarray, int]]]:
+    """``model`` refitted on each half of the log without each of its ``k`` groups of windows in turn (``group``:
+    each window's group), from its own fits; searched parameters held.
+
+    :return: (the fits, their (half mask, group) cells), early half first.
+    """
+    late = _late_half(d)
+    starts = np.vstack([model.x[None]] + [x[None] for x in model.x_folds])
+    cells = [(half, j) for half in (~late, late) for j in range(k)]
+    xs = map_tasks(fit, [(_effects_of(model), model.names, starts, replace(d, test=~(half & (group != j))), cfg,
+                          _fixed_of(model)) for half, j in cells], jobs, what)
+    return xs, cells
+
+
 def fit_time_split(model: CandidateFit, d: Data, cfg: DiagnoseConfig, jobs: int = 1) -> CandidateFit:
     """``model`` refitted separately on the early and on the late half of the log's windows, each half cross-fitted
     within itself (a window is predicted by the fit of its own half that did not see it).
@@ -62,12 +83,7 @@ def fit_time_split(model: CandidateFit, d: Data, cfg: DiagnoseConfig, jobs: int 
     """
     t = time.perf_counter()
     effects = _effects_of(model)
-    late = np.arange(len(d.starts)) >= len(d.starts) // 2
-    starts = np.vstack([model.x[None]] + [x[None] for x in model.x_folds])
-    halves = [(half, j) for half in (~late, late) for j in range(int(cfg.folds))]
-    xs = map_tasks(fit, [(effects, model.names, starts, replace(d, test=~(half & (d.fold != j))), cfg,
-                           _fixed_of(model)) for half, j in halves], jobs,
-                   "drift test: early and late fits")
+    xs, halves = _half_fits(model, d, cfg, jobs, d.fold, int(cfg.folds), "drift test: early and late fits")
     resid = np.empty_like(model.resid)
     for x, (half, j) in zip(xs, halves):  # every window is held out in exactly one (half, fold)
         held = half & (d.fold == j)
@@ -93,26 +109,19 @@ def parameter_shift(model: CandidateFit, d: Data, cfg: DiagnoseConfig, jobs: int
 
     :return: ``{param: {"early", "late", "share", "t"}}``.
     """
-    effects = _effects_of(model)
     n = len(d.starts)
-    late = np.arange(n) >= n // 2
-    group = (np.arange(n) - np.where(late, n // 2, 0)) % int(groups)
-    starts = np.vstack([model.x[None]] + [x[None] for x in model.x_folds])
-    fixed = _fixed_of(model)
-    cells = [(half, j) for half in (~late, late) for j in range(int(groups))]
-    xs = map_tasks(fit, [(effects, model.names, starts, replace(d, test=~(half & (group != j))), cfg, fixed)
-                         for half, j in cells], jobs, "drift test: parameter shift")
+    group = (np.arange(n) - np.where(_late_half(d), n // 2, 0)) % int(groups)  # interleaved within each half
+    xs, _ = _half_fits(model, d, cfg, jobs, group, int(groups), "drift test: parameter shift")
     early, later = np.array(xs[:groups]), np.array(xs[groups:])
     var = (groups - 1) / groups * (np.sum((early - early.mean(0)) ** 2, 0) + np.sum((later - later.mean(0)) ** 2, 0))
-    road = np.asarray(model.x[: len(ROAD_NAMES)], dtype=float)
-    off = {q.name: float(np.asarray(q.off_value(road, d.p)).reshape(-1)[0])
-           for e in effects for q in registry.get(e).params}
+    off = ModelBatch.nominal(road_of(model.x), 1, d.p)  # each parameter at the value that switches its effect off
+    held = _fixed_of(model) or {}
     out = {}
     for i, name in enumerate(model.names):
-        if name in ROAD_NAMES or name in (fixed or {}):
+        if name in ROAD_NAMES or name in held:
             continue
         e, lt = float(early[:, i].mean()), float(later[:, i].mean())
-        size = abs(0.5 * (e + lt) - off[name])
+        size = abs(0.5 * (e + lt) - float(off.param(name)[0]))
         out[name] = {"early": e, "late": lt, "share": abs(e - lt) / size if size > 0 else float("inf"),
                      "t": (e - lt) / float(np.sqrt(var[i])) if var[i] > 0 else float("nan")}
     return out
