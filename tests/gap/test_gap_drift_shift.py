@@ -64,6 +64,21 @@ def test_a_constant_brake_gain_does_not_shift(tmp_path):
     assert dg.params["gain"] == pytest.approx(0.8476, rel=0.03)
 
 
+
+def test_a_significant_shift_smaller_than_half_the_effect_is_no_drift(tmp_path):
+    """A radius error (0.356 m) on ice under the sine driver, exported at 88 Hz: the radius is read 0.357 m on the
+    early half and 0.363 m on the late one, about five standard errors of the jackknife but only 0.38 of the
+    radius error's size. A bias that small in a precise parameter is no drift: the radius error is named."""
+    case = IndependentCase("radius_error", (Effect("radius_error", {"r_eff": 0.3560164541605212}),),
+                           Road(4.414774473922794, 2.0, 1.0, 0.09944504711120548, "ice"), "sine",
+                           25.898115562350345, 0.46403165036402355, ("v", "a_x"), 0.03501949828600592,
+                           0.11151842467719286, 1718132609, real={"rate_hz": 88.10043500020328})
+    dg = _diagnosed(tmp_path, case)
+    drift = dg.where["drift_test"]
+    radius = drift["shift"]["r_eff"]
+    assert abs(radius["t"]) > drift["shift_limit"] and radius["share"] < SHIFT_SHARE
+    assert not drift["drifts"] and dg.verdict == "radius_error"
+
 def test_a_drift_level_outside_zero_to_one_is_rejected():
     from fricenv.gap.quarter_car.diagnose import diagnose
     from fricenv.gap.quarter_car.simulate import simulate_log
