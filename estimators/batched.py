@@ -32,7 +32,7 @@ from estimators.curve_shape import ShapeFit
 from estimators.ekf_rls import KS0, PHI_MIN_SLIP, RLS_P0, QuarterCarEkfRls
 from estimators.jump import jump_test
 from estimators.mhe_batched import BATCHED_MHE
-from estimators.speed_reference import speed_step
+from estimators.speed_reference import brake_lag_shift, speed_step
 from fricenv.plants.quarter_car import QuarterCarParams
 from fricenv.plants.tire import SLIP_SPEED_FLOOR
 
@@ -43,11 +43,12 @@ _INVALID, _OUTLIER, _REINIT = int(Health.INVALID_INPUT), int(Health.OUTLIER), in
 _OK, _NOT_EXCITED = int(Health.OK), int(Health.NOT_EXCITED)
 
 
-def _gate_row(i, omega, torque_prev, ceiling, gc, x, P, started, rejected, jump) -> tuple[float, int]:
+def _gate_row(i, omega, torque_prev, ceiling, gc, x, P, started, rejected, jump, commands) -> tuple[float, int]:
     """:class:`~estimators.speed_reference.WheelSpeedGate` for sub-env ``i``: the wheel speed to use and the health it
     implies (``_OK`` when accepted). ``gc`` from :meth:`BatchedGate.constants`; ``jump[i]``: (armed, reference
     speed, sign) of the friction-jump rule (:mod:`estimators.jump`); ``ceiling``: rule (B3)'s bound on a braked
-    wheel's prediction (inf: none). Plain Python compiled by :func:`_core_kernel`."""
+    wheel's prediction (inf: none); ``commands[i]``: rule (B4)'s span of torques, newest last (NaN: none yet).
+    Plain Python compiled by :func:`_core_kernel`."""
     dt, I_w, R, b_var0, q_b, bound, max_rej = gc[0], gc[1], gc[2], gc[3], gc[4], gc[5], gc[6]
     if not started[i]:
         started[i], x[i, 0], x[i, 1] = True, omega, 0.0
@@ -60,6 +61,18 @@ def _gate_row(i, omega, torque_prev, ceiling, gc, x, P, started, rejected, jump)
     p01, p10, p11 = P[i, 0, 1] - dt * P[i, 1, 1], P[i, 1, 0] - dt * P[i, 1, 1], P[i, 1, 1] + q_b
     e, S = omega - x0, p00 + R
     nis = e * e / S if S > 0 else np.inf
+    t_min, t_max = torque_prev, torque_prev  # (B4): the span's commands, this one last
+    for j in range(commands.shape[1] - 1):
+        commands[i, j] = commands[i, j + 1]
+        if not np.isnan(commands[i, j]):
+            t_min, t_max = min(t_min, commands[i, j]), max(t_max, commands[i, j])
+    commands[i, commands.shape[1] - 1] = torque_prev
+    if nis > bound and rejected[i] == 0:  # (B4): the first failing sample, the brake's lag?
+        shift = brake_lag_shift(e, torque_prev, t_min, t_max, ceiling - x0 if torque_prev < 0.0 else np.inf, dt,
+                                I_w)
+        if (e - shift) * (e - shift) / S <= bound:
+            x0, e = x0 + shift, e - shift
+            nis = e * e / S
     if nis <= bound:  # accepted: the Kalman update
         rejected[i] = 0
         k0, k1 = p00 / S, p10 / S
@@ -112,7 +125,7 @@ def _ekf_row(i, a_x, torque, S, k, x, P, H, A, Q, T, U) -> float:
     return F
 
 
-def _core_rows(omega, a_x, T_b, k, gated, gc, gx, gP, started, rejected, gj, y, c, R_g, x, P, k_s, P_rls, s_num,
+def _core_rows(omega, a_x, T_b, k, gated, gc, gx, gP, started, rejected, gj, gh, y, c, R_g, x, P, k_s, P_rls, s_num,
                s_den, mu_peak, torque_prev, H, A, Q, out) -> None:
     """Steps 1-4 of :class:`~estimators.ekf_rls.EkfRlsCore` for every sub-env, in place; ``out`` gets (S, F,
     health) per sub-env. ``k``: (dt, R_w, d, m_eff, m, I_w, C_s, a_x loop factor, dead zone, lam, F_z, phi_min
@@ -127,7 +140,7 @@ def _core_rows(omega, a_x, T_b, k, gated, gc, gx, gP, started, rejected, gj, y, 
         torque, w, health = -T_b[i], omega[i], _OK
         if gated:
             ceiling = (y[i] + k[14]) / R_w if k[13] > 0.0 and not np.isnan(y[i]) else np.inf  # (B3)
-            w, health = _gate_row(i, omega[i], torque_prev[i], ceiling, gc, gx, gP, started, rejected, gj)
+            w, health = _gate_row(i, omega[i], torque_prev[i], ceiling, gc, gx, gP, started, rejected, gj, gh)
             if health == _REINIT:  # the gate restarted: the RLS forgets the old road (as EkfRlsCore.step)
                 P_rls[i] = RLS_P0
         torque_prev[i] = torque
@@ -168,7 +181,8 @@ def _core_kernel():
         import numba
 
         jit = numba.njit(cache=True, error_model="numpy")
-        gate_row = types.FunctionType(_gate_row.__code__, {**globals(), "jump_test": jit(jump_test)}, "_gate_row")
+        gate_row = types.FunctionType(_gate_row.__code__, {**globals(), "jump_test": jit(jump_test),
+                                                            "brake_lag_shift": jit(brake_lag_shift)}, "_gate_row")
         deps = {"_gate_row": jit(gate_row), "_ekf_row": jit(_ekf_row), "speed_step": jit(speed_step)}
         _COMPILED_CORE.append(jit(types.FunctionType(_core_rows.__code__, {**globals(), **deps}, "_core_rows")))
     return _COMPILED_CORE[0]
@@ -181,6 +195,7 @@ class _NoGate:
         self.x, self.P = np.zeros((n, 2)), np.zeros((n, 2, 2))
         self.started, self.rejected = np.zeros(n, dtype=bool), np.zeros(n, dtype=np.int64)
         self.jump = np.zeros((n, 3))
+        self.commands = np.zeros((n, 1))
 
     def constants(self) -> np.ndarray:
         return np.zeros(9)
@@ -202,11 +217,13 @@ class BatchedGate:
         self.started = np.zeros(n, dtype=bool)
         self.rejected = np.zeros(n, dtype=np.int64)
         self.jump = np.zeros((n, 3))  # (armed, reference speed, sign) of the friction-jump rule (estimators.jump)
+        self.commands = np.full((n, template.settle), np.nan)  # rule (B4)'s span of torques, newest last
 
     def reset(self, mask: np.ndarray) -> None:
         self.started[mask] = False
         self.rejected[mask] = 0
         self.jump[mask] = 0.0
+        self.commands[mask] = np.nan
 
     def constants(self) -> np.ndarray:
         """(dt, I_w, R, b's initial variance, q_b, NIS bound, max rejections, jump bound, rest band) for the
@@ -297,7 +314,7 @@ class BatchedEkfRls:
         out = np.zeros((self.n, 3))  # S, F, health
         g = self.gate or self._no_gate
         _core_kernel()(omega, a_x, T_b, self.consts, self.gate is not None, g.constants(), g.x, g.P, g.started,
-                       g.rejected, g.jump, self.y, self.c, self.R_g, self.x, self.P, self.k_s, self.P_rls, self.s_num,
+                       g.rejected, g.jump, g.commands, self.y, self.c, self.R_g, self.x, self.P, self.k_s, self.P_rls, self.s_num,
                        self.s_den, self.mu_peak, self.torque_prev, self.core.H[0], self.core.A, self.core.Q, out)
         S, F, health = out[:, 0], out[:, 1], out[:, 2].astype(int)
         active = health != int(Health.INVALID_INPUT)

@@ -15,6 +15,7 @@ __all__ = [
     "AB_P0_STD",
     "AB_Q_STD",
     "A_REF",
+    "BRAKE_SETTLE_S",
     "DEFAULT_ARRIVAL",
     "DEFAULT_EKF_TUNING",
     "GATE_CHI2",
@@ -80,3 +81,6 @@ JUMP_MU_MAX = 1.5  # largest friction coefficient a road may show in a run of fa
 A_REF = 12.0  # deceleration bound of the reference speed, about 1.2 g (the presets peak at 1.0) [m/s^2]
 REF_MARGIN_STD = 2.0  # the reference follows the wheel speed less this many noise std's [-]
 MISMATCH_NIS_MAX = 10.0  # a persistent innovation above this many gate bounds is taken as outliers (M1) [-]
+
+# ---- the EKF/RLS's wheel-speed gate (estimators.speed_reference)
+BRAKE_SETTLE_S = 0.1  # the torque a brake applies lies within its commands over this span, rule (B4) [s]
