@@ -1,5 +1,8 @@
-"""The env's EKF/RLS on the robustness matrix's stop where a lagging brake holds the wheel locked: (J3) of
-:mod:`estimators.jump` restarts the wheel-speed gate where the paper's gate rejects the locked wheel ten times."""
+"""The EKF/RLS on the robustness matrix's stop where a lagging brake holds the wheel locked while the command falls:
+the torque the brake still applies lies within the command's last 0.1 s, so rule (B4) of
+:mod:`estimators.speed_reference` takes the locked wheel as the brake's lag, in the env's gate and in the paper's
+(before the rule the paper's gate rejected it ten times in a row, and the env's restarted at its second sample
+through (J3) of :mod:`estimators.jump`, whose own test is in tests/estimators/test_gate_jump.py)."""
 
 from __future__ import annotations
 
@@ -23,20 +26,17 @@ def _lagging_brake_stop():
     return simulate_stop(GridCell("brake_lag", "high"), "dry", "abs", 1)
 
 
-def test_a_wheel_a_lagging_brake_holds_at_rest_is_restarted_not_rejected_ten_times():
+def test_a_wheel_a_lagging_brake_holds_at_rest_is_not_flagged():
     stop = _lagging_brake_stop()
     held = (stop.t >= 2.615) & (stop.t <= 2.725)
     assert np.all(stop.slip[held] == 1.0)  # locked through the window
-    flags = {}
+    assert stop.T_b[held][0] > 1.5 * stop.T_b[held][-1]  # while the command falls
     for braking_reference in (True, False):
         est = get_estimator("ekf-rls").make(P, DT, braking_reference=braking_reference)
         est.reset(v0=float(stop.omega[0]) * P.r)
         samples = zip(stop.omega, stop.a_x, stop.T_b)
         health = np.array([int(est.update((w, a), (T,)).health) for w, a, T in samples])
-        flags[braking_reference] = health[held]
-    assert list(flags[True][:2]) == [int(Health.OUTLIER), int(Health.REINITIALISED)]
-    assert not np.isin(flags[True][2:], BAD).any()
-    assert list(flags[False][:10]) == [int(Health.OUTLIER)] * 10  # the paper's gate: the whole run rejected
+        assert not np.isin(health, BAD).any(), (braking_reference, np.flatnonzero(np.isin(health, BAD)))
 
 
 def test_batched_gate_holds_the_wheel_at_rest_as_the_single_one():
