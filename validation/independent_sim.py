@@ -82,7 +82,7 @@ from validation.independent_model import (  # the physics; re-exported: tests an
     stopping_distance,
 )
 from validation.measure_cli import measurement_parser, pool_map
-from validation.quarter_car_oracle import true_model_oracle
+from validation.quarter_car_oracle import effect_oracle, true_model_oracle
 from validation.real_artifacts import QuarterCarArtifacts, real_like_quarter_car, write_export
 from validation.true_noise import real_like_noise, white_noise
 
@@ -419,7 +419,8 @@ def _effect_figures(out: dict, case: IndependentCase, dg) -> None:
     out["ratio"] = out["gap_after"] / out["gap_before"] if out["gap_before"] > 0 else float("nan")
     # the tool's own model class with the true values and the true noise: "could any tool see it in these data"
     cfg = DiagnoseConfig(jobs=1)
-    out.update(true_model_oracle({case.category: truth["params"]}, truth["road"], dg, cfg, out["true_noise"]))
+    oracle = effect_oracle if len(case.effects) < 2 else true_model_oracle
+    out.update(oracle({case.category: truth["params"]}, truth["road"], dg, cfg, out["true_noise"]))
     if len(case.effects) < 2:
         out["size_ratio"] = report_check.size_ratio(case.category, truth, dg)
     else:

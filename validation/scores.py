@@ -9,7 +9,11 @@ writes:
   its resampled rows), and where that oracle could not run (an export whose rows differ from its truth's,
   ``truth_error``) it counts as shown;
 - the right verdicts on those logs (several effects: every effect named);
-- the share of all logs with at least one named effect that is not in the log.
+- the share of all logs with at least one named effect that is not in the log;
+
+and, where the suite ran it, a fourth: the right verdicts on the shown logs whose data also tell the answer from the
+best other library effect (``apart``, :func:`validation.quarter_car_oracle.alternative_oracle`; a one-effect log
+without that oracle counts as apart).
 
 Every oracle judges with the noise levels the source drew (``true_noise`` of each row, :mod:`validation.true_noise`),
 not with the tool's estimate. A ``fricenv gap validate --json`` result carries no oracle: its effect logs are
@@ -52,6 +56,10 @@ def _shown(row: dict) -> bool:
     return bool(row.get("detectable", True))
 
 
+def _apart(row: dict) -> bool:
+    return bool(row.get("apart", True))
+
+
 def _right(row: dict) -> bool:
     if row.get("truth_effects") and len(row["truth_effects"]) > 1:
         return bool(row.get("all_named", False))
@@ -70,19 +78,31 @@ def quarter_car_numbers(rows: Sequence[dict]) -> dict:
         raise ValueError(f"{len(unjudged)} effect log(s) without the oracle's 'detectable': a fricenv gap validate "
                          "result? Run the seed through python -m validation.stand_in_suite")
     shown = [r for r in rows if _shown(r)]
+    apart = [r for r in shown if _apart(r)]
     wrong = [r for r in rows if any(e not in _truth_effects(r) for e in _named(r, library))]
-    return {"n": len(rows), "shown": len(shown), "right_on_shown": sum(_right(r) for r in shown),
-            "wrong_named": len(wrong),
-            "shown_share": len(shown) / len(rows) if rows else float("nan"),
-            "right_on_shown_share": sum(_right(r) for r in shown) / len(shown) if shown else float("nan"),
-            "wrong_named_share": len(wrong) / len(rows) if rows else float("nan")}
+    out = {"n": len(rows), "shown": len(shown), "right_on_shown": sum(_right(r) for r in shown),
+           "wrong_named": len(wrong),
+           "shown_share": len(shown) / len(rows) if rows else float("nan"),
+           "right_on_shown_share": sum(_right(r) for r in shown) / len(shown) if shown else float("nan"),
+           "wrong_named_share": len(wrong) / len(rows) if rows else float("nan")}
+    if any("apart" in r for r in rows):
+        out.update(apart=len(apart), right_on_apart=sum(_right(r) for r in apart),
+                   alternatives={f"{r['category']}->{r['alternative']}": sum(
+                       1 for q in shown if not _apart(q) and (q["category"], q["alternative"]) ==
+                       (r["category"], r["alternative"])) for r in shown if not _apart(r)})
+    return out
 
 
 def format_numbers(q: dict, label: str = "") -> str:
     """One line of :func:`quarter_car_numbers`."""
-    return (f"{label}data show the answer on {q['shown']}/{q['n']} ({q['shown_share']:.0%}); right on those "
+    line = (f"{label}data show the answer on {q['shown']}/{q['n']} ({q['shown_share']:.0%}); right on those "
             f"{q['right_on_shown']}/{q['shown']} ({q['right_on_shown_share']:.0%}); wrong named effects "
             f"{q['wrong_named']}/{q['n']} ({q['wrong_named_share']:.0%})")
+    if "apart" in q:
+        told = ", ".join(f"{k} {v}" for k, v in sorted(q["alternatives"].items())) or "none"
+        line += (f"; told apart from the best other effect on {q['apart']}/{q['shown']}, right on those "
+                 f"{q['right_on_apart']}/{q['apart']} (not apart: {told})")
+    return line
 
 
 def main(argv: Sequence[str] | None = None) -> int:

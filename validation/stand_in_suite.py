@@ -1,6 +1,7 @@
 """The library stand-in's blind suite (the logs of ``fricenv gap validate``) with the oracle of what each log's data
-show (:mod:`validation.quarter_car_oracle`, at the noise levels the stand-in drew; on an out-of-library log, whether
-its noise-free truth beats the nominal model) and the three numbers of :mod:`validation.scores`.
+show (:mod:`validation.quarter_car_oracle`, at the noise levels the stand-in drew: whether they show the effect, and
+whether they tell it from the best other library effect; on an out-of-library log, whether its noise-free truth
+beats the nominal model) and the numbers of :mod:`validation.scores`.
 
 ``fricenv gap validate`` draws the same logs for the same seed and scores its verdicts; this command adds the
 oracle, which lives here, outside the library.
@@ -32,11 +33,11 @@ def measure(n: int, seed: int, jobs: int = 1, required_only_share: float = 0.0) 
     """The stand-in suite (:func:`fricenv.gap.quarter_car.validate.validate`) with the oracle on every effect log
     and the three numbers under ``"scores"``."""
     from fricenv.gap.quarter_car.validate import validate
-    from validation.quarter_car_oracle import true_model_oracle
+    from validation.quarter_car_oracle import effect_oracle
     from validation.scores import quarter_car_numbers
 
     s = validate(n, seed, jobs=jobs, drop_optional_share=required_only_share, show_progress=False,
-                 oracle=true_model_oracle, truth_oracle=out_of_library_oracle)
+                 oracle=effect_oracle, truth_oracle=out_of_library_oracle)
     s["scores"] = quarter_car_numbers(s["logs"])
     s["source"] = "validation.stand_in_suite"
     return s

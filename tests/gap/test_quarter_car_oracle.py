@@ -56,3 +56,32 @@ def test_a_filtered_channels_true_level_is_its_white_equivalent():
     assert got["omega"] == pytest.approx(math.sqrt(0.4**2 + q * q / 12.0), rel=0.05)  # instants on clean samples
     assert "a_x" not in got
     assert np.isfinite(list(got.values())).all()
+
+
+@pytest.mark.parametrize("speed_logged", [False, True])
+def test_a_radius_error_is_told_from_a_brake_gain_only_where_speed_is_logged(speed_logged):
+    """(A2) of fricenv.gap.quarter_car.alternatives: from t, T_b and omega alone a rolling radius r_e gives the data
+    of a brake gain (r / r_e)^2 on another road, so no fit of these data can tell the two apart; with v and a_x
+    logged the speed shows the radius. The alternative oracle reads that: the brake gain refitted at the true
+    noise levels against the true radius error, apart only with the speed logged."""
+    from fricenv.gap.quarter_car.stats import CandidateFit
+    from validation.quarter_car_oracle import alternative_oracle
+
+    p = qc.PAPER_PARAMS
+    r_eff = 1.04 * p.r
+    log, _ = simulate_log([make_effect("radius_error", r_eff=r_eff)], ROADS["dry"], driver="open-loop", seed=3,
+                          duration=3.0, write_v=speed_logged, write_ax=speed_logged)
+    d = prepare(log, p, CFG)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        nominal = fit_nominal(d, CFG)
+        refine_noise(nominal, d)
+    road = dict(zip(("B", "C", "E", "theta"), ROADS["dry"].as_array()))
+    x = np.r_[nominal.x, (p.r / r_eff) ** 2]  # the diagnosis' brake gain, as (A2) predicts it
+    gain = CandidateFit(effect="brake_gain", names=(*nominal.names, "gain"), x=x, train_mse=1.0, test_mse=1.0,
+                        window_mse=np.ones(1), x_folds=(x,) * int(CFG.folds))
+    noise = {"omega": math.sqrt(OMEGA_NOISE_VAR), "v": 0.05, "a_x": 0.1}
+    out = alternative_oracle({"radius_error": {"r_eff": r_eff}}, road, SimpleNamespace(data=d, candidates=[gain]),
+                             CFG, {c: noise[c] for c in d.channels})
+    assert out["alternative"] == "brake_gain"
+    assert out["apart"] == speed_logged, out
