@@ -36,3 +36,20 @@ def test_an_effect_log_without_the_oracle_is_refused():
 
     with pytest.raises(ValueError, match="stand_in_suite"):
         quarter_car_numbers([{"category": "drag", "verdict": "drag", "right": True}])
+
+
+def test_the_fourth_figure_counts_right_verdicts_on_shown_logs_told_apart():
+    rows = [
+        {"category": "none", "verdict": "none", "right": True},  # shown, nothing to tell apart from
+        {"category": "brake_delay", "verdict": "brake_lag", "right": False, "detectable": True, "apart": False,
+         "alternative": "brake_lag"},  # shown, not told apart: out of the fourth figure
+        {"category": "brake_lag", "verdict": "brake_lag", "right": True, "detectable": True, "apart": False,
+         "alternative": "brake_delay"},
+        {"category": "drag", "verdict": "none", "right": False, "detectable": True, "apart": True,
+         "alternative": "brake_gain"},
+        {"category": "drag", "verdict": "none", "right": False, "detectable": False},  # not shown
+    ]
+    q = quarter_car_numbers(rows)
+    assert (q["shown"], q["right_on_shown"], q["apart"], q["right_on_apart"]) == (4, 2, 2, 1)
+    assert q["alternatives"] == {"brake_delay->brake_lag": 1, "brake_lag->brake_delay": 1}
+    assert "apart" not in quarter_car_numbers(rows[:1] + rows[-1:])  # a suite without the oracle: three numbers
