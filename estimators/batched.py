@@ -314,8 +314,9 @@ class BatchedEkfRls:
         out = np.zeros((self.n, 3))  # S, F, health
         g = self.gate or self._no_gate
         _core_kernel()(omega, a_x, T_b, self.consts, self.gate is not None, g.constants(), g.x, g.P, g.started,
-                       g.rejected, g.jump, g.commands, self.y, self.c, self.R_g, self.x, self.P, self.k_s, self.P_rls, self.s_num,
-                       self.s_den, self.mu_peak, self.torque_prev, self.core.H[0], self.core.A, self.core.Q, out)
+                       g.rejected, g.jump, g.commands, self.y, self.c, self.R_g, self.x, self.P, self.k_s, self.P_rls,
+                       self.s_num, self.s_den, self.mu_peak, self.torque_prev, self.core.H[0], self.core.A, self.core.Q,
+                       out)
         S, F, health = out[:, 0], out[:, 1], out[:, 2].astype(int)
         active = health != int(Health.INVALID_INPUT)
         with np.errstate(divide="ignore", invalid="ignore"):

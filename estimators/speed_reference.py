@@ -152,12 +152,12 @@ class WheelSpeedGate:
             e = float(omega[i]) - x[0]
             S = P[0, 0] + self.R
             before = self.rejected[i]
-            self.commands[i] = np.roll(self.commands[i], -1)
-            self.commands[i, -1] = torque_prev[i]
+            span = self.commands[i]
+            span[:-1], span[-1] = span[1:], torque_prev[i]  # in place: this sample's command newest
             if before == 0 and nis(e, S) > self.params.bound:  # (B4): the first failing sample, the brake's lag?
                 room = ceiling - x[0] if torque_prev[i] < 0 else np.inf
-                shift = brake_lag_shift(e, float(torque_prev[i]), float(np.nanmin(self.commands[i])),
-                                        float(np.nanmax(self.commands[i])), room, self.dt, self.I_w)
+                shift = brake_lag_shift(e, float(torque_prev[i]), float(np.nanmin(span)), float(np.nanmax(span)), room,
+                                        self.dt, self.I_w)
                 if nis(e - shift, S) <= self.params.bound:
                     x[0], e = x[0] + shift, e - shift
             verdict, self.rejected[i] = gate(nis(e, S), before, self.params)

@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import json
 import sys
+from collections import Counter
 from collections.abc import Sequence
 
 __all__ = ["format_numbers", "quarter_car_numbers"]
@@ -86,10 +87,8 @@ def quarter_car_numbers(rows: Sequence[dict]) -> dict:
            "right_on_shown_share": sum(_right(r) for r in shown) / len(shown) if shown else float("nan"),
            "wrong_named_share": len(wrong) / len(rows) if rows else float("nan")}
     if any("apart" in r for r in rows):
-        out.update(apart=len(apart), right_on_apart=sum(_right(r) for r in apart),
-                   alternatives={f"{r['category']}->{r['alternative']}": sum(
-                       1 for q in shown if not _apart(q) and (q["category"], q["alternative"]) ==
-                       (r["category"], r["alternative"])) for r in shown if not _apart(r)})
+        pairs = Counter(f"{r['category']}->{r['alternative']}" for r in shown if not _apart(r))
+        out.update(apart=len(apart), right_on_apart=sum(_right(r) for r in apart), alternatives=dict(pairs))
     return out
 
 

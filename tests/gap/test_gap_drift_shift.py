@@ -64,7 +64,6 @@ def test_a_constant_brake_gain_does_not_shift(tmp_path):
     assert dg.params["gain"] == pytest.approx(0.8476, rel=0.03)
 
 
-
 def test_a_significant_shift_smaller_than_half_the_effect_is_no_drift(tmp_path):
     """A radius error (0.356 m) on ice under the sine driver, exported at 88 Hz: the radius is read 0.357 m on the
     early half and 0.363 m on the late one, about five standard errors of the jackknife but only 0.38 of the
