@@ -1,4 +1,5 @@
-"""The files of a training run beside the model that rl-zoo3 users expect, and the steps a run really trains.
+"""The files of a training run: the names of the model, its normalisation statistics and its metadata, the files
+beside the model that rl-zoo3 users expect, and the steps a run really trains.
 
 ``config.yml``: env id, algorithm, policy class, trained steps, normalisation, frame stack and hyperparameters.
 ``env_kwargs.yml``: the keyword arguments of ``gymnasium.make(env_id, **env_kwargs)`` that build the env the policy
@@ -17,10 +18,14 @@ import yaml
 
 from fricenv.utils import atomic_write
 
-__all__ = ["CONFIG_FILE", "ENV_IDS", "ENV_KWARGS_FILE", "rounded_steps", "write_zoo_files", "zoo_files"]
+__all__ = ["CONFIG_FILE", "ENV_IDS", "ENV_KWARGS_FILE", "META_FILE", "MODEL_FILE", "VECNORM_FILE", "rounded_steps",
+           "write_zoo_files", "zoo_files"]
 
 ENV_IDS = {"braking": "fricenv/Braking-v0", "payload": "fricenv/PayloadExcitation-v0"}
 CONFIG_FILE = "config.yml"
+MODEL_FILE = "model.zip"  # the final policy (SB3 format)
+VECNORM_FILE = "vecnormalize.pkl"  # its VecNormalize statistics
+META_FILE = "train.json"  # what the run was: env, estimator, algorithm, seed, steps, hyperparameters, times
 ENV_KWARGS_FILE = "env_kwargs.yml"
 
 

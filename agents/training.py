@@ -10,7 +10,8 @@ file                              content
 ``vecnormalize.pkl``              observation/reward normalisation statistics (VecNormalize)
 ``checkpoints/``                  periodic checkpoints (model and VecNormalize statistics)
 ``tb/``                           TensorBoard logs (``tensorboard`` is a dependency; without it, a warning)
-``train.json``                    env, estimator, algorithm, seed, steps, hyperparameters, wall time, steps/s
+``train.json``                    env, estimator, algorithm, seed, steps, hyperparameters, wall time, steps/s,
+                                  the run it started from (``init``, :mod:`agents.warm_start`)
 ``config.yml``                    what rl-zoo3 keeps: env id, algorithm, policy, steps, normalisation, frame
                                   stack and the hyperparameters
 ``env_kwargs.yml``                the keyword arguments of ``gymnasium.make(env_id, **env_kwargs)`` that
@@ -58,6 +59,7 @@ import gymnasium as gym
 import numpy as np
 
 from agents.hyperparams import BRAKING_FILE, load_hyperparams
+from agents.run_files import META_FILE, MODEL_FILE, VECNORM_FILE
 from agents.scenario_mix import CHANGE_PROBABILITY, CHANGE_RANGE, V0_RANGE, ScenarioMix, ScenarioSampler  # noqa: F401
 from fricenv.utils import write_json
 
@@ -80,9 +82,6 @@ ALGOS = ("ppo", "sac", "recurrent-ppo")  # recurrent-ppo: sb3-contrib's Recurren
 ENVS = ("braking", "payload")
 CHECKPOINT_EVERY = 50_000  # env steps between checkpoints
 SEED_STRIDE = 1000  # env i of a run with seed s is seeded s * SEED_STRIDE + i
-MODEL_FILE = "model.zip"
-VECNORM_FILE = "vecnormalize.pkl"
-META_FILE = "train.json"
 VEC_KINDS = ("auto", "native", "dummy", "subproc")
 
 
@@ -339,7 +338,8 @@ def make_training_model(env: str, estimator: str, algo: str, cfg: PPOConfig | SA
 def train(out: str | Path, env: str = "braking", estimator: str = "none", algo: str = "ppo", steps: int = 200_000,
           seed: int = 0, config: PPOConfig | SACConfig | None = None, vec: str = "auto",
           progress_bar: bool = True, checkpoint_every: int = CHECKPOINT_EVERY,
-          env_kwargs: dict | None = None, verbose: int = 0, frame_stack: int = 0) -> TrainResult:
+          env_kwargs: dict | None = None, verbose: int = 0, frame_stack: int = 0,
+          init: str | Path | None = None) -> TrainResult:
     """Train a policy and save model, normalisation statistics, checkpoints and metadata in ``out``.
 
     :param out: run directory (created).
@@ -358,11 +358,18 @@ def train(out: str | Path, env: str = "braking", estimator: str = "none", algo: 
     :param verbose: SB3 verbosity.
     :param frame_stack: k > 0: the policy sees the last k observations (SB3's ``VecFrameStack``), the memory
         baseline; 0: the observation alone.
+    :param init: a training run to start from (:mod:`agents.warm_start`: its policy's weights and normalisation
+        statistics; same env, estimator, algorithm, frame stack and network); ``train.json`` names it.
     """
     import torch
     from stable_baselines3.common.callbacks import CheckpointCallback
 
     cfg = check_train_args(env, estimator, algo, steps, vec, config)
+    source = None
+    if init is not None:
+        from agents.warm_start import check_warm_start
+
+        source = check_warm_start(init, env, estimator, algo, frame_stack, list(cfg.net_arch))
     torch.set_num_threads(1)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -371,6 +378,10 @@ def train(out: str | Path, env: str = "braking", estimator: str = "none", algo: 
         vec = "native" if native_vec_available(env, estimator) else "dummy"
     tb = _tensorboard_dir(out)
     model = make_training_model(env, estimator, algo, cfg, seed, vec, env_kwargs, frame_stack, tb, verbose)
+    if init is not None:
+        from agents.warm_start import warm_start
+
+        warm_start(model, init)
     venv = model.get_env()
     callbacks = []
     if checkpoint_every > 0:
@@ -391,7 +402,9 @@ def train(out: str | Path, env: str = "braking", estimator: str = "none", algo: 
             "wall_time_s": wall, "steps_per_second": trained / wall, "cpu_time_s": cpu,
             "config": dataclasses.asdict(cfg),
             "vec": vec, "env_kwargs": env_kwargs or {}, "tensorboard": tb is not None,
-            "torch_threads": torch.get_num_threads(), "frame_stack": frame_stack}
+            "torch_threads": torch.get_num_threads(), "frame_stack": frame_stack,
+            "init": None if source is None else {"run": str(init), "steps": source.get("steps"),
+                                                  "env_kwargs": source.get("env_kwargs", {})}}
     write_json(out / META_FILE, meta)
     from agents.run_files import write_zoo_files, zoo_files
 

@@ -13,6 +13,8 @@ episode draws each effect of the effect grid but the friction change (which the 
 range from the nominal plant through both grid sizes (brake lag 0.001-0.08 s, delay 0-0.06 s, gain 0.80-1.25, rolling
 radius 0.97-1.04 r, relaxation length 0.001-0.6 m, drag c0 0-150 N and c2 0-0.6 N s^2/m^2);
 ``--effects-randomization grid-one`` draws one of those effects or none per episode, each with equal probability.
+``--init RUN`` starts from a finished run's policy and normalisation statistics (fine-tuning: a nominal-trained
+policy trained on over the grid's distribution); the two runs need the same env, estimator, algorithm and network.
 """
 
 from __future__ import annotations
@@ -45,6 +47,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="braking: draw the plant's effects per episode over the effect grid's ranges: every "
                              "effect at once (grid), or one of them or none (grid-one, the grid's own "
                              "distribution) (default %(default)s)")
+    parser.add_argument("--init", metavar="RUN", default=None,
+                        help="start from the policy weights and normalisation statistics of a finished run "
+                             "(fine-tuning; same env, estimator, algorithm and network)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     parser.add_argument("--json", metavar="PATH", help="write the run summary (wall time, steps/s) as JSON")
 
@@ -81,6 +86,13 @@ def run(args) -> int:
         cfg = check_train_args(args.env, args.estimator, args.algo, args.steps, args.vec, config)
     except (ValueError, TypeError) as exc:
         raise InvalidInputError(one_line(exc)) from None
+    if args.init is not None:
+        from agents.warm_start import check_warm_start
+
+        try:
+            check_warm_start(args.init, args.env, args.estimator, args.algo, 0, list(cfg.net_arch))
+        except ValueError as exc:
+            raise InvalidInputError(f"--init: {one_line(exc)}") from None
     if rounded_steps(args.algo, cfg, args.steps) != args.steps:
         unit = "whole rounds of n_envs x train_freq" if args.algo == "sac" else "whole rollouts of n_envs x n_steps"
         print(f"{args._prog}: note: --steps {args.steps} rounds up to {rounded_steps(args.algo, cfg, args.steps)} "
@@ -89,7 +101,7 @@ def run(args) -> int:
           file=sys.stderr, flush=True)
     result = train(args.out, env=args.env, estimator=args.estimator, algo=args.algo, steps=args.steps,
                    seed=args.seed, config=config, vec=args.vec, env_kwargs=env_kwargs,
-                   progress_bar=getattr(args, "show_progress", True) and not args.no_progress)
+                   progress_bar=getattr(args, "show_progress", True) and not args.no_progress, init=args.init)
     print(f"trained {args.algo} on {args.env} (estimator {args.estimator}): {result.steps} steps in "
           f"{result.wall_time:.1f} s ({result.steps_per_second:.0f} steps/s); saved {result.model_path}")
     if args.json:
