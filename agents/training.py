@@ -61,6 +61,7 @@ import numpy as np
 from agents.hyperparams import BRAKING_FILE, load_hyperparams
 from agents.run_files import META_FILE, MODEL_FILE, VECNORM_FILE
 from agents.scenario_mix import CHANGE_PROBABILITY, CHANGE_RANGE, V0_RANGE, ScenarioMix, ScenarioSampler  # noqa: F401
+from agents.warm_start import check_warm_start, warm_start
 from fricenv.utils import write_json
 
 __all__ = [
@@ -367,8 +368,6 @@ def train(out: str | Path, env: str = "braking", estimator: str = "none", algo: 
     cfg = check_train_args(env, estimator, algo, steps, vec, config)
     source = None
     if init is not None:
-        from agents.warm_start import check_warm_start
-
         source = check_warm_start(init, env, estimator, algo, frame_stack, list(cfg.net_arch))
     torch.set_num_threads(1)
     out = Path(out)
@@ -379,8 +378,6 @@ def train(out: str | Path, env: str = "braking", estimator: str = "none", algo: 
     tb = _tensorboard_dir(out)
     model = make_training_model(env, estimator, algo, cfg, seed, vec, env_kwargs, frame_stack, tb, verbose)
     if init is not None:
-        from agents.warm_start import warm_start
-
         warm_start(model, init)
     venv = model.get_env()
     callbacks = []
