@@ -24,11 +24,14 @@ from __future__ import annotations
 import inspect
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from fricenv.effects.grid import GridCell, cell_effects, grid_cells
+
+if TYPE_CHECKING:
+    from fricenv.plants.quarter_car import QuarterCarParams
 
 __all__ = [
     "DRIVERS",
@@ -120,23 +123,28 @@ def simulate_stop(cell: GridCell, road: str, driver: str, seed: int, duration: f
     return Stop(**arr, brake_start=free, v0=v0, effects=entries)
 
 
-def run_estimator(name: str, stops: Sequence[Stop]) -> list[dict[str, np.ndarray]]:
+def run_estimator(name: str, stops: Sequence[Stop], p: QuarterCarParams | None = None) -> list[dict[str, np.ndarray]]:
     """Run the env estimator ``name`` over each stop: its speed, slip, friction in use and health per sample.
 
     An estimator with a batched form (:data:`estimators.batched.BATCHED`, equal to the single one; what the
     native vector env runs) runs every stop in one batch, a stop that has ended holding its last sample; the
     others run one stop after the other.
+
+    :param p: the vehicle parameters the estimator's model uses (default the nominal
+        :data:`~fricenv.plants.quarter_car.PAPER_PARAMS`, whatever the stop's plant: the matrix measures the
+        estimators as the env builds them; a calibrated radius goes in here).
     """
     from estimators.batched import make_batched
     from estimators.registry import get_estimator
     from fricenv.plants import quarter_car as qc
 
-    p, values = qc.PAPER_PARAMS, dict(get_estimator(name).values)
+    p = qc.PAPER_PARAMS if p is None else p
+    values = dict(get_estimator(name).values)
     keys = {q: values.get(q, q) for q in ("v", "slip", "mu")}
     starts = np.array([float(s.omega[0]) * p.r for s in stops])
     batched = make_batched(name, len(stops), p, DT)
     if batched is None:
-        return [_run_single(name, stop, v0, keys) for stop, v0 in zip(stops, starts)]
+        return [_run_single(name, stop, v0, keys, p) for stop, v0 in zip(stops, starts)]
     lengths = np.array([len(s.t) for s in stops])
     out = {q: np.zeros((len(stops), lengths.max())) for q in (*keys, "health")}
     batched.reset(np.ones(len(stops), dtype=bool), starts)
@@ -152,12 +160,12 @@ def run_estimator(name: str, stops: Sequence[Stop]) -> list[dict[str, np.ndarray
             for j, n in enumerate(lengths)]
 
 
-def _run_single(name: str, stop: Stop, v_start: float, keys: dict[str, str]) -> dict[str, np.ndarray]:
-    """One single estimator over one stop, started from ``v_start``."""
+def _run_single(name: str, stop: Stop, v_start: float, keys: dict[str, str], p: QuarterCarParams) \
+        -> dict[str, np.ndarray]:
+    """One single estimator (its model on the vehicle parameters ``p``) over one stop, started from ``v_start``."""
     from estimators.registry import get_estimator
-    from fricenv.plants import quarter_car as qc
 
-    est = get_estimator(name).make(qc.PAPER_PARAMS, DT)
+    est = get_estimator(name).make(p, DT)
     columns = {"omega": stop.omega, "a_x": stop.a_x}
     y = np.column_stack([columns[c] for c in est.measurement_columns])
     accepted = inspect.signature(est.reset).parameters
