@@ -51,7 +51,7 @@ def check_warm_start(run_dir: str | Path, env: str, estimator: str, algo: str, f
 
 def warm_start(model, run_dir: str | Path) -> None:
     """Load the source run's policy weights into ``model`` and its normalisation statistics into ``model``'s
-    ``VecNormalize`` (checked first with :func:`check_warm_start`).
+    ``VecNormalize``. The caller checks the source with :func:`check_warm_start` before building ``model``.
 
     :param model: the new run's SB3 model, on its ``VecNormalize`` env.
     :param run_dir: the source run.
