@@ -71,6 +71,15 @@ def _mapped_log(args: argparse.Namespace) -> str:
     return str(out)
 
 
+def _naming_the_export(exc: InvalidInputError, log: str, export: str) -> InvalidInputError:
+    """An error about the whole converted log (``OUT/log.contract.csv: ...``, no line) names the export it was
+    converted from; an error at a line of the converted log keeps its path, whose lines it counts."""
+    message, prefix = str(exc), f"{log}: "
+    if log == export or not message.startswith(prefix):
+        return exc
+    return InvalidInputError(f"{export}: {message[len(prefix):]} (converted to {log})")
+
+
 def check_options(args: argparse.Namespace) -> None:
     """Reject option values the diagnosis cannot use, before it starts (the paths are checked by fricenv.cli)."""
     if args.plant not in PLANTS:
@@ -114,7 +123,11 @@ def _run(args: argparse.Namespace) -> int:
 
     plant = get_plant(args.plant)
     names = _candidates(args, plant.make_config(None, None).candidates)
-    dg = plant.diagnose_file(_mapped_log(args), args.params, plant.make_config(names, args.jobs))
+    log = _mapped_log(args)
+    try:
+        dg = plant.diagnose_file(log, args.params, plant.make_config(names, args.jobs))
+    except InvalidInputError as exc:
+        raise _naming_the_export(exc, log, args.log) from None
     return _report(args, dg, plant.write_report(dg, args.out, not args.no_plots), plant.summary_line(dg))
 
 

@@ -162,8 +162,9 @@ def _log_class(plant: str) -> type:
         raise ValueError(f"unknown plant {plant!r}; valid plants: {', '.join(PLANTS)}") from None
 
 
-def _check_time(path: Path, t: np.ndarray, lines: np.ndarray) -> rs.Grid | None:
-    """Increasing, finite steps at 10 Hz - 1 kHz; the resampling grid (None: already uniform)."""
+def _check_time(path: Path, t: np.ndarray, lines: np.ndarray, offset: float = 0.0) -> rs.Grid | None:
+    """Increasing, finite steps at 10 Hz - 1 kHz; the resampling grid (None: already uniform). ``offset``: what was
+    subtracted from the stamps (a mapped log's first stamp), added back in the messages."""
     with np.errstate(over="ignore", invalid="ignore"):
         dt = np.diff(t)
     huge = np.flatnonzero(~np.isfinite(dt))
@@ -174,12 +175,27 @@ def _check_time(path: Path, t: np.ndarray, lines: np.ndarray) -> rs.Grid | None:
     bad = np.flatnonzero(dt <= 0)
     if bad.size:
         i = bad[0] + 1
-        raise LogFormatError(f"{path}:{lines[i]}: column 't' is not increasing ({t[i - 1]!r} then {t[i]!r})")
+        was = "repeats" if t[i] == t[i - 1] else "goes back from"
+        raise LogFormatError(f"{path}:{lines[i]}: column 't' is not increasing: the stamp {was} line "
+                             f"{lines[i - 1]}'s ({offset + float(t[i - 1]):.17g} then {offset + float(t[i]):.17g} s)")
     checks.check_rate(path, float(np.median(dt)), int(lines[0]))
     try:
         return rs.plan_grid(t)
     except rs.StepError as exc:
         raise LogFormatError(f"{path}:{lines[exc.row]}: column 't': {exc}") from None
+
+
+def _drop_repeated_rows(table: np.ndarray, lines: np.ndarray) -> tuple[np.ndarray, np.ndarray, str | None]:
+    """Rows equal to the row before them in every cell, time stamp included (a logger writing one record twice),
+    dropped; the finding for the log's warnings (None: there were none)."""
+    same = np.all((table[1:] == table[:-1]) | (np.isnan(table[1:]) & np.isnan(table[:-1])), axis=1)
+    if not same.any():
+        return table, lines, None
+    keep = np.concatenate([[True], ~same])
+    first = int(lines[1:][same][0])
+    finding = (f"t: {int(same.sum())} row(s) repeating the row before them in every column dropped (the first on "
+               f"line {first})")
+    return table[keep], lines[keep], finding
 
 
 def _check_range(path: Path, name: str, x: np.ndarray, lines: np.ndarray, limit: float, hint: str) -> None:
@@ -345,9 +361,10 @@ def read_log(path: str | os.PathLike, plant: str = "quarter-car",
     cls = _log_class(plant)
     path = Path(path)
     comments, header, table, lines = parse(path, raw_header=column_map is not None)
+    table, lines, repeated = _drop_repeated_rows(table, lines)
     cols, info = _columns(path, plant, header, table, column_map)
     _check_values(path, cls, cols, lines)
-    grid = _check_time(path, cols["t"], lines)
+    grid = _check_time(path, cols["t"], lines, info.offset)
     if column_map is None:  # a mapped time is re-based already, in its own unit (apply_map)
         info.offset = float(cols["t"][0])
         cols["t"] = cols["t"] - info.offset
@@ -359,11 +376,11 @@ def read_log(path: str | os.PathLike, plant: str = "quarter-car",
     if grid is not None:
         cols = rs.resample(cols["t"], cols, grid, hold=_HOLD, keep=slow)
     old, kept = _carried(path, comments)
-    found = []
+    found = [repeated] if repeated else []
     if plant == "quarter-car":
         info.throttle_unit = old.get("throttle_unit", info.throttle_unit)
         _check_throttle(path, cols, info.throttle_unit)
-        found = checks.check_session(path, cols, float(cols["t"][1] - cols["t"][0]), info.radii, _NOMINAL_RADIUS)
+        found += checks.check_session(path, cols, float(cols["t"][1] - cols["t"][0]), info.radii, _NOMINAL_RADIUS)
     for line in found:
         warnings.warn(LogCheckWarning(f"{path}: {line}"), stacklevel=2)
     offset = old.get("t_offset", 0.0) + info.offset

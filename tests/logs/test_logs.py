@@ -52,6 +52,26 @@ def test_non_increasing_time_names_line(tmp_path):
         read_log(path)
 
 
+def test_a_repeated_stamp_names_both_lines_in_plain_seconds(tmp_path):
+    rows = _rows()
+    rows[6] = rows[5].replace(",57.971014,", ",58.0,")  # the stamp of the row before, other values
+    path = _write(tmp_path, [HEADER] + rows)
+    with pytest.raises(LogFormatError, match=r"log\.csv:8: column 't' is not increasing: the stamp repeats line "
+                                             r"7's \(0\.050000000000000003 then 0\.050000000000000003 s\)$"):
+        read_log(path)
+
+
+def test_a_row_written_twice_is_dropped_with_a_warning(tmp_path):
+    rows = _rows()
+    clean = read_log(_write(tmp_path, [HEADER] + rows, "clean.csv"))
+    with pytest.warns(Warning, match=r"t: 2 row\(s\) repeating the row before them in every column dropped "
+                                     r"\(the first on line 7\)"):
+        log = read_log(_write(tmp_path, [HEADER] + rows[:5] + rows[4:12] + rows[11:]))
+    for name in ("t", "T_b", "omega", "v", "a_x"):
+        np.testing.assert_array_equal(getattr(log, name), getattr(clean, name))
+    assert log.warnings == ("t: 2 row(s) repeating the row before them in every column dropped (the first on line 7)",)
+
+
 def test_non_uniform_time(tmp_path):
     rows = _rows()
     rows[10] = rows[10].replace("0.1000", "0.1040", 1)

@@ -200,3 +200,25 @@ def test_another_wheel_that_cannot_be_one_is_left_out(tmp_path, wheel, said):
     with pytest.warns(Warning, match=said):
         log = _read_car(tmp_path, wheel)
     assert log.omega_rr is None and log.warnings[0].startswith("omega_rr: ") and log.warnings[0].endswith("left out")
+
+
+def test_a_session_without_a_braking_event_is_an_error_naming_the_export(tmp_path, capsys):
+    """The converted log (OUT/log.contract.csv) is the tool's file: an error about the whole session names the
+    export the user gave."""
+    from fricenv.cli import main
+
+    path, cmap = _car_export(tmp_path, lambda v: 3.6 * v * 1.01)
+    text = path.read_text().splitlines()
+    rows = [line.split(",") for line in text[1:]]
+    for row in rows:
+        row[1] = "0.0"  # no brake anywhere
+    path.write_text("\n".join([text[0]] + [",".join(row) for row in rows]) + "\n")
+    params = tmp_path / "params.json"
+    params.write_text(json.dumps({"r": 0.33, "car": {"mass": 790.0, "lf": 1.248, "lr": 1.7328}}))
+    out = tmp_path / "out"
+    code = main(["gap", "diagnose", str(path), "--map", str(cmap), "--params", str(params), "--out", str(out),
+                 "--no-plots"])
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    assert code == 2
+    assert err.startswith(f"fricenv gap diagnose: error: {path}: no braking event"), err
+    assert err.endswith(f"(converted to {out / 'log.contract.csv'})"), err
