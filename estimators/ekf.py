@@ -209,6 +209,7 @@ class QuarterCarEKF(Estimator):
             np.diag([q[n] ** 2 for n in names]),
             np.array([[float(R)]]),
         )
+        self.input_columns = self.model.input_names  # ("T_b",), or ("T_b", "a_x") when the speed follows a_x
         self.lower, self.upper = self.model.lower(), self.model.upper()
         # the model's speed can change by at most F_z theta_max / m per second (|mu| <= theta <= 1): a predicted
         # step beyond it is a numerical failure of the stiff step (slip near 1, speed near 0) and is clipped to it
@@ -246,18 +247,21 @@ class QuarterCarEKF(Estimator):
         x_post, P_post, innov = self.filter.update(self.x, self.P, y)
         return verdict, self.guard.bound_speed(x_post, float(self.x[0]), float(y[0])), P_post, innov, inflation
 
-    def propagate(self, x_post: np.ndarray, P_post: np.ndarray, brake_torque: float) -> bool:
-        """Time update from the posterior (clipped to the bounds) under the torque held to the next sample.
+    def propagate(self, x_post: np.ndarray, P_post: np.ndarray, inputs) -> bool:
+        """Time update from the posterior (clipped to the bounds) under the input held to the next sample.
 
+        :param inputs: the torque [N m], or the model's inputs in :attr:`input_columns` order.
         :return: False when the step is not finite: the prior is kept and its covariance restarts at P0.
         """
-        self._brake_torque = float(brake_torque)
+        u = np.atleast_1d(np.asarray(inputs, dtype=float))
+        self._brake_torque = float(u[0])
         x_post = np.clip(x_post, self.lower, self.upper)
-        x_next, P_next = self.filter.predict(x_post, P_post, self._brake_torque)
+        x_next, P_next = self.filter.predict(x_post, P_post, u if u.size > 1 else self._brake_torque)
         if not (np.all(np.isfinite(x_next)) and np.all(np.isfinite(P_next))):
             self.P = self.P0.copy()
             return False
-        x_next[0] = np.clip(x_next[0], x_post[0] - self.dv_max, x_post[0] + self.dv_max)
+        if not self.model.speed_from_a_x:  # a speed from a_x moves by a_x dt, no stiff step
+            x_next[0] = np.clip(x_next[0], x_post[0] - self.dv_max, x_post[0] + self.dv_max)
         self.x, self.P = np.clip(x_next, self.lower, self.upper), P_next
         return True
 
@@ -269,7 +273,7 @@ class QuarterCarEKF(Estimator):
         verdict, x_post, P_post, innov, inflation = self.correct(y)
         P_prior = self.P
         x_post = np.clip(x_post, self.lower, self.upper)
-        if not self.propagate(x_post, P_post, float(uu[0])):  # keep the last good state
+        if not self.propagate(x_post, P_post, uu):  # keep the last good state
             return self._estimate(self.x, Health.SOLVER_FAILED, {"reason": "non-finite EKF step"})
         self.information.add(P_prior, None if innov is None else P_post)
         if verdict in (Verdict.ACCEPT, Verdict.MISMATCH, Verdict.START):

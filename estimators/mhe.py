@@ -131,6 +131,9 @@ class RegularizedMHE(Estimator):
             self.model = model or AugmentedModel(estimated=tuple(estimated), dt=dt)
         except ValueError as exc:
             raise EstimatorConfigError(str(exc)) from None
+        if self.model.speed_from_a_x:
+            raise EstimatorConfigError("the MHE's window takes the torque as its only input; a model whose speed "
+                                       "follows a_x (speed_from_a_x=True) runs in the EKF")
         group = "theta-only" if len(self.model.estimated) <= 1 else "all"
         self.config = cfg = config.resolved(group)
         self.alpha, self.beta, self.delta = cfg.alpha, cfg.beta, cfg.delta

@@ -30,6 +30,11 @@ filter until the re-initialisation, which then took the speed from a wheel that 
      prediction and the wheel): at a locked wheel the measurement is flat in v, and a linearised update
      can take the speed to 0, where the stiff model step diverges (the four-parameter filters, 20 ms brake delay,
      dry ABS stop: 4482 m/s off without it).
+(M2') **Speed from the accelerometer.** A model whose speed follows the measured ``a_x``
+     (``AugmentedModel.speed_from_a_x``) takes neither bound of (M2) nor its speed at a re-initialisation: its speed
+     is the integrated ``a_x``, which no slip or tire transient moves, while the fastest wheel is no lower bound of a
+     car whose tire winds up under a relaxation length (the wheel spins past the car as the brake releases). A
+     re-initialisation restarts the slip only, from the wheel at the filter's speed.
 (M3) **Start.** The state after a reset is a guess (19 m/s a priori): a first sample that fails against it is no
      outlier; the filter starts from it as from a re-initialisation (``Verdict.START``) and keeps its own health.
 """
@@ -100,6 +105,8 @@ class WheelSpeedGuard:
 
         :param x: posterior state; :param v_prior: the prior speed [m/s]; :param omega: the sample's wheel speed.
         """
+        if self.model.speed_from_a_x:  # (M2')
+            return x
         margin = REF_MARGIN_STD * self.noise_std * self.model.p.r
         floor = self.s.v_ref - margin
         ceiling = max(float(v_prior), float(omega) * self.model.p.r + margin)
@@ -122,14 +129,18 @@ class WheelSpeedGuard:
         """
         r = self.model.p.r
         wheel = max(float(omega) * r, 0.0)
-        v = max(self.s.v_ref if np.isfinite(self.s.v_ref) else float(x[0]), wheel)
+        started = np.isfinite(self.s.omega_used)
+        if self.model.speed_from_a_x and started:  # (M2'): the slip only, at the filter's speed
+            v, block = float(x[0]), slice(1, 2)
+        else:
+            v, block = max(self.s.v_ref if np.isfinite(self.s.v_ref) else float(x[0]), wheel), slice(0, 2)
         slip = 1.0 - wheel / v if v > 0 else SLIP_PRIOR
         x = x.copy()
         x[0], x[1] = v, float(np.clip(slip, 0.0, 1.0))
         P = P.copy()
-        P[:2, :] = 0.0
-        P[:, :2] = 0.0
-        P[:2, :2] = P0[:2, :2]
+        P[block, :] = 0.0
+        P[:, block] = 0.0
+        P[block, block] = P0[block, block]
         return x, P
 
     def check(self, x: np.ndarray, P: np.ndarray, P0: np.ndarray, R: np.ndarray, Q: np.ndarray, y: np.ndarray,

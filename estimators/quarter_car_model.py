@@ -21,6 +21,13 @@ four-parameter MHE of case 3 diverge. Fewer substeps matter because the MHE's co
 model and its Jacobian over the horizon. After each substep the slip is clipped to [0, 1] (a locked wheel cannot
 slip more than 1) and the speed kept above ``V_FLOOR`` in ``1/v`` so that it stays finite; both are outside the
 ABS operating range (v > 3 m/s, slip < 0.5) the estimators are run in.
+
+Speed from the accelerometer (``speed_from_a_x=True``): the input is ``(T_b, a_x)`` and the car's speed follows
+the measured acceleration, ``v' = a_x``, instead of eq. (6a); the slip follows
+:func:`fricenv.plants.quarter_car.slip_ode_given_accel` (eq. (6b) with that ``v'``). The tire model then reaches the
+speed only through the wheel: a tire force that lags its slip (a relaxation length) or a brake that lags its
+command moves the slip and the parameters, not the car. ``a_b`` (a deceleration the tire does not explain) has no
+meaning there: the deceleration is measured.
 """
 
 from __future__ import annotations
@@ -33,7 +40,7 @@ import numpy as np
 
 from fricenv.plants import sui_johansen as sj
 from fricenv.plants.namespace import with_namespace
-from fricenv.plants.quarter_car import PAPER_PARAMS, QuarterCarParams, slip_ode
+from fricenv.plants.quarter_car import PAPER_PARAMS, QuarterCarParams, slip_ode, slip_ode_given_accel
 from fricenv.plants.rosenbrock import ROS2_GAMMA
 from fricenv.plants.tire import magic_formula
 
@@ -77,6 +84,7 @@ CASADI_NP = types.SimpleNamespace(arctan=ca.atan, sin=ca.sin, cos=ca.cos, maximu
 # The Magic Formula, eq. (2), as a CasADi expression (SX or MX): fricenv.plants.tire.magic_formula over CASADI_NP.
 magic_formula_casadi = with_namespace(magic_formula, CASADI_NP)
 _slip_ode_casadi = with_namespace(slip_ode, CASADI_NP)  # eq. (6): fricenv.plants.quarter_car.slip_ode
+_slip_given_accel_casadi = with_namespace(slip_ode_given_accel, CASADI_NP)  # eq. (6b) with v' = a_x
 
 
 @dataclass(frozen=True)
@@ -93,6 +101,7 @@ class AugmentedModel:
     p: QuarterCarParams = PAPER_PARAMS  # vehicle parameters
     fixed: dict = field(default_factory=lambda: dict(NOMINAL))  # values of non-estimated parameters
     extras: tuple[str, ...] = ()  # mismatch states after the parameters (subset of EXTRA_NAMES)
+    speed_from_a_x: bool = False  # input (T_b, a_x) and v' = a_x (module docstring), else input T_b and eq. (6a)
     _cache: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     def __post_init__(self):
@@ -104,6 +113,8 @@ class AugmentedModel:
         if unknown:
             raise ValueError(f"extra states {unknown} unknown; valid: {', '.join(EXTRA_NAMES)}")
         object.__setattr__(self, "extras", tuple(n for n in EXTRA_NAMES if n in self.extras))
+        if self.speed_from_a_x and "a_b" in self.extras:
+            raise ValueError("a deceleration bias a_b has no meaning when the speed follows the measured a_x")
         bad = [k for k in self.fixed if k not in PARAM_NAMES]
         if bad:
             raise ValueError(f"fixed parameters {bad} unknown; valid: {', '.join(PARAM_NAMES)}")
@@ -117,6 +128,11 @@ class AugmentedModel:
     def names(self) -> tuple[str, ...]:
         """State names: ``("v", "slip", *estimated, *extras)``."""
         return ("v", "slip") + self.estimated + self.extras
+
+    @property
+    def input_names(self) -> tuple[str, ...]:
+        """The model's input per sample, held from one sample to the next: ``("T_b",)`` or ``("T_b", "a_x")``."""
+        return ("T_b", "a_x") if self.speed_from_a_x else ("T_b",)
 
     @property
     def nx(self) -> int:
@@ -147,25 +163,30 @@ class AugmentedModel:
         return vals["B"], vals["C"], vals["E"], vals["theta"]
 
     # ----------------------------------------------------------------- symbolic pieces
-    def rhs_sx(self, x, Tb):
-        """Continuous (v', lambda') of eq. (6)/(19) as SX, speed floored at V_FLOOR."""
+    def rhs_sx(self, x, u):
+        """Continuous (v', lambda') of eq. (6)/(19) as SX, speed floored at V_FLOOR; ``u`` the input
+        (:attr:`input_names`)."""
         p = self.p
         B, C, E, theta = self.road(x)
         v = ca.fmax(x[0], V_FLOOR)
         lam = x[1]
-        vdot, lamdot = _slip_ode_casadi(v, lam, self.extra(x, "k_T") * Tb, B, C, E, theta, p.r, p.m, p.J, p.Fz)
+        Tb = self.extra(x, "k_T") * u[0]
+        if self.speed_from_a_x:
+            return u[1], _slip_given_accel_casadi(u[1], v, lam, Tb, B, C, E, theta, p.r, p.J, p.Fz)
+        vdot, lamdot = _slip_ode_casadi(v, lam, Tb, B, C, E, theta, p.r, p.m, p.J, p.Fz)
         if "a_b" not in self.extras:
             return vdot, lamdot
         a_b = self.extra(x, "a_b")  # lambda = 1 - omega r / v: a speed change a_b moves the slip by (1 - lambda) / v
         return vdot - a_b, lamdot - (1.0 - lam) * a_b / v
 
     def step_sx(self, x, Tb):
-        """One sample of the discrete model x+ = f(x, T_b), eq. (8a), as SX (ROS2 substeps)."""
+        """One sample of the discrete model x+ = f(x, u), eq. (8a), as SX (ROS2 substeps); ``Tb`` the input
+        (:attr:`input_names`: the torque, or (T_b, a_x))."""
         h = self.dt / self.substeps
         hg = h * ROS2_GAMMA
         xs = ca.SX.sym("xs", 2)
         prm = ca.SX.sym("prm", self.nx - 2)
-        ts = ca.SX.sym("ts")
+        ts = ca.SX.sym("ts", len(self.input_names))
         fv, fl = self.rhs_sx(ca.vertcat(xs, prm), ts)
         f_expr = ca.vertcat(fv, fl)
         rhs = ca.Function("rhs", [xs, prm, ts], [f_expr, ca.jacobian(f_expr, xs)])
@@ -199,7 +220,7 @@ class AugmentedModel:
     def _functions(self) -> dict:
         if not self._cache:
             x = ca.SX.sym("x", self.nx)
-            Tb = ca.SX.sym("Tb")
+            Tb = ca.SX.sym("Tb", len(self.input_names))
             xn = self.step_sx(x, Tb)
             y = self.measurement_sx(x)
             self._cache["f"] = ca.Function("f", [x, Tb], [xn])
@@ -213,11 +234,11 @@ class AugmentedModel:
         """Compiled ``f(x, T_b) -> x+``."""
         return self._functions()["f"]
 
-    def f(self, x, Tb: float) -> np.ndarray:
-        """Numeric x+ = f(x, T_b)."""
+    def f(self, x, Tb) -> np.ndarray:
+        """Numeric x+ = f(x, u) (``u``: the torque, or (T_b, a_x))."""
         return np.asarray(self._functions()["f"](x, Tb)).ravel()
 
-    def f_and_jacobian(self, x, Tb: float) -> tuple[np.ndarray, np.ndarray]:
+    def f_and_jacobian(self, x, Tb) -> tuple[np.ndarray, np.ndarray]:
         """Numeric x+ and d x+ / d x."""
         xn, F = self._functions()["fF"](x, Tb)
         return np.asarray(xn).ravel(), np.asarray(F)

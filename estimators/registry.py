@@ -9,6 +9,8 @@ name                family    variant   estimator
 ``ekf``             ekf       default   :class:`~estimators.ekf.QuarterCarEKF`, theta and the mismatch states
                                         ``k_T``, ``a_b`` augmented (``ekf-full``, ``mhe``, ``mhe-full`` too)
 ``ekf-full``        ekf       full      the same with (theta, B, C, E) augmented (Sui & Johansen, cases 3-4)
+``ekf-ax``          ekf       ax        the EKF with the car's speed from the measured a_x (``v' = a_x``, input
+                                        ``(T_b, a_x)``), theta and the brake gain augmented
 ``mhe``             mhe       default   :class:`~estimators.mhe.RegularizedMHE`, default (EKF arrival cost,
                                         process noise, gate), theta augmented
 ``mhe-full``        mhe       full      the same with (theta, B, C, E) augmented
@@ -47,7 +49,7 @@ from estimators.ekf_rls import ENV_CORRECTION_GAIN, PAPER_CORRECTION_GAIN, Quart
 from estimators.mhe import RegularizedMHE
 from estimators.quarter_car_model import PARAM_NAMES, AugmentedModel
 from estimators.slope_maps import PAPER_MAP
-from estimators.tuning import MISMATCH_STATES
+from estimators.tuning import A_X_SPEED_Q_STD, MISMATCH_STATES
 from fricenv.errors import InvalidInputError
 from fricenv.plants import sui_johansen as sj
 from fricenv.plants.quarter_car import PAPER_PARAMS, QuarterCarParams
@@ -81,11 +83,12 @@ def _shape_dict(road: MagicFormula) -> Mapping[str, float]:
 
 
 def _augmented_model(params: Any, dt: float, estimated: tuple[str, ...], shape: Mapping[str, float],
-                     extras: tuple[str, ...] = ()):
+                     extras: tuple[str, ...] = (), speed_from_a_x: bool = False):
     if not isinstance(params, QuarterCarParams):
         raise EstimatorConfigError(f"the EKF and MHE take QuarterCarParams, got {type(params).__name__}")
     try:
-        return AugmentedModel(estimated=tuple(estimated), dt=dt, p=params, fixed=dict(shape), extras=tuple(extras))
+        return AugmentedModel(estimated=tuple(estimated), dt=dt, p=params, fixed=dict(shape), extras=tuple(extras),
+                              speed_from_a_x=bool(speed_from_a_x))
     except ValueError as exc:
         raise EstimatorConfigError(str(exc)) from None
 
@@ -93,7 +96,8 @@ def _augmented_model(params: Any, dt: float, estimated: tuple[str, ...], shape: 
 def _build_ekf(entry: EstimatorEntry, params: Any, dt: float, estimated: tuple[str, ...],
                options: dict[str, Any]) -> Estimator:
     options = dict(options)
-    model = _augmented_model(params, dt, estimated, entry.assumed_shape, options.pop("mismatch_states", ()))
+    model = _augmented_model(params, dt, estimated, entry.assumed_shape, options.pop("mismatch_states", ()),
+                             options.pop("speed_from_a_x", False))
     return QuarterCarEKF(estimated=model.estimated, dt=dt, model=model, **options)
 
 
@@ -189,6 +193,9 @@ def _entries() -> tuple[EstimatorEntry, ...]:
                        absorb, estimated=FULL_SHAPE, observation=True),
         EstimatorEntry("mhe", "full", "regularized MHE, theta, B, C, E, brake gain, deceleration bias", _build_mhe,
                        absorb, estimated=FULL_SHAPE, cls=RegularizedMHE, observation=True),
+        EstimatorEntry("ekf", "ax", "augmented EKF, the speed from a_x, theta, brake gain", _build_ekf,
+                       MappingProxyType({"mismatch_states": ("k_T",), "speed_from_a_x": True,
+                                         "Q_std": {"v": A_X_SPEED_Q_STD}})),
         EstimatorEntry("mhe", "paper", "the paper's MHE: prior terms beta_i, hard dynamics", _build_mhe,
                        MappingProxyType(mhe_paper), cls=RegularizedMHE),
         EstimatorEntry("mhe", "ekf", "hard dynamics, EKF arrival cost only", _build_mhe,

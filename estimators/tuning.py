@@ -13,6 +13,7 @@ from fricenv.plants.sui_johansen import OMEGA_NOISE_VAR
 
 __all__ = [
     "AB_P0_STD",
+    "A_X_SPEED_Q_STD",
     "AB_Q_STD",
     "A_REF",
     "BRAKE_SETTLE_S",
@@ -49,6 +50,9 @@ DEFAULT_EKF_TUNING = {
               "a_b": AB_Q_STD},
     "R": OMEGA_NOISE_VAR,  # wheel-speed noise variance [(rad/s)^2], Sui & Johansen Section IV
 }
+# a speed that follows the measured a_x (estimators.quarter_car_model, speed_from_a_x): its random walk per sample,
+# three times the accelerometer's noise (0.1 m/s^2, the stand-in's and the env's) over a 10 ms sample [m/s]
+A_X_SPEED_Q_STD = 0.003
 V_PRIOR = 19.0  # a priori initial speed [m/s], Sui & Johansen Section IV
 SLIP_PRIOR = 0.0  # a priori initial slip [-]
 

@@ -56,6 +56,7 @@ __all__ = [
     "slip",
     "slip_form_derivatives",
     "slip_ode",
+    "slip_ode_given_accel",
     "step",
     "tire_force",
 ]
@@ -151,6 +152,20 @@ def slip_ode(v, lam, Tb, B, C, E, theta, r, m, J, Fz):
     vdot = -Fx / m
     lamdot = (-((1.0 - lam) / m + r**2 / J) * Fx + r / J * Tb) / v
     return vdot, lamdot
+
+
+def slip_ode_given_accel(vdot, v, lam, Tb, B, C, E, theta, r, J, Fz):
+    """The slip of eq. (6b) when the car's acceleration ``v'`` is given (a measured ``a_x``) rather than eq. (6a):
+    ``lambda = 1 - r omega / v`` differentiated, with the wheel of eq. (1b),
+
+        lambda' = ((1 - lambda) v' - r omega') / v,    J omega' = r F_z mu(lambda) - T_b
+
+    With ``v' = -F_z mu(lambda) / m`` it is eq. (6b) (tested). In plain math, as :func:`slip_ode`.
+
+    :return: lambda'.
+    """
+    r_omega_dot = r * (r * Fz * magic_formula(lam, B, C, E, theta) - Tb) / J
+    return ((1.0 - lam) * vdot - r_omega_dot) / v
 
 
 def step(v, omega, Tb, road, dt: float, p: QuarterCarParams = PAPER_PARAMS, substeps: int = 1):
