@@ -52,15 +52,6 @@ def test_non_increasing_time_names_line(tmp_path):
         read_log(path)
 
 
-def test_a_repeated_stamp_names_both_lines_in_plain_seconds(tmp_path):
-    rows = _rows()
-    rows[6] = rows[5].replace(",57.971014,", ",58.0,")  # the stamp of the row before, other values
-    path = _write(tmp_path, [HEADER] + rows)
-    with pytest.raises(LogFormatError, match=r"log\.csv:8: column 't' is not increasing: the stamp repeats line "
-                                             r"7's \(0\.050000000000000003 then 0\.050000000000000003 s\)$"):
-        read_log(path)
-
-
 def test_a_row_written_twice_is_dropped_with_a_warning(tmp_path):
     rows = _rows()
     clean = read_log(_write(tmp_path, [HEADER] + rows, "clean.csv"))
@@ -72,12 +63,18 @@ def test_a_row_written_twice_is_dropped_with_a_warning(tmp_path):
     assert log.warnings == ("t: 2 row(s) repeating the row before them in every column dropped (the first on line 7)",)
 
 
-def test_non_uniform_time(tmp_path):
+@pytest.mark.parametrize("row, edit, message", [
+    (10, lambda rows: rows[10].replace("0.1000", "0.1040", 1),
+     r"log\.csv:12: column 't': step 0\.014 s is 1\.4 median steps \(0\.01 s\): time-stamp jitter above 25% of the step"),
+    (6, lambda rows: rows[5].replace(",57.971014,", ",58.0,"),  # the stamp of the row before, other values
+     r"log\.csv:8: column 't' is not increasing: the stamp repeats line 7's \(0\.050000000000000003 then "
+     r"0\.050000000000000003 s\)$"),
+])
+def test_a_stamp_off_the_grid_is_named(tmp_path, row, edit, message):
     rows = _rows()
-    rows[10] = rows[10].replace("0.1000", "0.1040", 1)
+    rows[row] = edit(rows)
     path = _write(tmp_path, [HEADER] + rows)
-    with pytest.raises(LogFormatError, match=r"log\.csv:12: column 't': step 0\.014 s is 1\.4 median steps "
-                                             r"\(0\.01 s\): time-stamp jitter above 25% of the step"):
+    with pytest.raises(LogFormatError, match=message):
         read_log(path)
 
 
