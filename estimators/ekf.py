@@ -164,7 +164,8 @@ class QuarterCarEKF(Estimator):
     """EKF on the augmented quarter-car model (the MHE's baseline).
 
     ``update(omega, T_b)``: measurement update with the wheel speed at time k, returns x(k|k), then predicts to
-    k+1 with the torque held over the sample. Values: ``v``, ``slip``, the four curve parameters (estimated or fixed) and
+    k+1 with the torque held over the sample (``update(omega, (T_b, a_x))`` for a model whose speed follows the
+    measured acceleration, ``AugmentedModel(speed_from_a_x=True)``: :attr:`input_columns` says which). Values: ``v``, ``slip``, the four curve parameters (estimated or fixed) and
     ``mu``, the friction in use, mu(slip) on the estimated curve.
 
     Every wheel speed is gated (:mod:`estimators.outliers`): a sample whose NIS exceeds the chi-square bound is
