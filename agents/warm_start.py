@@ -58,12 +58,12 @@ def warm_start(model, run_dir: str | Path) -> None:
     :raises ValueError: when the source's observation statistics do not fit the new env's observation.
     """
     run_dir = Path(run_dir)
-    source = type(model).load(str(run_dir / MODEL_FILE), device="cpu")
-    model.policy.load_state_dict(source.policy.state_dict())
     venv = model.get_env()
     with open(run_dir / VECNORM_FILE, "rb") as fh:
         stats = pickle.load(fh)
-    if stats.obs_rms.mean.shape != venv.obs_rms.mean.shape:
+    if stats.obs_rms.mean.shape != venv.obs_rms.mean.shape:  # before the weights, whose load would fail unclearly
         raise ValueError(f"init run {run_dir}: observation statistics of shape {stats.obs_rms.mean.shape}, this "
                          f"run's observation has shape {venv.obs_rms.mean.shape}")
+    source = type(model).load(str(run_dir / MODEL_FILE), device="cpu")
+    model.policy.load_state_dict(source.policy.state_dict())
     venv.obs_rms, venv.ret_rms = stats.obs_rms, stats.ret_rms

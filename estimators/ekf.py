@@ -257,7 +257,7 @@ class QuarterCarEKF(Estimator):
         u = np.atleast_1d(np.asarray(inputs, dtype=float))
         self._brake_torque = float(u[0])
         x_post = np.clip(x_post, self.lower, self.upper)
-        x_next, P_next = self.filter.predict(x_post, P_post, u if u.size > 1 else self._brake_torque)
+        x_next, P_next = self.filter.predict(x_post, P_post, u)
         if not (np.all(np.isfinite(x_next)) and np.all(np.isfinite(P_next))):
             self.P = self.P0.copy()
             return False

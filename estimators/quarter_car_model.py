@@ -179,9 +179,9 @@ class AugmentedModel:
         a_b = self.extra(x, "a_b")  # lambda = 1 - omega r / v: a speed change a_b moves the slip by (1 - lambda) / v
         return vdot - a_b, lamdot - (1.0 - lam) * a_b / v
 
-    def step_sx(self, x, Tb):
-        """One sample of the discrete model x+ = f(x, u), eq. (8a), as SX (ROS2 substeps); ``Tb`` the input
-        (:attr:`input_names`: the torque, or (T_b, a_x))."""
+    def step_sx(self, x, u):
+        """One sample of the discrete model x+ = f(x, u), eq. (8a), as SX (ROS2 substeps); ``u`` the input held
+        over the sample (:attr:`input_names`: the torque, or (T_b, a_x))."""
         h = self.dt / self.substeps
         hg = h * ROS2_GAMMA
         xs = ca.SX.sym("xs", 2)
@@ -193,7 +193,7 @@ class AugmentedModel:
         params = x[2:self.nx] if self.nx > 2 else ca.SX(0, 1)
 
         def rhs_fun(z):
-            return rhs(z, params, Tb)
+            return rhs(z, params, u)
 
         z = ca.vertcat(x[0], x[1])
         for _ in range(self.substeps):
@@ -220,27 +220,27 @@ class AugmentedModel:
     def _functions(self) -> dict:
         if not self._cache:
             x = ca.SX.sym("x", self.nx)
-            Tb = ca.SX.sym("Tb", len(self.input_names))
-            xn = self.step_sx(x, Tb)
+            u = ca.SX.sym("u", len(self.input_names))
+            xn = self.step_sx(x, u)
             y = self.measurement_sx(x)
-            self._cache["f"] = ca.Function("f", [x, Tb], [xn])
-            self._cache["fF"] = ca.Function("fF", [x, Tb], [xn, ca.jacobian(xn, x)])
+            self._cache["f"] = ca.Function("f", [x, u], [xn])
+            self._cache["fF"] = ca.Function("fF", [x, u], [xn, ca.jacobian(xn, x)])
             self._cache["h"] = ca.Function("h", [x], [y])
             self._cache["hH"] = ca.Function("hH", [x], [y, ca.jacobian(y, x)])
         return self._cache
 
     @property
     def f_function(self) -> ca.Function:
-        """Compiled ``f(x, T_b) -> x+``."""
+        """Compiled ``f(x, u) -> x+``."""
         return self._functions()["f"]
 
-    def f(self, x, Tb) -> np.ndarray:
+    def f(self, x, u) -> np.ndarray:
         """Numeric x+ = f(x, u) (``u``: the torque, or (T_b, a_x))."""
-        return np.asarray(self._functions()["f"](x, Tb)).ravel()
+        return np.asarray(self._functions()["f"](x, u)).ravel()
 
-    def f_and_jacobian(self, x, Tb) -> tuple[np.ndarray, np.ndarray]:
+    def f_and_jacobian(self, x, u) -> tuple[np.ndarray, np.ndarray]:
         """Numeric x+ and d x+ / d x."""
-        xn, F = self._functions()["fF"](x, Tb)
+        xn, F = self._functions()["fF"](x, u)
         return np.asarray(xn).ravel(), np.asarray(F)
 
     def h(self, x) -> float:

@@ -44,6 +44,13 @@ def test_warm_start_loads_the_source_weights_and_statistics(source):
     assert venv.obs_rms.count == stats.obs_rms.count > 0
 
 
+def test_a_source_of_another_observation_is_refused_before_its_weights_load(source):
+    model = make_training_model("braking", "none", "ppo", TINY_PPO, seed=5, vec="native")
+    with pytest.raises(ValueError, match=r"observation statistics of shape \(\d+,\), this run's observation has "
+                                         r"shape \(\d+,\)"):
+        warm_start(model, source)
+
+
 def test_a_warm_started_run_names_its_source(source, tmp_path):
     result = train(tmp_path / "tuned", estimator="ekf-rls", algo="ppo", steps=256, seed=4, config=TINY_PPO,
                    progress_bar=False, checkpoint_every=0, init=source,

@@ -6,6 +6,7 @@ follows the tire force loses it.
 Stops: the gap tool's stand-in, dry road, ABS driver, seed 0 (a tuning seed of the robustness study).
 """
 
+import casadi as ca
 import numpy as np
 import pytest
 
@@ -22,15 +23,20 @@ from fricenv.plants.tire import ROADS
 def test_the_model_speed_moves_by_a_x_dt_and_its_slip_by_eq_6b():
     model = AugmentedModel(estimated=("theta",), extras=("k_T",), speed_from_a_x=True, dt=0.01)
     assert model.input_names == ("T_b", "a_x") and get_estimator("ekf-ax").make().input_columns == ("T_b", "a_x")
-    x = model.nominal_state(20.0, 0.05, {"theta": 0.9})
+    x = model.nominal_state(20.0, 0.05, {"theta": 0.9, "k_T": 1.1})
     nxt = model.f(x, np.array([800.0, -7.5]))
     assert nxt[0] == pytest.approx(20.0 - 0.075, abs=1e-12)  # v' = a_x held over the sample: exact in ROS2
-    # with a_x equal to the tire's own deceleration, the slip follows eq. (6b) of the tire-force model
+    # the model's rates: v' = a_x, and the slip of eq. (6b) with that v' under the torque the brake gain scales
+    xs, us = ca.SX.sym("x", model.nx), ca.SX.sym("u", 2)
+    rates = ca.Function("rates", [xs, us], [ca.vertcat(*model.rhs_sx(xs, us))])
     road = (qc.sj.NOMINAL_SHAPE["B"], qc.sj.NOMINAL_SHAPE["C"], qc.sj.NOMINAL_SHAPE["E"], 0.9)
+    p = qc.PAPER_PARAMS
+    vdot, lamdot = np.asarray(rates(x, [800.0, -7.5])).ravel()
+    assert vdot == -7.5
+    assert lamdot == pytest.approx(qc.slip_ode_given_accel(-7.5, 20.0, 0.05, 880.0, *road, p.r, p.J, p.Fz), rel=1e-13)
+    # with a_x equal to the tire's own deceleration, that slip is eq. (6b) of the tire-force model
     vdot, lamdot = qc.slip_form_derivatives(20.0, 0.05, 800.0, road)
-    given = qc.slip_ode_given_accel(vdot, 20.0, 0.05, 800.0, *road, qc.PAPER_PARAMS.r, qc.PAPER_PARAMS.J,
-                                    qc.PAPER_PARAMS.Fz)
-    assert given == pytest.approx(lamdot, rel=1e-13)
+    assert qc.slip_ode_given_accel(vdot, 20.0, 0.05, 800.0, *road, p.r, p.J, p.Fz) == pytest.approx(lamdot, rel=1e-13)
 
 
 def test_a_measured_deceleration_has_no_bias_state_and_the_mhe_does_not_take_it():
