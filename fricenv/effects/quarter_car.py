@@ -270,8 +270,10 @@ class EffectSimulator:
 
     # -- actuator chain
     def _command_at(self, idx: np.ndarray) -> np.ndarray:
-        """Logged command at sample ``idx`` of each element, held at the ends of the log."""
-        return self._cmd[self._rows, np.minimum(np.maximum(idx, 0), self._cmd.shape[1] - 1)]
+        """Command at sample ``idx`` of each element, held at the ends of the log; a recording simulator (an env)
+        starts with the brake released, so before its first sample the command is zero, as the lag's state."""
+        cmd = self._cmd[self._rows, np.minimum(np.maximum(idx, 0), self._cmd.shape[1] - 1)]
+        return np.where(idx < 0, 0.0, cmd) if self._record else cmd
 
     def _delayed(self, j: int) -> np.ndarray:
         """Command delayed by ``delay``, averaged exactly over substep ``j`` of the current sample (ZOH input)."""

@@ -106,6 +106,25 @@ def test_brake_lag_env_applies_the_lag_and_stops_later():
     assert lagged > plain + 0.2  # ~ v0 x the lag's dead time on the onset
 
 
+def test_brake_delay_env_starts_with_the_brake_released_and_equals_the_shifted_commands():
+    """A delay of three samples: the car sees the commands three samples late and no torque before the first (the
+    brake is released when an episode starts), that is, the plain env fed (0, 0, 0, T_0, T_1, ...)."""
+    shift = 3
+    delayed = gym.make("fricenv/Braking-v0", road="wet",
+                       effects=[{"effect": "brake_delay", "params": {"delay": shift * 0.01}}])
+    plain = gym.make("fricenv/Braking-v0", road="wet")
+    actions = np.random.default_rng(2).uniform(-1.0, 0.2, 40).astype(np.float32)  # torque (a + 1) t_max / 2
+    released = np.full(shift, -1.0, dtype=np.float32)
+
+    def speeds(env, acts):
+        env.reset(seed=0)
+        return np.array([env.step(np.array([a]))[4]["v"] for a in acts])
+
+    got, want = speeds(delayed, actions), speeds(plain, np.r_[released, actions[:-shift]])
+    assert np.all(got[:shift] == 20.0)  # no drag, no torque: the car rolls on at its v0
+    np.testing.assert_allclose(got, want, rtol=1e-9)
+
+
 def test_radius_error_sets_free_rolling_and_the_lock_test_on_r_eff():
     env = gym.make("fricenv/Braking-v0", effects=[{"effect": "radius_error", "params": {"r_eff": 0.30}}])
     _, info = env.reset(seed=1)
