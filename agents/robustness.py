@@ -9,7 +9,8 @@ slower than 3 m/s or after :data:`DURATION` seconds. The seed draws the speed, t
 every cell of a (driver, road, seed) uses the same draws.
 
 Every estimator of :data:`ESTIMATORS` (the env estimators, built as ``Braking-v0`` builds them) runs over the stop's
-measured signals (wheel speed, commanded torque, ``a_x`` where it reads it), started from the measured free-rolling
+measured signals (wheel speed, commanded torque, ``a_x`` where it reads it: as a measurement, or as the input
+whose integral is the car's speed for ``ekf-ax``), started from the measured free-rolling
 speed. Metrics per stop (:func:`stop_metrics`), after the first :data:`SETTLE_S` seconds of the stop: rms error of
 the speed, of the slip (the true slip with the plant's own rolling radius) and of the friction in use (tire force
 over wheel load); the worst speed error over the whole stop; the share of samples with each health value of
@@ -46,7 +47,7 @@ __all__ = [
     "summarize",
 ]
 
-ESTIMATORS = ("ekf", "mhe", "ekf-rls", "ekf-full", "mhe-full")
+ESTIMATORS = ("ekf", "mhe", "ekf-rls", "ekf-full", "mhe-full", "ekf-ax")
 DRIVERS = ("abs", "open-loop")
 ROADS = ("dry", "wet", "snow")
 SETTLE_S = 0.5  # errors count from this long after the brake is first applied [s]
@@ -166,13 +167,18 @@ def _run_single(name: str, stop: Stop, v_start: float, keys: dict[str, str], p: 
     from estimators.registry import get_estimator
 
     est = get_estimator(name).make(p, DT)
-    columns = {"omega": stop.omega, "a_x": stop.a_x}
+    columns = {"omega": stop.omega, "a_x": stop.a_x, "T_b": stop.T_b}
     y = np.column_stack([columns[c] for c in est.measurement_columns])
+    u = np.column_stack([columns[c] for c in est.input_columns])
+    from fricenv.gap.quarter_car.simulate import OMEGA_NOISE_VAR
+
+    v_std = float(np.sqrt(OMEGA_NOISE_VAR)) * p.r  # one free-rolling wheel sample's spread, as the env says it
     accepted = inspect.signature(est.reset).parameters
-    est.reset(**{k: val for k, val in (("v", v_start), ("v0", v_start), ("slip", 0.0)) if k in accepted})
+    est.reset(**{k: val for k, val in (("v", v_start), ("v0", v_start), ("slip", 0.0), ("v_std", v_std))
+                 if k in accepted})
     out: dict[str, list[float]] = {q: [] for q in (*keys, "health")}
     for k in range(len(stop.t)):
-        e = est.update(y[k], [float(stop.T_b[k])])
+        e = est.update(y[k], u[k])
         for q, key in keys.items():
             out[q].append(float(np.asarray(e.values[key], dtype=float)))
         out["health"].append(int(e.health))

@@ -96,10 +96,10 @@ class ExtendedKalmanFilter:
             if M.shape[0] != M.shape[1] or not np.all(np.isfinite(M)):
                 raise EstimatorConfigError(f"{name} must be a finite square matrix, got shape {M.shape}")
 
-    def predict(self, x, P, u):
-        """Time update from (x, P) under input u."""
+    def predict(self, x, P, u, Q=None):
+        """Time update from (x, P) under input u (process noise ``Q``, default the filter's)."""
         xn, F = self.f_and_jacobian(x, u)
-        return ekf_predict(np.asarray(xn, dtype=float), np.asarray(F, dtype=float), P, self.Q)
+        return ekf_predict(np.asarray(xn, dtype=float), np.asarray(F, dtype=float), P, self.Q if Q is None else Q)
 
     def update(self, x, P, y):
         """Measurement update with y; returns (x, P, innovation)."""
@@ -181,6 +181,9 @@ class QuarterCarEKF(Estimator):
     :param R: measurement noise variance [(rad/s)^2].
     :param model: a prebuilt :class:`AugmentedModel` (else one is built from ``estimated`` and ``dt``).
     :param outlier_gate: the innovation gate, or None to trust every sample (the paper's EKF).
+    :param Q_braking_std: process noise per state name that replaces ``Q_std``'s from the first sample with a brake
+        torque on, until the next reset (``ekf-ax``: the slip, whose force law the model holds only approximately
+        once the tire is loaded); None: ``Q_std`` throughout.
     """
 
     measurement_columns = ("omega",)
@@ -189,13 +192,14 @@ class QuarterCarEKF(Estimator):
 
     def __init__(self, estimated: tuple[str, ...] = ("theta",), dt: float = 0.01, P0_std: dict | None = None,
                  Q_std: dict | None = None, R: float = DEFAULT_EKF_TUNING["R"],
-                 model: AugmentedModel | None = None, outlier_gate: GateParams | None = DEFAULT_GATE):
+                 model: AugmentedModel | None = None, outlier_gate: GateParams | None = DEFAULT_GATE,
+                 Q_braking_std: dict | None = None):
         dt = check_dt(dt)
         try:
             self.model = model or AugmentedModel(estimated=tuple(estimated), dt=dt)
         except ValueError as exc:
             raise EstimatorConfigError(str(exc)) from None
-        for label, given in (("P0_std", P0_std), ("Q_std", Q_std)):
+        for label, given in (("P0_std", P0_std), ("Q_std", Q_std), ("Q_braking_std", Q_braking_std)):
             bad = [k for k in (given or {}) if k not in ("v", "slip") + PARAM_NAMES + EXTRA_NAMES]
             if bad:
                 raise EstimatorConfigError(f"{label} keys {bad} unknown; valid: v, slip, "
@@ -210,6 +214,9 @@ class QuarterCarEKF(Estimator):
             np.diag([q[n] ** 2 for n in names]),
             np.array([[float(R)]]),
         )
+        # while the brake acts, the states of Q_braking_std take that process noise instead (None: no change)
+        self.Q_braking = None if Q_braking_std is None else \
+            np.diag([{**q, **Q_braking_std}[n] ** 2 for n in names])
         self.input_columns = self.model.input_names  # ("T_b",), or ("T_b", "a_x") when the speed follows a_x
         self.lower, self.upper = self.model.lower(), self.model.upper()
         # the model's speed can change by at most F_z theta_max / m per second (|mu| <= theta <= 1): a predicted
@@ -222,12 +229,23 @@ class QuarterCarEKF(Estimator):
         self.information = ParameterInformation(slice(2, 2 + len(self.model.estimated)), HORIZON, PAPER_TUNING[group]["delta"])
         self.reset()
 
-    def reset(self, v: float = V_PRIOR, slip: float = SLIP_PRIOR, params: dict | None = None) -> Estimate:
-        """Start from the a priori state (Section IV) with covariance P0."""
+    def reset(self, v: float = V_PRIOR, slip: float = SLIP_PRIOR, params: dict | None = None,
+              v_std: float | None = None) -> Estimate:
+        """Start from the a priori state (Section IV) with covariance P0.
+
+        :param v: the speed to start from [m/s]; :param slip: the slip; :param params: parameter values.
+        :param v_std: how well ``v`` is known [m/s] (e.g. a free-rolling wheel's speed: its noise times r); None:
+            the prior spread of P0. A model whose speed follows ``a_x`` keeps this error for the whole run.
+        """
         self.x = self.model.nominal_state(v, slip, params)
         self.P = self.P0.copy()
+        if v_std is not None:
+            if not (np.isfinite(v_std) and v_std > 0):
+                raise EstimatorConfigError(f"v_std must be a positive speed [m/s], got {v_std!r}")
+            self.P[0, 0] = float(v_std) ** 2
         self.guard.reset()
         self._brake_torque = 0.0  # torque held since the last sample [N m]
+        self._braked = False  # a brake torque has acted since the reset
         self.information.reset()
         return self._estimate(self.x, Health.OK)
 
@@ -257,7 +275,9 @@ class QuarterCarEKF(Estimator):
         u = np.atleast_1d(np.asarray(inputs, dtype=float))
         self._brake_torque = float(u[0])
         x_post = np.clip(x_post, self.lower, self.upper)
-        x_next, P_next = self.filter.predict(x_post, P_post, u)
+        self._braked = self._braked or self._brake_torque > 0.0
+        braked = self.Q_braking is not None and self._braked
+        x_next, P_next = self.filter.predict(x_post, P_post, u, self.Q_braking if braked else None)
         if not (np.all(np.isfinite(x_next)) and np.all(np.isfinite(P_next))):
             self.P = self.P0.copy()
             return False

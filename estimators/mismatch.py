@@ -172,10 +172,11 @@ class WheelSpeedGuard:
             persistent = physical and s.run >= 1 and sign == s.sign
             smooth = np.isfinite(s.e_prev) and (e - s.e_prev) ** 2 <= 2.0 * S * self.params.bound
             if persistent and smooth and value <= MISMATCH_NIS_MAX * self.params.bound:  # (M1): the model is off
-                Hq = H[0, :2]
-                inflation = (e * e / self.params.bound - S) / max(float(Hq @ Q[:2, :2] @ Hq), 1e-300)
+                raised = slice(1, 2) if self.model.speed_from_a_x else slice(0, 2)  # (M2'): not the speed
+                Hq = H[0, raised]
+                inflation = (e * e / self.params.bound - S) / max(float(Hq @ Q[raised, raised] @ Hq), 1e-300)
                 P = P.copy()
-                P[:2, :2] += max(inflation, 0.0) * Q[:2, :2]
+                P[raised, raised] += max(inflation, 0.0) * Q[raised, raised]
                 verdict, rejected = Verdict.MISMATCH, s.rejected  # a run of mismatches never re-initialises
             if physical:  # a sample no road can produce is a spike: it joins no run
                 s.run = s.run + 1 if sign == s.sign else 1

@@ -49,7 +49,7 @@ from estimators.ekf_rls import ENV_CORRECTION_GAIN, PAPER_CORRECTION_GAIN, Quart
 from estimators.mhe import RegularizedMHE
 from estimators.quarter_car_model import PARAM_NAMES, AugmentedModel
 from estimators.slope_maps import PAPER_MAP
-from estimators.tuning import A_X_SPEED_Q_STD, MISMATCH_STATES
+from estimators.tuning import A_X_SLIP_BRAKING_Q_STD, A_X_SPEED_Q_STD, MISMATCH_STATES
 from fricenv.errors import InvalidInputError
 from fricenv.plants import sui_johansen as sj
 from fricenv.plants.quarter_car import PAPER_PARAMS, QuarterCarParams
@@ -195,7 +195,8 @@ def _entries() -> tuple[EstimatorEntry, ...]:
                        absorb, estimated=FULL_SHAPE, cls=RegularizedMHE, observation=True),
         EstimatorEntry("ekf", "ax", "augmented EKF, the speed from a_x, theta, brake gain", _build_ekf,
                        MappingProxyType({"mismatch_states": ("k_T",), "speed_from_a_x": True,
-                                         "Q_std": {"v": A_X_SPEED_Q_STD}})),
+                                         "Q_std": {"v": A_X_SPEED_Q_STD},
+                                         "Q_braking_std": {"slip": A_X_SLIP_BRAKING_Q_STD}}), observation=True),
         EstimatorEntry("mhe", "paper", "the paper's MHE: prior terms beta_i, hard dynamics", _build_mhe,
                        MappingProxyType(mhe_paper), cls=RegularizedMHE),
         EstimatorEntry("mhe", "ekf", "hard dynamics, EKF arrival cost only", _build_mhe,

@@ -28,7 +28,8 @@ once it has been commanded, so after the env step k -> k+1 the wrapper updates w
 ``v_hat = v(k|k) + dt a_x,m(k+1)`` (the accelerometer reads the speed change over the step, so this removes the
 one-sample lag of the speed, ``|a| dt`` = up to 0.1 m/s); ``slip_hat``, ``mu_hat`` and ``theta_hat`` are the
 estimate at k (one sample, 10 ms, old). At reset the estimator starts from the free-rolling speed measured by the
-wheel (``v = omega_m r``, slip 0).
+wheel (``v = omega_m r``, slip 0), and one that takes it (the EKFs' ``v_std``) is told that speed's spread, one
+wheel sample's noise times r.
 
 Estimators (:data:`ESTIMATOR_NAMES`; each is an entry of :data:`estimators.registry.ESTIMATORS` built with the
 env's own plant parameters and sample time): ``ekf`` (:class:`estimators.ekf.QuarterCarEKF`, theta augmented),
@@ -37,8 +38,9 @@ env's own plant parameters and sample time): ``ekf`` (:class:`estimators.ekf.Qua
 its peak-friction estimate ``mu`` fills ``theta_hat``, as its registry entry's ``values`` say; its ``peak_slip``,
 from the online curve-shape fit of :mod:`estimators.curve_shape`, fills ``peak_slip_hat``), and ``ekf-full`` /
 ``mhe-full`` (theta, B, C, E augmented, Sui & Johansen's cases 3-4; the appended layout is the same, B, C, E are
-in ``info`` of the estimate, ``EstimatorObservation.last_estimate``). An unknown name raises ValueError listing
-the choices.
+in ``info`` of the estimate, ``EstimatorObservation.last_estimate``), and ``ekf-ax`` (the EKF whose car speed
+follows the measured acceleration, ``v' = a_x``: its input over the step k -> k+1 is the torque held over it and the
+a_x measured over it, the a_x of the observation at k+1). An unknown name raises ValueError listing the choices.
 
 ``oracle`` appends the truth in the same layout (true speed, slip, friction, the theta and peak slip of the road
 under the car, health 0): an upper bound. ``none`` appends nothing (use the env as it is).
@@ -95,7 +97,9 @@ ESTIMATE_FIELDS: dict[str, ObsField] = {
 HEALTH_FIELD = ObsField("health", "-", 1.0, 0.0, HEALTH_MAX, "estimator health flag (0 = OK)")
 # Measured signals the wrapper can feed an estimator: estimator column name -> env observation entry.
 MEASURED_COLUMNS = {"omega": "wheel_speed", "a_x": "a_x"}
-INPUT_COLUMNS = ("T_b",)
+# Inputs it can feed: the commanded torque held over the step, and the acceleration measured over that step (the
+# a_x of the observation after it: the speed change over the step, :func:`fricenv.envs.episode.measure`).
+INPUT_COLUMNS = ("T_b", "a_x")
 # Observation choices: "none" appends nothing, "oracle" appends the truth, the others run a registered estimator.
 NO_ESTIMATOR = "none"
 ORACLE = "oracle"
@@ -126,10 +130,11 @@ def batched_names() -> tuple[str, ...]:
     return tuple(BATCHED)
 
 
-def _reset(est: Estimator, v0: float) -> Estimate:
-    """Reset ``est`` from the measured free-rolling speed ``v0`` [m/s] if it takes an initial speed."""
+def _reset(est: Estimator, v0: float, v_std: float) -> Estimate:
+    """Reset ``est`` from the measured free-rolling speed ``v0`` [m/s], known to ``v_std`` [m/s], as far as its
+    ``reset`` takes an initial speed and its spread."""
     params = inspect.signature(est.reset).parameters
-    kwargs = {k: val for k, val in (("v", v0), ("v0", v0), ("slip", 0.0)) if k in params}
+    kwargs = {k: val for k, val in (("v", v0), ("v0", v0), ("slip", 0.0), ("v_std", v_std)) if k in params}
     return est.reset(**kwargs)
 
 
@@ -269,7 +274,8 @@ class EstimatorObservation(gym.Wrapper):
         else:
             est = self.estimator
             v0 = self._measured(obs, "wheel_speed") * self._params.r
-            values, health = self._safe(lambda: _reset(est, v0))
+            v_std = float(np.sqrt(self.env.unwrapped.config.omega_noise_var)) * self._params.r  # one wheel sample's
+            values, health = self._safe(lambda: _reset(est, v0, v_std))
         self._last_obs = np.asarray(obs)
         info = dict(info, estimate=self._estimate_info(values, health))
         return self._augment(obs, values, health), info
@@ -283,7 +289,7 @@ class EstimatorObservation(gym.Wrapper):
         else:
             est, prev = self.estimator, self._last_obs
             y = [self._measured(prev, MEASURED_COLUMNS[c]) for c in est.measurement_columns]
-            u = [float(info["torque"])]
+            u = [float(info["torque"]) if c == "T_b" else self._measured(obs, "a_x") for c in est.input_columns]
             values, health = self._safe(lambda: est.update(y, u))
             if "v" in values:  # advance x(k|k) to k+1 with the measured speed change over the step
                 values = dict(values, v=values["v"] + self._dt * self._measured(obs, "a_x"))
