@@ -1,7 +1,7 @@
 """The estimators under the effect grid: rms speed, slip and friction error per plant cell, and health shares.
 
-Every env estimator (``ekf``, ``mhe``, ``ekf-rls``, ``ekf-full``, ``mhe-full``) runs over the same stops: the gap
-tool's stand-in with its ``abs`` and ``open-loop`` drivers on dry, wet and snow, ``--seeds`` seeds (0..n-1; each
+Every env estimator (``ekf``, ``mhe``, ``ekf-rls``, ``ekf-full``, ``mhe-full``, ``ekf-ax``) runs over the same
+stops: the gap tool's stand-in with its ``abs`` and ``open-loop`` drivers on dry, wet and snow, ``--seeds`` seeds (0..n-1; each
 draws the initial speed on 20-32 m/s, the free roll, the driver and the noise), on the nominal plant and on every
 cell of the effect grid (each library effect at its low and high size; radius and friction change relative to the
 road, the change at mid-stop). Errors count from 0.5 s after the brake is first applied: rms speed, slip and
@@ -23,12 +23,14 @@ DEFAULT_SEEDS = 3
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of ``fricenv paper robustness``."""
+    from agents.robustness import ESTIMATORS
+
     parser.add_argument("--out", default="runs/paper_robustness", metavar="DIR",
                         help="output directory (default %(default)s)")
     parser.add_argument("--seeds", type=int, default=DEFAULT_SEEDS,
                         help="stops per (driver, road, cell): seeds 0..n-1 (default %(default)s)")
     parser.add_argument("--estimators", nargs="+", default=None, metavar="EST",
-                        help="env estimators (default: ekf mhe ekf-rls ekf-full mhe-full)")
+                        help="env estimators (default: " + " ".join(ESTIMATORS) + ")")
     parser.add_argument("--effects", nargs="+", default=None, metavar="EFFECT",
                         help="grid effects to run (default: all); the nominal plant always runs")
     parser.add_argument("--workers", type=int, default=2, help="worker processes (default %(default)s)")
