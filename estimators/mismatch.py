@@ -34,7 +34,8 @@ filter until the re-initialisation, which then took the speed from a wheel that 
      (``AugmentedModel.speed_from_a_x``) takes neither bound of (M2) nor its speed at a re-initialisation: its speed
      is the integrated ``a_x``, which no slip or tire transient moves, while the fastest wheel is no lower bound of a
      car whose tire winds up under a relaxation length (the wheel spins past the car as the brake releases). A
-     re-initialisation restarts the slip only, from the wheel at the filter's speed.
+     re-initialisation restarts the slip only, from the wheel at the filter's speed, and a persistent innovation
+     (M1) raises the slip's process noise only.
 (M3) **Start.** The state after a reset is a guess (19 m/s a priori): a first sample that fails against it is no
      outlier; the filter starts from it as from a re-initialisation (``Verdict.START``) and keeps its own health.
 """

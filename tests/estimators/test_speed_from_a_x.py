@@ -63,3 +63,22 @@ def test_the_speed_from_a_x_is_kept_where_the_tire_force_speed_is_lost(effect, p
     assert rms < 0.3 and worst < 0.5 and flags <= 0.01, (rms, worst, flags)
     rms_force, worst_force, _ = _speed_errors("ekf", log, truth)
     assert worst_force > 1.5, worst_force  # the stop is one where the tire-force speed fails the target
+
+
+def test_the_slip_noise_rises_once_the_brake_has_acted_and_a_start_spread_is_taken():
+    """The slip's random walk is Q_std's 0.01 until a torque first acts, 0.07 from then on, even with the brake
+    released again; ``reset(v_std=...)`` sets the start speed's spread, and a spread that is no speed is refused."""
+    from estimators.tuning import A_X_SLIP_BRAKING_Q_STD
+
+    free, braked = make_estimator("ekf-ax"), make_estimator("ekf-ax")
+    for est in (free, braked):
+        est.reset(v=20.0, slip=0.0, v_std=0.15)
+        assert est.covariance[0, 0] == pytest.approx(0.15 ** 2, rel=1e-12)
+    braked.update([20.0 / qc.PAPER_PARAMS.r], [800.0, -7.0])  # one sample with the brake on
+    x, P = free.x.copy(), free.P.copy()
+    for est in (free, braked):
+        est.propagate(x, P, [0.0, 0.0])  # the same prior, the brake released
+    grown = braked.covariance[1, 1] - free.covariance[1, 1]
+    assert grown == pytest.approx(A_X_SLIP_BRAKING_Q_STD ** 2 - 0.01 ** 2, rel=1e-9)
+    with pytest.raises(EstimatorConfigError, match="v_std"):
+        free.reset(v=20.0, v_std=0.0)
