@@ -22,7 +22,6 @@ stop and estimator; :func:`summarize` groups them per (estimator, cell) over dri
 
 from __future__ import annotations
 
-import inspect
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
@@ -47,7 +46,7 @@ __all__ = [
     "summarize",
 ]
 
-ESTIMATORS = ("ekf", "mhe", "ekf-rls", "ekf-full", "mhe-full", "ekf-ax")
+ESTIMATORS = ("ekf", "mhe", "ekf-rls", "ekf-full", "mhe-full", "ekf-ax", "mhe-ax")
 DRIVERS = ("abs", "open-loop")
 ROADS = ("dry", "wet", "snow")
 SETTLE_S = 0.5  # errors count from this long after the brake is first applied [s]
@@ -142,10 +141,13 @@ def run_estimator(name: str, stops: Sequence[Stop], p: QuarterCarParams | None =
     p = qc.PAPER_PARAMS if p is None else p
     values = dict(get_estimator(name).values)
     keys = {q: values.get(q, q) for q in ("v", "slip", "mu")}
+    from fricenv.gap.quarter_car.simulate import OMEGA_NOISE_VAR
+
     starts = np.array([float(s.omega[0]) * p.r for s in stops])
+    v_std = float(np.sqrt(OMEGA_NOISE_VAR)) * p.r  # one free-rolling wheel sample's spread, as the env says it
     batched = make_batched(name, len(stops), p, DT)
     if batched is None:
-        return [_run_single(name, stop, v0, keys, p) for stop, v0 in zip(stops, starts)]
+        return [_run_single(name, stop, v0, v_std, keys, p) for stop, v0 in zip(stops, starts)]
     lengths = np.array([len(s.t) for s in stops])
     out = {q: np.zeros((len(stops), lengths.max())) for q in (*keys, "health")}
     batched.reset(np.ones(len(stops), dtype=bool), starts)
@@ -161,21 +163,18 @@ def run_estimator(name: str, stops: Sequence[Stop], p: QuarterCarParams | None =
             for j, n in enumerate(lengths)]
 
 
-def _run_single(name: str, stop: Stop, v_start: float, keys: dict[str, str], p: QuarterCarParams) \
-        -> dict[str, np.ndarray]:
-    """One single estimator (its model on the vehicle parameters ``p``) over one stop, started from ``v_start``."""
+def _run_single(name: str, stop: Stop, v_start: float, v_std: float, keys: dict[str, str],
+                p: QuarterCarParams) -> dict[str, np.ndarray]:
+    """One single estimator (its model on the vehicle parameters ``p``) over one stop, started as the env starts it
+    from the wheel's ``v_start`` and its spread ``v_std`` (:func:`estimators.base.reset_from_wheel`)."""
+    from estimators.base import reset_from_wheel
     from estimators.registry import get_estimator
 
     est = get_estimator(name).make(p, DT)
     columns = {"omega": stop.omega, "a_x": stop.a_x, "T_b": stop.T_b}
     y = np.column_stack([columns[c] for c in est.measurement_columns])
     u = np.column_stack([columns[c] for c in est.input_columns])
-    from fricenv.gap.quarter_car.simulate import OMEGA_NOISE_VAR
-
-    v_std = float(np.sqrt(OMEGA_NOISE_VAR)) * p.r  # one free-rolling wheel sample's spread, as the env says it
-    accepted = inspect.signature(est.reset).parameters
-    est.reset(**{k: val for k, val in (("v", v_start), ("v0", v_start), ("slip", 0.0), ("v_std", v_std))
-                 if k in accepted})
+    reset_from_wheel(est, v_start, v_std)
     out: dict[str, list[float]] = {q: [] for q in (*keys, "health")}
     for k in range(len(stop.t)):
         e = est.update(y[k], u[k])

@@ -13,6 +13,7 @@ construction, unknown options) do raise, at construction, with a clear message.
 from __future__ import annotations
 
 import enum
+import inspect
 from abc import ABC, abstractmethod
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -21,7 +22,7 @@ import numpy as np
 
 from fricenv.errors import InvalidInputError
 
-__all__ = ["Estimate", "Estimator", "EstimatorConfigError", "Health", "check_dt", "run"]
+__all__ = ["Estimate", "Estimator", "EstimatorConfigError", "Health", "check_dt", "reset_from_wheel", "run"]
 
 
 class EstimatorConfigError(InvalidInputError):
@@ -100,6 +101,22 @@ class Estimator(ABC):
         if not (np.all(np.isfinite(y)) and np.all(np.isfinite(uu))):
             return None
         return y, uu
+
+
+def reset_from_wheel(estimator: Estimator, v0: float, v_std: float) -> Estimate:
+    """Reset ``estimator`` from a free-rolling wheel sample: speed ``v0`` [m/s] and slip 0, as far as its ``reset``
+    takes them. An estimator whose speed integrates the measured ``a_x`` (``a_x`` among its inputs) keeps the error
+    it starts with, so it is also told the sample's spread ``v_std`` [m/s] when its ``reset`` takes one; the others
+    keep their prior's spread.
+
+    :param estimator: any :class:`Estimator`.
+    :param v0: the wheel's speed [m/s] (omega r); :param v_std: its spread [m/s] (the wheel-speed noise times r).
+    """
+    accepted = inspect.signature(estimator.reset).parameters
+    given = {"v": v0, "v0": v0, "slip": 0.0}
+    if "a_x" in estimator.input_columns:
+        given["v_std"] = v_std
+    return estimator.reset(**{k: val for k, val in given.items() if k in accepted})
 
 
 def _columns(log, names: Sequence[str]) -> np.ndarray:

@@ -122,7 +122,7 @@ class RegularizedMHE(Estimator):
     names = ("v", "slip", "theta", "B", "C", "E", "mu")
 
     def __init__(self, estimated: tuple[str, ...] = ("theta",), dt: float = 0.01, config: MHEConfig | None = None,
-                 model: AugmentedModel | None = None, **options):
+                 model: AugmentedModel | None = None, filter_options: dict | None = None, **options):
         dt = check_dt(dt)
         if config is not None and options:
             raise EstimatorConfigError(f"give either config or options, not both (options: {sorted(options)})")
@@ -131,10 +131,8 @@ class RegularizedMHE(Estimator):
             self.model = model or AugmentedModel(estimated=tuple(estimated), dt=dt)
         except ValueError as exc:
             raise EstimatorConfigError(str(exc)) from None
-        if self.model.speed_from_a_x:
-            raise EstimatorConfigError("the MHE's window takes the torque as its only input; a model whose speed "
-                                       "follows a_x (speed_from_a_x=True) runs in the EKF")
         group = "theta-only" if len(self.model.estimated) <= 1 else "all"
+        auto_error = isinstance(config.model_error, str)
         self.config = cfg = config.resolved(group)
         self.alpha, self.beta, self.delta = cfg.alpha, cfg.beta, cfg.delta
         self.arrival, self.N, self.weighting = cfg.arrival, cfg.horizon, cfg.weighting
@@ -147,8 +145,16 @@ class RegularizedMHE(Estimator):
         self.lower, self.upper = self.model.lower(), self.model.upper()
         # the arrival-cost filter and outlier gate: the quarter-car EKF itself, with this MHE's noise
         self.arrival_filter = QuarterCarEKF(self.model.estimated, dt, R=self.noise_std**2, model=self.model,
-                                            outlier_gate=self.outlier_gate)
+                                            outlier_gate=self.outlier_gate, **(filter_options or {}))
         self._Q, self._P0, self._R = self.arrival_filter.filter.Q, self.arrival_filter.P0, self.arrival_filter.filter.R
+        self.input_columns = self.model.input_names  # ("T_b",), or ("T_b", "a_x") when the speed follows a_x
+        # model_error "auto" with the arrival filter's own options: that filter's process noise on (v, slip), and
+        # its braked value once a brake torque has acted (filter_options' Q_braking_std)
+        self._model_error_braked = None
+        if auto_error and filter_options and self.model_error is not None:
+            self.model_error = np.sqrt(np.diag(self._Q)[:2])
+            if self.arrival_filter.Q_braking is not None:
+                self._model_error_braked = np.sqrt(np.diag(self.arrival_filter.Q_braking)[:2])
         self._build()
         self.reset()
 
@@ -164,11 +170,11 @@ class RegularizedMHE(Estimator):
         x0 = ca.SX.sym("x0", nx)
         w = ca.SX.sym("w", nw)  # model-error inputs on (v, slip), one pair per sample (option model_error)
         z = ca.vertcat(x0, w)
-        U = ca.SX.sym("U", N)
+        U = ca.SX.sym("U", N, len(m.input_names))  # row i: the inputs held over sample i
         xs = [x0]
         f0 = None
         for i in range(N):
-            xn = m.step_sx(xs[-1], U[i])  # (12b)
+            xn = m.step_sx(xs[-1], U[i, :].T)  # (12b)
             if i == 0:
                 f0 = xn
             if nw:
@@ -188,11 +194,13 @@ class RegularizedMHE(Estimator):
         # the a priori trajectory of eq. (11): once per update, no derivatives
         xb = [x0]
         for i in range(N):
-            xb.append(m.step_sx(xb[-1], U[i]))
+            xb.append(m.step_sx(xb[-1], U[i, :].T))
         self._fun_prior = ca.Function("mhe_prior", [x0, U], [ca.horzcat(*xb)])
         self._zlo = np.r_[self.model.lower(), np.full(nw, -np.inf)]
         self._zhi = np.r_[self.model.upper(), np.full(nw, np.inf)]
-        self._w_scale = np.tile(self.model_error, N) if nw else np.zeros(0)
+        self._w_scale = self._w_scale_free = np.tile(self.model_error, N) if nw else np.zeros(0)
+        self._w_scale_braked = np.tile(self._model_error_braked, N) if nw and self._model_error_braked is not None \
+            else self._w_scale_free
 
     def _z(self, x0: np.ndarray) -> np.ndarray:
         return np.r_[x0, np.zeros(self._nz - len(x0))]
@@ -208,19 +216,23 @@ class RegularizedMHE(Estimator):
                 "f0": np.asarray(f0).ravel()}
 
     # ------------------------------------------------------------------ interface
-    def reset(self, v: float = V_PRIOR, slip: float = SLIP_PRIOR, params: dict | None = None) -> Estimate:
-        """Start from the a priori state of Section IV (v = 19, slip = 0, eq. (18) parameters)."""
+    def reset(self, v: float = V_PRIOR, slip: float = SLIP_PRIOR, params: dict | None = None,
+              v_std: float | None = None) -> Estimate:
+        """Start from the a priori state of Section IV (v = 19, slip = 0, eq. (18) parameters).
+
+        :param v_std: how well ``v`` is known [m/s], as :meth:`QuarterCarEKF.reset` (the arrival filter's start).
+        """
         self.x_prior0 = self.model.nominal_state(v, slip, params)  # xbar of the oldest sample in the buffer
         self._y: list[float] = []
-        self._u: list[float] = []
+        self._u: list[np.ndarray] = []
         self._x_est0: np.ndarray | None = None  # x(t-N|t) of the last solve
         self._f_est0: np.ndarray | None = None  # f(x(t-N|t), u(t-N)), for the next prior (eq. (11))
-        self._P = self._P0.copy()  # EKF covariance at the window start (arrival="ekf")
+        self.arrival_filter.reset(v, slip, params, v_std=v_std)
+        self._P = self.arrival_filter.P.copy()  # EKF covariance at the window start (arrival="ekf")
         self._last = self.x_prior0.copy()
         self._n_fail = 0
         self._X_prev: np.ndarray | None = None
         self._w_prev: np.ndarray | None = None
-        self.arrival_filter.reset(v, slip, params)
         self._arr_hist: deque = deque(maxlen=self.N + 1)
         self._used: list[bool] = []  # per window sample: False if the gate rejected it
         return self._estimate(self.x_prior0, Health.OK)
@@ -233,15 +245,15 @@ class RegularizedMHE(Estimator):
         if sample is None:
             return self._estimate(self._last, Health.INVALID_INPUT, {"reason": "NaN or wrong shape; sample skipped"})
         y, uu = sample
-        verdict = self._take(y, float(uu[0]))
-        est = self._window_estimate(float(uu[0]))
-        self._ekf_predict(float(uu[0]))
+        verdict = self._take(y, uu)
+        est = self._window_estimate()
+        self._ekf_predict(uu)
         if verdict in (Verdict.ACCEPT, Verdict.MISMATCH, Verdict.START):  # no outlier (estimators.mismatch)
             return est
         health = Health.OUTLIER if verdict == Verdict.REJECT else Health.REINITIALISED
         return Estimate(est.values, health, {**est.info, "window_health": est.health})
 
-    def _take(self, y: np.ndarray, u: float) -> Verdict:
+    def _take(self, y: np.ndarray, u: np.ndarray) -> Verdict:
         """Gate the sample and update the arrival filter (the EKF's correction), append it to the window buffers."""
         f = self.arrival_filter
         verdict, x_post, P_post, _, _ = f.correct(y)
@@ -256,7 +268,7 @@ class RegularizedMHE(Estimator):
         self._ekf_post = (x_post, P_post)
         return verdict
 
-    def _window_estimate(self, u: float) -> Estimate:
+    def _window_estimate(self) -> Estimate:
         """Warm-up, window solve (eq. (12)), fallback and the EKF-consistency gate."""
         N = self.N
         if len(self._y) < N + 1:  # warming up: propagate the prior, eq. (11), or the alongside EKF's estimate
@@ -274,7 +286,8 @@ class RegularizedMHE(Estimator):
         if self.arrival == "ekf":
             self.x_prior0, self._P = self._arr_hist[0]
         Y = np.asarray(self._y)
-        U = np.asarray(self._u[:N])
+        U = np.asarray(self._u[:N]).reshape(N, -1)
+        self._w_scale = self._w_scale_braked if self.arrival_filter._braked else self._w_scale_free
         try:
             sol, health, info = self._solve(self.x_prior0, Y, U, np.asarray(self._used))
         except Exception as exc:  # noqa: BLE001 - a failed solve must never raise inside a loop
@@ -312,7 +325,7 @@ class RegularizedMHE(Estimator):
                 info["gated"] = True
         return self._estimate(self._last, health, info)
 
-    def _ekf_predict(self, u: float) -> None:
+    def _ekf_predict(self, u: np.ndarray) -> None:
         """The arrival filter's time update from x(t|t) to the prior of x(t+1)."""
         self.arrival_filter.propagate(*self._ekf_post, u)
 

@@ -11,6 +11,7 @@ name                family    variant   estimator
 ``ekf-full``        ekf       full      the same with (theta, B, C, E) augmented (Sui & Johansen, cases 3-4)
 ``ekf-ax``          ekf       ax        the EKF with the car's speed from the measured a_x (``v' = a_x``, input
                                         ``(T_b, a_x)``), theta and the brake gain augmented
+``mhe-ax``          mhe       ax        the MHE on that model, its arrival filter ``ekf-ax``
 ``mhe``             mhe       default   :class:`~estimators.mhe.RegularizedMHE`, default (EKF arrival cost,
                                         process noise, gate), theta augmented
 ``mhe-full``        mhe       full      the same with (theta, B, C, E) augmented
@@ -104,7 +105,8 @@ def _build_ekf(entry: EstimatorEntry, params: Any, dt: float, estimated: tuple[s
 def _build_mhe(entry: EstimatorEntry, params: Any, dt: float, estimated: tuple[str, ...],
                options: dict[str, Any]) -> Estimator:
     options = dict(options)
-    model = _augmented_model(params, dt, estimated, entry.assumed_shape, options.pop("mismatch_states", ()))
+    model = _augmented_model(params, dt, estimated, entry.assumed_shape, options.pop("mismatch_states", ()),
+                             options.pop("speed_from_a_x", False))
     return RegularizedMHE(estimated=model.estimated, dt=dt, model=model, **options)
 
 
@@ -179,6 +181,9 @@ class EstimatorEntry:
 def _entries() -> tuple[EstimatorEntry, ...]:
     mhe_paper = {"arrival": "paper", "model_error": None}
     absorb = MappingProxyType({"mismatch_states": MISMATCH_STATES})  # the env entries' brake gain and drag states
+    # the speed from a_x: its model, and its filter's noise (the MHE's arrival filter is that EKF)
+    a_x_filter = {"Q_std": {"v": A_X_SPEED_Q_STD}, "Q_braking_std": {"slip": A_X_SLIP_BRAKING_Q_STD}}
+    a_x_model = {"mismatch_states": ("k_T",), "speed_from_a_x": True}
     return (
         EstimatorEntry("ekf", "default", "augmented EKF, theta, brake gain, deceleration bias", _build_ekf, absorb,
                        observation=True),
@@ -194,9 +199,10 @@ def _entries() -> tuple[EstimatorEntry, ...]:
         EstimatorEntry("mhe", "full", "regularized MHE, theta, B, C, E, brake gain, deceleration bias", _build_mhe,
                        absorb, estimated=FULL_SHAPE, cls=RegularizedMHE, observation=True),
         EstimatorEntry("ekf", "ax", "augmented EKF, the speed from a_x, theta, brake gain", _build_ekf,
-                       MappingProxyType({"mismatch_states": ("k_T",), "speed_from_a_x": True,
-                                         "Q_std": {"v": A_X_SPEED_Q_STD},
-                                         "Q_braking_std": {"slip": A_X_SLIP_BRAKING_Q_STD}}), observation=True),
+                       MappingProxyType({**a_x_model, **a_x_filter}), observation=True),
+        EstimatorEntry("mhe", "ax", "regularized MHE, the speed from a_x, theta, brake gain", _build_mhe,
+                       MappingProxyType({**a_x_model, "filter_options": a_x_filter}), cls=RegularizedMHE,
+                       observation=True),
         EstimatorEntry("mhe", "paper", "the paper's MHE: prior terms beta_i, hard dynamics", _build_mhe,
                        MappingProxyType(mhe_paper), cls=RegularizedMHE),
         EstimatorEntry("mhe", "ekf", "hard dynamics, EKF arrival cost only", _build_mhe,

@@ -67,7 +67,7 @@ def spike_indices(n: int, rng: np.random.Generator, fraction: float = SPIKE_FRAC
 
 def _logs(estimator: str, seed: int):
     """(log, true speed, estimated parameters) of every study log of an estimator for one seed."""
-    if estimator.startswith("ekf-rls") or estimator == "ekf-ax":  # the stop with a (noisy) a_x
+    if estimator.startswith("ekf-rls") or estimator.endswith("-ax"):  # the stop with a (noisy) a_x
         pc = scenarios.ekf_rls_scenario(noisy=True, seed=seed, omega_noise_var=OMEGA_NOISE_VAR)
         return [pc]
     return [scenarios.mhe_case(case, seed=seed) for case in MHE_STUDY_CASES]
@@ -77,13 +77,15 @@ def _factory(estimator: str, estimated: tuple[str, ...], gated: bool = True):
     opt = {"outlier_gate": DEFAULT_GATE if gated else None}
     makers = {"ekf": lambda: QuarterCarEKF(estimated=estimated, **opt),
               "mhe": lambda: RegularizedMHE(estimated=estimated, **opt), "ekf-rls": lambda: QuarterCarEkfRls(**opt),
-              "ekf-rls-env": lambda: make_estimator("ekf-rls", **opt), "ekf-ax": lambda: make_estimator("ekf-ax", **opt)}
+              "ekf-rls-env": lambda: make_estimator("ekf-rls", **opt), "ekf-ax": lambda: make_estimator("ekf-ax", **opt),
+              "mhe-ax": lambda: make_estimator("mhe-ax", **opt)}
     return makers[estimator]()
 
 
 # ``ekf-rls-env``: the EKF/RLS as the braking env runs it (the registry's entry: its a_x loop and braking rules);
-# ``ekf-ax``: the registry's EKF whose speed follows a_x, on the EKF/RLS paper's stop (the study log with a noisy a_x)
-STUDY_ESTIMATORS = ("ekf", "ekf-rls", "mhe", "ekf-rls-env", "ekf-ax")
+# ``ekf-ax``, ``mhe-ax``: the registry's EKF and MHE whose speed follows a_x, on the EKF/RLS paper's stop (the study
+# log with a noisy a_x)
+STUDY_ESTIMATORS = ("ekf", "ekf-rls", "mhe", "ekf-rls-env", "ekf-ax", "mhe-ax")
 
 
 def _run_one(est, pc, omega: np.ndarray) -> tuple[float, np.ndarray]:

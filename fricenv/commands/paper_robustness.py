@@ -1,12 +1,13 @@
 """The estimators under the effect grid: rms speed, slip and friction error per plant cell, and health shares.
 
-Every env estimator (``ekf``, ``mhe``, ``ekf-rls``, ``ekf-full``, ``mhe-full``, ``ekf-ax``) runs over the same
-stops: the gap tool's stand-in with its ``abs`` and ``open-loop`` drivers on dry, wet and snow, ``--seeds`` seeds (0..n-1; each
-draws the initial speed on 20-32 m/s, the free roll, the driver and the noise), on the nominal plant and on every
-cell of the effect grid (each library effect at its low and high size; radius and friction change relative to the
-road, the change at mid-stop). Errors count from 0.5 s after the brake is first applied: rms speed, slip and
-friction-in-use error (rms over the stops of a cell), the worst speed error over the whole stop, and the share of
-samples with each health value (ok, not_excited, solver_failed, invalid_input, outlier, reinitialised, ...).
+Every env estimator (``ekf``, ``mhe``, ``ekf-rls``, ``ekf-full``, ``mhe-full``, ``ekf-ax``, ``mhe-ax``) runs over
+the same stops: the gap tool's stand-in with its ``abs`` and ``open-loop`` drivers on dry, wet and snow,
+``--seeds`` seeds (0..n-1; each draws the initial speed on 20-32 m/s, the free roll, the driver and the noise), on
+the nominal plant and on every cell of the effect grid (each library effect at its low and high size; radius and
+friction change relative to the road, the change at mid-stop). Errors count from 0.5 s after the brake is first
+applied: rms speed, slip and friction-in-use error (rms over the stops of a cell), the worst speed error over the
+whole stop, and the share of samples with each health value (ok, not_excited, solver_failed, invalid_input,
+outlier, reinitialised, ...).
 
 Writes into ``--out``: ``robustness.txt`` (the rms speed error table, estimator x cell), ``robustness.json`` (the
 matrix, every stop's row and the run's settings) and ``robustness.png`` (the heatmap); prints the tables of rms

@@ -28,8 +28,8 @@ once it has been commanded, so after the env step k -> k+1 the wrapper updates w
 ``v_hat = v(k|k) + dt a_x,m(k+1)`` (the accelerometer reads the speed change over the step, so this removes the
 one-sample lag of the speed, ``|a| dt`` = up to 0.1 m/s); ``slip_hat``, ``mu_hat`` and ``theta_hat`` are the
 estimate at k (one sample, 10 ms, old). At reset the estimator starts from the free-rolling speed measured by the
-wheel (``v = omega_m r``, slip 0), and one that takes it (the EKFs' ``v_std``) is told that speed's spread, one
-wheel sample's noise times r.
+wheel (``v = omega_m r``, slip 0); one whose speed integrates ``a_x`` (``ekf-ax``, ``mhe-ax``) is also told that
+speed's spread, one wheel sample's noise times r (:func:`estimators.base.reset_from_wheel`).
 
 Estimators (:data:`ESTIMATOR_NAMES`; each is an entry of :data:`estimators.registry.ESTIMATORS` built with the
 env's own plant parameters and sample time): ``ekf`` (:class:`estimators.ekf.QuarterCarEKF`, theta augmented),
@@ -38,9 +38,10 @@ env's own plant parameters and sample time): ``ekf`` (:class:`estimators.ekf.Qua
 its peak-friction estimate ``mu`` fills ``theta_hat``, as its registry entry's ``values`` say; its ``peak_slip``,
 from the online curve-shape fit of :mod:`estimators.curve_shape`, fills ``peak_slip_hat``), and ``ekf-full`` /
 ``mhe-full`` (theta, B, C, E augmented, Sui & Johansen's cases 3-4; the appended layout is the same, B, C, E are
-in ``info`` of the estimate, ``EstimatorObservation.last_estimate``), and ``ekf-ax`` (the EKF whose car speed
-follows the measured acceleration, ``v' = a_x``: its input over the step k -> k+1 is the torque held over it and the
-a_x measured over it, the a_x of the observation at k+1). An unknown name raises ValueError listing the choices.
+in ``info`` of the estimate, ``EstimatorObservation.last_estimate``), and ``ekf-ax`` / ``mhe-ax`` (the EKF and the
+MHE whose car speed follows the measured acceleration, ``v' = a_x``: their input over the step k -> k+1 is the torque
+held over it and the a_x measured over it, the a_x of the observation at k+1). An unknown name raises ValueError
+listing the choices.
 
 ``oracle`` appends the truth in the same layout (true speed, slip, friction, the theta and peak slip of the road
 under the car, health 0): an upper bound. ``none`` appends nothing (use the env as it is).
@@ -56,7 +57,6 @@ inside the env at 1 ms and needs no wrapper (see :mod:`fricenv.envs.factory`).
 
 from __future__ import annotations
 
-import inspect
 import warnings
 from collections.abc import Callable
 from typing import Any
@@ -67,7 +67,7 @@ from gymnasium import spaces
 from gymnasium.vector import AutoresetMode, VectorWrapper
 from gymnasium.vector.utils import batch_space
 
-from estimators.base import Estimate, Estimator, Health
+from estimators.base import Estimate, Estimator, Health, reset_from_wheel
 from estimators.registry import OBSERVATION_ESTIMATORS, check_name, get_estimator
 from fricenv.envs.config import ObsField
 from fricenv.plants.quarter_car import QuarterCarParams
@@ -128,14 +128,6 @@ def batched_names() -> tuple[str, ...]:
     from estimators.batched import BATCHED
 
     return tuple(BATCHED)
-
-
-def _reset(est: Estimator, v0: float, v_std: float) -> Estimate:
-    """Reset ``est`` from the measured free-rolling speed ``v0`` [m/s], known to ``v_std`` [m/s], as far as its
-    ``reset`` takes an initial speed and its spread."""
-    params = inspect.signature(est.reset).parameters
-    kwargs = {k: val for k, val in (("v", v0), ("v0", v0), ("slip", 0.0), ("v_std", v_std)) if k in params}
-    return est.reset(**kwargs)
 
 
 class EstimatorObservation(gym.Wrapper):
@@ -274,8 +266,8 @@ class EstimatorObservation(gym.Wrapper):
         else:
             est = self.estimator
             v0 = self._measured(obs, "wheel_speed") * self._params.r
-            v_std = float(np.sqrt(self.env.unwrapped.config.omega_noise_var)) * self._params.r  # one wheel sample's
-            values, health = self._safe(lambda: _reset(est, v0, v_std))
+            v_std = float(np.sqrt(self.env.unwrapped.config.omega_noise_var)) * self._params.r  # the sample's spread
+            values, health = self._safe(lambda: reset_from_wheel(est, v0, v_std))
         self._last_obs = np.asarray(obs)
         info = dict(info, estimate=self._estimate_info(values, health))
         return self._augment(obs, values, health), info

@@ -77,7 +77,7 @@ def test_the_env_entries_carry_the_mismatch_settings():
 
 
 def test_every_entry_builds_with_its_declared_outputs_and_values():
-    assert set(ESTIMATORS) == set(OLD) | {"ekf-full", "mhe-full", "ekf-ax"}
+    assert set(ESTIMATORS) == set(OLD) | {"ekf-full", "mhe-full", "ekf-ax", "mhe-ax"}
     for name, entry in ESTIMATORS.items():
         est = entry.make()
         assert entry.name == name and isinstance(est, entry.cls)

@@ -176,7 +176,7 @@ def test_rejected_sample_gives_the_prediction_and_the_filter_goes_on_from_it():
     np.testing.assert_allclose(after, np.clip(x_ref, ref.lower, ref.upper), rtol=0, atol=1e-12)
 
 
-@pytest.mark.parametrize("estimator", [pytest.param(e, marks=pytest.mark.slow) if e in ("mhe", "ekf-rls") else e
+@pytest.mark.parametrize("estimator", [pytest.param(e, marks=pytest.mark.slow) if e in ("mhe", "ekf-rls", "mhe-ax") else e
                                        for e in STUDY_ESTIMATORS])
 def test_spike_targets_on_unseen_seeds(estimator):
     """Spikes x0.5 to x10 on 1 % of the samples: rms speed error within 1.5x of the clean run in every run,
