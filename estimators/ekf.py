@@ -317,6 +317,11 @@ class QuarterCarEKF(Estimator):
         return self._estimate(x_post, health, info)
 
     @property
+    def braked(self) -> bool:
+        """A brake torque has acted since the reset (from then on ``Q_braking_std`` applies)."""
+        return self._braked
+
+    @property
     def covariance(self) -> np.ndarray:
         """Current (predicted) covariance."""
         return self.P.copy()

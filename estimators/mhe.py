@@ -100,7 +100,8 @@ BOUND_TOL = 1e-9  # relative distance at which a bound counts as active
 class RegularizedMHE(Estimator):
     """The regularized MHE of Sui & Johansen on the augmented quarter-car model.
 
-    ``update(omega, T_b)`` takes the wheel speed at time t and the torque held from t to t+1, and returns x(t|t).
+    ``update(omega, u)`` takes the wheel speed at time t and the input held from t to t+1 (the torque, or
+    ``(T_b, a_x)``: :attr:`input_columns`), and returns x(t|t).
     Until N + 1 samples have arrived it returns the a priori trajectory (``arrival="ekf"``: the alongside EKF's
     estimate; ``Health.NOT_EXCITED``, info ``warming_up``). Values: ``v``, ``slip``, theta, B, C, E and ``mu``.
 
@@ -114,7 +115,11 @@ class RegularizedMHE(Estimator):
         arrival cost, else none); ``gate`` returns the alongside EKF's estimate when the solution is further than
         this squared Mahalanobis distance from it (info ``gated``); ``outlier_gate`` gates the wheel speed on the
         alongside EKF's innovation (module docstring, "Outliers").
-    :param model: a prebuilt :class:`AugmentedModel`.
+    :param model: a prebuilt :class:`AugmentedModel` (one whose speed follows ``a_x`` makes the inputs ``(T_b, a_x)``
+        per sample, ``mhe-ax``).
+    :param filter_options: options of the arrival filter (:class:`QuarterCarEKF`: ``P0_std``, ``Q_std``,
+        ``Q_braking_std``); with them, ``model_error="auto"`` is that filter's process noise on (v, slip), its braked
+        value once a brake torque has acted.
     """
 
     measurement_columns = ("omega",)
@@ -287,7 +292,7 @@ class RegularizedMHE(Estimator):
             self.x_prior0, self._P = self._arr_hist[0]
         Y = np.asarray(self._y)
         U = np.asarray(self._u[:N]).reshape(N, -1)
-        self._w_scale = self._w_scale_braked if self.arrival_filter._braked else self._w_scale_free
+        self._w_scale = self._w_scale_braked if self.arrival_filter.braked else self._w_scale_free
         try:
             sol, health, info = self._solve(self.x_prior0, Y, U, np.asarray(self._used))
         except Exception as exc:  # noqa: BLE001 - a failed solve must never raise inside a loop
