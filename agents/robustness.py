@@ -9,11 +9,11 @@ slower than 3 m/s or after :data:`DURATION` seconds. The seed draws the speed, t
 every cell of a (driver, road, seed) uses the same draws.
 
 Every estimator of :data:`ESTIMATORS` (the env estimators, built as ``Braking-v0`` builds them) runs over the stop's
-measured signals (wheel speed, commanded torque, ``a_x`` where it reads it: as a measurement, or as the input
-whose integral is the car's speed for ``ekf-ax``), started from the measured free-rolling
-speed. Metrics per stop (:func:`stop_metrics`), after the first :data:`SETTLE_S` seconds of the stop: rms error of
-the speed, of the slip (the true slip with the plant's own rolling radius) and of the friction in use (tire force
-over wheel load); the worst speed error over the whole stop; the share of samples with each health value of
+measured signals (wheel speed, commanded torque, ``a_x`` where it reads it: as a measurement, or as the input whose
+integral is the car's speed for ``ekf-ax`` and ``mhe-ax``), started from the measured free-rolling speed. Metrics
+per stop (:func:`stop_metrics`), after the first :data:`SETTLE_S` seconds of the stop: rms error of the speed, of
+the slip (the true slip with the plant's own rolling radius) and of the friction in use (tire force over wheel
+load); the worst speed error over the whole stop; the share of samples with each health value of
 :class:`estimators.base.Health`.
 
 :func:`study` maps the stops over a process pool or Ray (:func:`fricenv.gap.core.pool.map_tasks`) and returns one row per
@@ -136,13 +136,12 @@ def run_estimator(name: str, stops: Sequence[Stop], p: QuarterCarParams | None =
     """
     from estimators.batched import make_batched
     from estimators.registry import get_estimator
+    from fricenv.gap.quarter_car.simulate import OMEGA_NOISE_VAR
     from fricenv.plants import quarter_car as qc
 
     p = qc.PAPER_PARAMS if p is None else p
     values = dict(get_estimator(name).values)
     keys = {q: values.get(q, q) for q in ("v", "slip", "mu")}
-    from fricenv.gap.quarter_car.simulate import OMEGA_NOISE_VAR
-
     starts = np.array([float(s.omega[0]) * p.r for s in stops])
     v_std = float(np.sqrt(OMEGA_NOISE_VAR)) * p.r  # one free-rolling wheel sample's spread, as the env says it
     batched = make_batched(name, len(stops), p, DT)
