@@ -24,7 +24,7 @@ from estimators.quarter_car_model import BOUNDS, EXTRA_NAMES, PARAM_NAMES, Augme
 from estimators.tuning import DEFAULT_EKF_TUNING, HORIZON, PAPER_TUNING, SLIP_PRIOR, V_PRIOR
 
 __all__ = ["DEFAULT_EKF_TUNING", "SLIP_PRIOR", "V_PRIOR", "ExtendedKalmanFilter", "ParameterInformation", "QuarterCarEKF",
-           "ekf_predict", "ekf_update", "innovation_covariance", "start_covariance"]
+           "ekf_predict", "ekf_update", "innovation_covariance"]
 
 
 def _sym(P: np.ndarray) -> np.ndarray:
@@ -76,20 +76,6 @@ def ekf_update(x: np.ndarray, P: np.ndarray, y: np.ndarray, y_pred: np.ndarray, 
     IKH = np.eye(P.shape[0]) - K @ H
     P_post = _sym(IKH @ P @ IKH.T + K @ R @ K.T)
     return x + K @ innov, P_post, innov
-
-
-def start_covariance(P0: np.ndarray, v_std: float | None) -> np.ndarray:
-    """The covariance a quarter-car filter starts from: ``P0``, with the speed's variance ``v_std^2`` when the start
-    speed's spread is known (``v`` is state 0; P0 is diagonal).
-
-    :raises EstimatorConfigError: ``v_std`` not a positive finite speed.
-    """
-    P = np.array(P0, dtype=float)
-    if v_std is not None:
-        if not (np.isfinite(v_std) and v_std > 0):
-            raise EstimatorConfigError(f"v_std must be a positive speed [m/s], got {v_std!r}")
-        P[0, 0] = float(v_std) ** 2
-    return P
 
 
 class ExtendedKalmanFilter:
@@ -179,8 +165,9 @@ class QuarterCarEKF(Estimator):
 
     ``update(omega, T_b)``: measurement update with the wheel speed at time k, returns x(k|k), then predicts to
     k+1 with the torque held over the sample (``update(omega, (T_b, a_x))`` for a model whose speed follows the
-    measured acceleration, ``AugmentedModel(speed_from_a_x=True)``: :attr:`input_columns` says which). Values: ``v``, ``slip``, the four curve parameters (estimated or fixed) and
-    ``mu``, the friction in use, mu(slip) on the estimated curve.
+    measured acceleration, ``AugmentedModel(speed_from_a_x=True)``: :attr:`input_columns` says which). Values:
+    ``v``, ``slip``, the four curve parameters (estimated or fixed) and ``mu``, the friction in use, mu(slip) on
+    the estimated curve.
 
     Every wheel speed is gated (:mod:`estimators.outliers`): a sample whose NIS exceeds the chi-square bound is
     skipped (``Health.OUTLIER``, the state is only predicted); after ``outlier_gate.max_rejections`` in a row the
@@ -252,7 +239,11 @@ class QuarterCarEKF(Estimator):
             the prior spread of P0. A model whose speed follows ``a_x`` keeps this error for the whole run.
         """
         self.x = self.model.nominal_state(v, slip, params)
-        self.P = start_covariance(self.P0, v_std)
+        self.P = self.P0.copy()
+        if v_std is not None:  # P0 is diagonal: the speed's variance alone changes
+            if not (np.isfinite(v_std) and v_std > 0):
+                raise EstimatorConfigError(f"v_std must be a positive speed [m/s], got {v_std!r}")
+            self.P[0, 0] = float(v_std) ** 2
         self.guard.reset()
         self._brake_torque = 0.0  # torque held since the last sample [N m]
         self._braked = False  # a brake torque has acted since the reset

@@ -267,7 +267,7 @@ class RegularizedMHE(Estimator):
             self._arr_hist.clear()
             self.x_prior0, self._X_prev = f.x.copy(), None
         self._y.append(float(y[0]))
-        self._u.append(u)
+        self._u.append(u.copy())  # the window keeps it: not the caller's buffer
         self._used.append(verdict != Verdict.REJECT)  # a rejected sample stays in the window with no weight
         self._arr_hist.append((f.x, f.P))  # prior of x(t) given y(..t-1)
         self._ekf_post = (x_post, P_post)

@@ -13,10 +13,10 @@ from fricenv.plants.sui_johansen import OMEGA_NOISE_VAR
 
 __all__ = [
     "AB_P0_STD",
-    "A_X_SLIP_BRAKING_Q_STD",
-    "A_X_SPEED_Q_STD",
     "AB_Q_STD",
     "A_REF",
+    "A_X_SLIP_BRAKING_Q_STD",
+    "A_X_SPEED_Q_STD",
     "BRAKE_SETTLE_S",
     "DEFAULT_ARRIVAL",
     "DEFAULT_EKF_TUNING",
