@@ -35,7 +35,13 @@ filter until the re-initialisation, which then took the speed from a wheel that 
      is the integrated ``a_x``, which no slip or tire transient moves, while the fastest wheel is no lower bound of a
      car whose tire winds up under a relaxation length (the wheel spins past the car as the brake releases). A
      re-initialisation restarts the slip only, from the wheel at the filter's speed, and a persistent innovation
-     (M1) raises the slip's process noise only.
+     (M1) raises the slip's process noise only. As such a sample cannot move the speed, (M1) takes more samples as
+     a run: its first failing sample, when the passing sample just before it had an innovation of the same sign
+     whose NIS reached ``MISMATCH_TREND_NIS`` gate bounds (a model error grows into the gate; the sample before a
+     spike agrees with the prediction), and a sample whose innovation falls back towards zero with its sign kept
+     by more than two samples' spread (a wheel oscillating against the model, the tire wound up as a spring
+     against the wheel's inertia, turns back faster than it grew; a spike does not make an error smaller). A
+     model whose speed is the tire model's keeps (M1) as it is: each sample so taken moves its speed.
 (M3) **Start.** The state after a reset is a guess (19 m/s a priori): a first sample that fails against it is no
      outlier; the filter starts from it as from a re-initialisation (``Verdict.START``) and keeps its own health.
 """
@@ -47,7 +53,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from estimators.outliers import GateParams, Verdict, gate, nis
-from estimators.tuning import A_REF, JUMP_MU_MAX, MISMATCH_NIS_MAX, REF_MARGIN_STD, SLIP_PRIOR
+from estimators.tuning import (
+    A_REF,
+    JUMP_MU_MAX,
+    MISMATCH_NIS_MAX,
+    MISMATCH_TREND_NIS,
+    REF_MARGIN_STD,
+    SLIP_PRIOR,
+)
 
 __all__ = ["WheelSpeedGuard"]
 
@@ -60,7 +73,9 @@ class _State:
     omega_used: float = np.nan  # the last wheel speed the filter used [rad/s]
     since: int = 1  # samples since it
     v_ref: float = np.nan  # reference speed [m/s]
-    e_prev: float = np.nan  # the last sample's innovation [rad/s]
+    e_prev: float = np.nan  # the run's last innovation [rad/s]
+    e_passed: float = np.nan  # the innovation of the sample before this one if it passed the gate [rad/s]
+    nis_passed: float = 0.0  # its NIS [-]
 
 
 class WheelSpeedGuard:
@@ -170,10 +185,17 @@ class WheelSpeedGuard:
             b_implied = (s.omega_used - omega) / span - float(brake_torque) / self.model.p.J
             physical = bool(np.isfinite(b_implied) and abs(b_implied) <= self.b_bound)
             sign = float(np.sign(e))
-            persistent = physical and s.run >= 1 and sign == s.sign
-            smooth = np.isfinite(s.e_prev) and (e - s.e_prev) ** 2 <= 2.0 * S * self.params.bound
+            a_x = self.model.speed_from_a_x  # (M2'): a run may start at the passing sample before, and fall back
+            grown = (a_x and s.run == 0 and np.sign(s.e_passed) == sign
+                     and s.nis_passed >= MISMATCH_TREND_NIS * self.params.bound)
+            if grown:
+                s.sign, s.e_prev = sign, s.e_passed
+            persistent = physical and (s.run >= 1 or grown) and sign == s.sign
+            grows = (e - s.e_prev) ** 2 <= 2.0 * S * self.params.bound
+            recedes = a_x and np.sign(s.e_prev) == sign and abs(e) <= abs(s.e_prev)
+            smooth = np.isfinite(s.e_prev) and (grows or recedes)
             if persistent and smooth and value <= MISMATCH_NIS_MAX * self.params.bound:  # (M1): the model is off
-                raised = slice(1, 2) if self.model.speed_from_a_x else slice(0, 2)  # (M2'): not the speed
+                raised = slice(1, 2) if a_x else slice(0, 2)  # (M2'): not the speed
                 Hq = H[0, raised]
                 inflation = (e * e / self.params.bound - S) / max(float(Hq @ Q[raised, raised] @ Hq), 1e-300)
                 P = P.copy()
@@ -194,4 +216,5 @@ class WheelSpeedGuard:
         if verdict in (Verdict.ACCEPT, Verdict.REINIT, Verdict.START):
             s.run, s.sign, s.e_prev = 0, 0.0, np.nan
         s.rejected = rejected
+        s.e_passed, s.nis_passed = (e, value) if verdict == Verdict.ACCEPT else (np.nan, 0.0)
         return verdict, x, P, inflation

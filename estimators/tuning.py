@@ -28,6 +28,7 @@ __all__ = [
     "MAX_REJECTIONS",
     "MISMATCH_NIS_MAX",
     "MISMATCH_STATES",
+    "MISMATCH_TREND_NIS",
     "PAPER_TUNING",
     "P_FALSE",
     "REF_MARGIN_STD",
@@ -93,6 +94,7 @@ JUMP_MU_MAX = 1.5  # largest friction coefficient a road may show in a run of fa
 A_REF = 12.0  # deceleration bound of the reference speed, about 1.2 g (the presets peak at 1.0) [m/s^2]
 REF_MARGIN_STD = 2.0  # the reference follows the wheel speed less this many noise std's [-]
 MISMATCH_NIS_MAX = 10.0  # a persistent innovation above this many gate bounds is taken as outliers (M1) [-]
+MISMATCH_TREND_NIS = 0.25  # an a_x-speed filter's run may start at a passing sample of this many gate bounds (M2') [-]
 
 # ---- the EKF/RLS's wheel-speed gate (estimators.speed_reference)
 BRAKE_SETTLE_S = 0.1  # the torque a brake applies lies within its commands over this span, rule (B4) [s]

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from estimators.base import Health, run
+from estimators.outliers import Verdict
 from estimators.registry import make_estimator
 from fricenv.effects.quarter_car import make_effect
 from fricenv.gap.quarter_car.simulate import simulate_log
@@ -55,3 +56,45 @@ def test_a_reinitialisation_in_a_slip_dip_keeps_the_speed(lag_stop):
     assert abs(x[0] - truth["v"][k]) <= 1.5
     assert x[0] * (1.0 - x[1]) == pytest.approx(wheel, abs=1e-9)  # eq. (7) holds at the restart
 
+
+
+
+def _guard_sequence(name: str, sds: list[float]) -> list:
+    """The verdicts of estimator ``name``'s wheel-speed guard on wheel speeds ``sds`` innovation std's off one fixed
+    prior (a car rolling freely at 20 m/s, its state known to a tenth of the prior's spread)."""
+    est = make_estimator(name)
+    est.reset(v=20.0, slip=0.0)
+    x, P, guard = est.x, 0.01 * est.P0, est.guard
+    H = np.atleast_2d(est.model.h_jacobian(x))
+    sd = float(np.sqrt((H @ P @ H.T + est.filter.R)[0, 0]))
+    pred = float(est.model.h(x))
+    guard.check(x, P, P, est.filter.R, est.filter.Q, np.array([pred]), 0.0)  # a first sample used
+    return [guard.check(x, P, P, est.filter.R, est.filter.Q, np.array([pred + k * sd]), 0.0)[0] for k in sds]
+
+
+def test_a_run_grown_into_the_gate_from_a_passing_sample_is_a_mismatch_for_the_a_x_speed_filter():
+    # bound 19.5 (4.4 std's); the passing sample at 2.5 std's (NIS 6.25 >= a quarter of the bound) starts the run
+    assert _guard_sequence("ekf-ax", [2.5, 5.0]) == [Verdict.ACCEPT, Verdict.MISMATCH]
+    assert _guard_sequence("ekf-ax", [0.5, 5.0]) == [Verdict.ACCEPT, Verdict.REJECT]  # a spike: the sample before agrees
+    assert _guard_sequence("ekf-ax", [-2.5, 5.0]) == [Verdict.ACCEPT, Verdict.REJECT]  # the other sign
+    # the tire-model speed filter: its first failing sample stays an outlier (a mismatch there would move the speed)
+    assert _guard_sequence("ekf", [2.5, 5.0]) == [Verdict.ACCEPT, Verdict.REJECT]
+
+
+def test_a_run_falling_back_towards_the_prediction_is_a_mismatch_for_the_a_x_speed_filter():
+    # 11 -> 4.6 std's moves by more than two samples' spread (sqrt(2 x 19.5) = 6.2 std's), its sign kept
+    assert _guard_sequence("ekf-ax", [5.5, 11.0, 4.6]) == [Verdict.REJECT, Verdict.MISMATCH, Verdict.MISMATCH]
+    assert _guard_sequence("ekf-ax", [5.5, 11.0, -4.6]) == [Verdict.REJECT, Verdict.MISMATCH, Verdict.REJECT]
+    assert _guard_sequence("ekf", [5.5, 11.0, 4.6]) == [Verdict.REJECT, Verdict.MISMATCH, Verdict.REJECT]
+
+
+def test_the_a_x_speed_filter_flags_few_samples_where_a_relaxation_length_swings_the_wheel():
+    """Open-loop stop on dry, seed 1, relaxation length 0.6 m: the wound-up tire swings the wheel between 6 and 58
+    rad/s while the car does 9 m/s; the runs' first and falling samples were flagged (17 of 500 samples)."""
+    spec = make_effect("relaxation_length", sigma=0.6)
+    log, truth = simulate_log([spec], ROADS["dry"], "open-loop", seed=1)
+    out = run(make_estimator("ekf-ax"), {"t": log.t, "omega": log.omega, "T_b": log.T_b, "a_x": log.a_x})
+    flagged = np.isin(out["health"], (Health.OUTLIER, Health.REINITIALISED))
+    assert flagged.sum() <= 12, flagged.sum()
+    settled = log.t >= 0.5
+    assert np.max(np.abs(out["v"][settled] - truth["v"][settled])) < 0.5
