@@ -10,7 +10,9 @@ every cell of a (driver, road, seed) uses the same draws.
 
 Every estimator of :data:`ESTIMATORS` (the env estimators, built as ``Braking-v0`` builds them) runs over the stop's
 measured signals (wheel speed, commanded torque, ``a_x`` where it reads it: as a measurement, or as the input whose
-integral is the car's speed for ``ekf-ax`` and ``mhe-ax``), started from the measured free-rolling speed. Metrics
+integral is the car's speed for ``ekf-ax`` and ``mhe-ax``), started from the measured free-rolling speed, its
+model on the nominal vehicle parameters or, told the radius, on a radius-error cell's rolling radius
+(:func:`model_params`). Metrics
 per stop (:func:`stop_metrics`), after the first :data:`SETTLE_S` seconds of the stop: rms error of the speed, of
 the slip (the true slip with the plant's own rolling radius) and of the friction in use (tire force over wheel
 load); the worst speed error over the whole stop; the share of samples with each health value of
@@ -39,6 +41,7 @@ __all__ = [
     "ROADS",
     "SETTLE_S",
     "Stop",
+    "model_params",
     "run_estimator",
     "simulate_stop",
     "stop_metrics",
@@ -201,21 +204,36 @@ def stop_metrics(stop: Stop, estimate: dict[str, np.ndarray]) -> dict[str, Any]:
             "samples": len(stop.t)}
 
 
-def _stops_job(cells: tuple[GridCell, ...], road: str, driver: str, seed: int,
-               estimators: tuple[str, ...]) -> list[dict[str, Any]]:
-    """The stops of every cell for one (road, driver, seed), every estimator over them: per cell, the stop's
-    effects and speed and one metrics dict per estimator."""
+def model_params(stop: Stop, told_radius: bool = False) -> QuarterCarParams:
+    """The vehicle parameters of the estimators' model on ``stop``: the nominal ones, or, ``told_radius``, the
+    rolling radius of the stop's ``radius_error`` effect (as a calibration, such as the gap tool's ``radius_error``
+    verdict, gives it)."""
+    from dataclasses import replace
+
+    from fricenv.plants.quarter_car import PAPER_PARAMS
+
+    radius = [e["params"]["r_eff"] for e in stop.effects if e["effect"] == "radius_error"] if told_radius else []
+    return replace(PAPER_PARAMS, r=float(radius[0])) if radius else PAPER_PARAMS
+
+
+def _stops_job(cells: tuple[GridCell, ...], road: str, driver: str, seed: int, estimators: tuple[str, ...],
+               told_radius: bool = False) -> list[dict[str, Any]]:
+    """The stops of every cell for one (road, driver, seed), every estimator over them (each batch of stops with
+    one model, :func:`model_params`): per cell, the stop's effects and speed and one metrics dict per estimator."""
     stops = [simulate_stop(cell, road, driver, seed) for cell in cells]
+    params = [model_params(stop, told_radius) for stop in stops]
     metrics: list[list[dict]] = [[] for _ in cells]
     for name in estimators:
-        for j, (stop, est) in enumerate(zip(stops, run_estimator(name, stops))):
-            metrics[j].append({"estimator": name, **stop_metrics(stop, est)})
+        for p in dict.fromkeys(params):
+            batch = [j for j, q in enumerate(params) if q == p]
+            for j, est in zip(batch, run_estimator(name, [stops[j] for j in batch], p)):
+                metrics[j].append({"estimator": name, **stop_metrics(stops[j], est)})
     return [{"effects": stop.effects, "v0": stop.v0, "metrics": m} for stop, m in zip(stops, metrics)]
 
 
 def study(estimators: Sequence[str] = ESTIMATORS, cells: Sequence[GridCell] | None = None,
           roads: Sequence[str] = ROADS, drivers: Sequence[str] = DRIVERS, seeds: Sequence[int] = (0, 1, 2),
-          workers: int | None = None, ray: str | None = None) -> list[dict[str, Any]]:
+          workers: int | None = None, ray: str | None = None, told_radius: bool = False) -> list[dict[str, Any]]:
     """Every estimator on every (cell, road, driver, seed) stop; one row per stop and estimator.
 
     :param estimators: env estimator names (:data:`ESTIMATORS` by default).
@@ -223,6 +241,8 @@ def study(estimators: Sequence[str] = ESTIMATORS, cells: Sequence[GridCell] | No
     :param roads: preset roads; :param drivers: ``abs`` and/or ``open-loop``; :param seeds: stop seeds.
     :param workers: local processes (default min(2, CPUs)); not used with ``ray``.
     :param ray: None, ``"auto"`` or a Ray cluster address.
+    :param told_radius: the estimators' model takes a ``radius_error`` cell's rolling radius
+        (:func:`model_params`); every other cell, and by default every cell, the nominal parameters.
     :return: rows with ``estimator``, ``cell``, ``effects``, ``road``, ``driver``, ``seed`` and the metrics.
     """
     from fricenv.envs.estimator_observation import check_estimator_name
@@ -240,10 +260,10 @@ def study(estimators: Sequence[str] = ESTIMATORS, cells: Sequence[GridCell] | No
     if not seeds:
         raise ValueError("seeds must name at least one seed")
     cells = grid_cells() if cells is None else list(cells)
-    jobs = [(tuple(cells), r, d, int(s), tuple(estimators)) for d in drivers for r in roads for s in seeds]
+    jobs = [(tuple(cells), r, d, int(s), tuple(estimators), told_radius) for d in drivers for r in roads for s in seeds]
     results = map_tasks(_stops_job, jobs, default_jobs(workers), "stops", ray=ray)
     rows = []
-    for (_, road, driver, seed, _), per_cell in zip(jobs, results):
+    for (_, road, driver, seed, _, _), per_cell in zip(jobs, results):
         for cell, res in zip(cells, per_cell):
             for r in res["metrics"]:
                 rows.append({"estimator": r["estimator"], "cell": cell.label, "effects": res["effects"],

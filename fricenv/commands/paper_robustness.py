@@ -7,7 +7,9 @@ the nominal plant and on every cell of the effect grid (each library effect at i
 friction change relative to the road, the change at mid-stop). Errors count from 0.5 s after the brake is first
 applied: rms speed, slip and friction-in-use error (rms over the stops of a cell), the worst speed error over the
 whole stop, and the share of samples with each health value (ok, not_excited, solver_failed, invalid_input,
-outlier, reinitialised, ...).
+outlier, reinitialised, ...). Every estimator's model has the nominal vehicle parameters, as the env builds it;
+with ``--told-radius`` a radius-error cell's estimators are given that cell's rolling radius, as a calibration (the
+gap tool's ``radius_error`` verdict) would give it.
 
 Writes into ``--out``: ``robustness.txt`` (the rms speed error table, estimator x cell), ``robustness.json`` (the
 matrix, every stop's row and the run's settings) and ``robustness.png`` (the heatmap); prints the tables of rms
@@ -34,6 +36,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="env estimators (default: " + " ".join(ESTIMATORS) + ")")
     parser.add_argument("--effects", nargs="+", default=None, metavar="EFFECT",
                         help="grid effects to run (default: all); the nominal plant always runs")
+    parser.add_argument("--told-radius", action="store_true",
+                        help="give the estimators a radius_error cell's rolling radius, as a calibration would "
+                             "(default: every estimator uses the nominal radius on every cell)")
     parser.add_argument("--workers", type=int, default=2, help="worker processes (default %(default)s)")
     parser.add_argument("--ray", metavar="auto|ADDRESS", default=None,
                         help="run the stops as Ray tasks: 'auto' (a running instance, else a local one) or a "
@@ -76,7 +81,7 @@ def run(args) -> int:
     print(f"{n_stops} stops ({len(cells)} plant cells x {len(DRIVERS)} drivers x {len(ROADS)} roads x "
           f"{len(seeds)} seeds), {len(estimators)} estimators each, on {engine}", file=sys.stderr, flush=True)
     t0 = time.perf_counter()
-    rows = study(estimators, cells, seeds=seeds, workers=args.workers, ray=args.ray)
+    rows = study(estimators, cells, seeds=seeds, workers=args.workers, ray=args.ray, told_radius=args.told_radius)
     wall = time.perf_counter() - t0
     matrix = summarize(rows)
     for m in matrix:
@@ -93,7 +98,7 @@ def run(args) -> int:
                            f"estimators under the effect grid: rms speed error [m/s] after 0.5 s of braking "
                            f"({len(seeds)} seeds)", "rms speed error [m/s]",
                            extra={"rows": rows, "seeds": seeds, "drivers": list(DRIVERS), "roads": list(ROADS),
-                                  "wall_time_s": wall, "engine": engine})
+                                  "told_radius": args.told_radius, "wall_time_s": wall, "engine": engine})
     for kind, path in written.items():
         print(f"wrote {kind}: {path}")
     return 0
