@@ -248,7 +248,7 @@ def write_outputs(rows: Sequence[dict[str, Any]], out_dir: str | Path | None = N
             w.writerow({k: json.dumps(r[k]) if k == "effects" else r.get(k, "nominal") if k == "cell" else r[k]
                         for k in ROW_KEYS})
     written["csv"] = out / "results.csv"
-    cells = set(r.get("cell", "nominal") for r in rows)
+    cells = {r.get("cell", "nominal") for r in rows}
     chart = [r for r in rows if r.get("cell", "nominal") == "nominal"] if len(cells) > 1 else rows
     written["png"] = _bar_chart(chart, out / "ratios.png", title)  # one plant per chart: the nominal of a grid
     return written

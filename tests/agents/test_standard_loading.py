@@ -104,7 +104,7 @@ def test_robust_training_switch_draws_the_grid_effects(tmp_path):
     run = tmp_path / "robust"
     assert main(["-q", "train", "--out", str(run), "--steps", "64", "--hyperparams", str(hyper),
                  "--effects-randomization", "grid", "--no-progress"]) == 0
-    config, kwargs, venv = _zoo_env(run)
+    _, kwargs, venv = _zoo_env(run)
     expected = {e: {p: list(r) for p, r in ranges.items()} for e, ranges in grid_randomization().items()}
     assert kwargs["effects_randomization"] == expected
     plant = venv.envs[0].unwrapped.sim.plant

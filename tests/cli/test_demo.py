@@ -33,7 +33,7 @@ def test_the_corrected_simulator_part_puts_the_reported_effect_into_the_plant(tm
     name, params = story.HIDDEN_EFFECT
     report = tmp_path / "report.json"
     report.write_text(json.dumps({"verdict": name, "params": params, "effects": [{"effect": name, "params": params}]}))
-    rows, traces = story.corrected_simulator(str(report), seed=0)
+    rows, _ = story.corrected_simulator(str(report), seed=0)
     by = {(r["plant"], r["controller"]): r["distance_m"] for r in rows}
     for ctl in story.CORRECTED_CONTROLLERS:
         assert by[("corrected", ctl)] == pytest.approx(by[("true effect", ctl)], rel=1e-9)
@@ -46,7 +46,7 @@ def test_the_whole_demo_diagnoses_the_hidden_effect_and_links_every_part(tmp_pat
     out = tmp_path / "demo"
     assert main(["demo", "--out", str(out), "--json", str(tmp_path / "demo.json")]) == 0
     data = json.loads((tmp_path / "demo.json").read_text())
-    name, params = __import__("fricenv.commands.demo_story", fromlist=["x"]).HIDDEN_EFFECT
+    name, _ = __import__("fricenv.commands.demo_story", fromlist=["x"]).HIDDEN_EFFECT
     assert data["diagnosis"]["effects"][0]["effect"] == name
     assert data["diagnosis"]["gap_after"] < 0.5 * data["diagnosis"]["gap_before"]
     assert {r["policy"] for r in data["estimators_in_the_loop"]} == {"slip-pi", "est+slip-pi[ekf-rls]",

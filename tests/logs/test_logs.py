@@ -67,8 +67,8 @@ def test_a_row_written_twice_is_dropped_with_a_warning(tmp_path):
     (10, lambda rows: rows[10].replace("0.1000", "0.1040", 1),
      r"log\.csv:12: column 't': step 0\.014 s is 1\.4 median steps \(0\.01 s\): time-stamp jitter above 25% of the step"),
     (6, lambda rows: rows[5].replace(",57.971014,", ",58.0,"),  # the stamp of the row before, other values
-     r"log\.csv:8: column 't' is not increasing: the stamp repeats line 7's \(0\.050000000000000003 then "
-     r"0\.050000000000000003 s\)$"),
+     (r"log\.csv:8: column 't' is not increasing: the stamp repeats line 7's \(0\.050000000000000003 then "
+      r"0\.050000000000000003 s\)$")),
 ])
 def test_a_stamp_off_the_grid_is_named(tmp_path, row, edit, message):
     rows = _rows()

@@ -103,8 +103,10 @@ def main_error(category: str, truth: dict, fitted: dict) -> tuple[float, dict]:
     return next(iter(errs.values()), np.nan), errs
 
 
-def true_noise(case: Case, noise: NoiseSpec = NoiseSpec()) -> dict[str, float]:
-    """The noise std the stand-in draws on each channel of the case's log (white at the log's rate, SI units)."""
+def true_noise(case: Case, noise: NoiseSpec | None = None) -> dict[str, float]:
+    """The noise std the stand-in draws on each channel of the case's log (white at the log's rate, SI units;
+    ``noise`` default: the stand-in's :class:`NoiseSpec`)."""
+    noise = NoiseSpec() if noise is None else noise
     out = {"omega": float(np.sqrt(noise.omega_var))}
     if not case.drop_optional:
         out.update(v=noise.v_std, a_x=noise.a_x_std)
