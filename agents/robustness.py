@@ -260,7 +260,8 @@ def study(estimators: Sequence[str] = ESTIMATORS, cells: Sequence[GridCell] | No
     if not seeds:
         raise ValueError("seeds must name at least one seed")
     cells = grid_cells() if cells is None else list(cells)
-    jobs = [(tuple(cells), r, d, int(s), tuple(estimators), told_radius) for d in drivers for r in roads for s in seeds]
+    jobs = [(tuple(cells), r, d, int(s), tuple(estimators), told_radius)
+            for d in drivers for r in roads for s in seeds]
     results = map_tasks(_stops_job, jobs, default_jobs(workers), "stops", ray=ray)
     rows = []
     for (_, road, driver, seed, _, _), per_cell in zip(jobs, results):

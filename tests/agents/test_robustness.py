@@ -76,7 +76,8 @@ def test_told_the_radius_the_study_gives_a_radius_cell_its_rolling_radius():
     assert blind[1]["v_rms"] > 0.4 and told[1]["v_rms"] < blind[0]["v_rms"] + 0.05, (blind[1], told[1])
     stop = simulate_stop(cells[1], "dry", "abs", 0)
     assert model_params(stop, told_radius=True).r == pytest.approx(1.04 * PAPER_PARAMS.r)
-    assert model_params(stop) == PAPER_PARAMS and model_params(simulate_stop(cells[2], "dry", "abs", 0), True) == PAPER_PARAMS
+    assert model_params(stop) == PAPER_PARAMS
+    assert model_params(simulate_stop(cells[2], "dry", "abs", 0), told_radius=True) == PAPER_PARAMS
 
 
 def test_metrics_count_errors_after_the_settling_time():

@@ -75,7 +75,8 @@ def _guard_sequence(name: str, sds: list[float]) -> list:
 def test_a_run_grown_into_the_gate_from_a_passing_sample_is_a_mismatch_for_the_a_x_speed_filter():
     # bound 19.5 (4.4 std's); the passing sample at 2.5 std's (NIS 6.25 >= a quarter of the bound) starts the run
     assert _guard_sequence("ekf-ax", [2.5, 5.0]) == [Verdict.ACCEPT, Verdict.MISMATCH]
-    assert _guard_sequence("ekf-ax", [0.5, 5.0]) == [Verdict.ACCEPT, Verdict.REJECT]  # a spike: the sample before agrees
+    # a spike: the sample before agrees with the prediction
+    assert _guard_sequence("ekf-ax", [0.5, 5.0]) == [Verdict.ACCEPT, Verdict.REJECT]
     assert _guard_sequence("ekf-ax", [-2.5, 5.0]) == [Verdict.ACCEPT, Verdict.REJECT]  # the other sign
     # the tire-model speed filter: its first failing sample stays an outlier (a mismatch there would move the speed)
     assert _guard_sequence("ekf", [2.5, 5.0]) == [Verdict.ACCEPT, Verdict.REJECT]
