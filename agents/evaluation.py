@@ -47,6 +47,7 @@ __all__ = [
     "evaluate",
     "format_table",
     "parse_policy",
+    "policy_controller",
     "run_controller",
     "run_episode",
     "summarize",
@@ -89,7 +90,9 @@ def parse_policy(spec: str) -> PolicySpec:
 _POLICY_CACHE: dict[str, Any] = {}
 
 
-def _controller(spec: PolicySpec, env):
+def policy_controller(spec: PolicySpec, env):
+    """The controller of a policy spec on ``env``: a classical controller, the estimator-slip pipeline, or a
+    trained run (loaded once per process)."""
     from agents.controllers import make_controller
 
     if spec.kind == "controller":
@@ -117,7 +120,7 @@ def run_episode(spec: PolicySpec, scenario: Scenario, seed: int) -> dict[str, An
     env = make_braking(spec.estimator, road=scenario.road, v0=scenario.v0, change_distance=CHANGE_DISTANCE,
                        observation=spec.observation, effects=list(scenario.effects) or None)
     try:
-        return run_controller(_controller(spec, env), env, seed)
+        return run_controller(policy_controller(spec, env), env, seed)
     finally:
         env.close()
 
