@@ -23,13 +23,15 @@ import argparse
 
 ENV_CHOICES = ("braking", "payload")
 VEC_CHOICES = ("auto", "native", "dummy", "subproc")  # agents.training.VEC_KINDS (not imported: CLI start-up)
+# fricenv.envs.estimator_observation.ESTIMATOR_NAMES (not imported: CLI start-up; a test holds them equal)
+BRAKING_ESTIMATORS = ("none", "ekf", "mhe", "ekf-rls", "ekf-full", "mhe-full", "ekf-ax", "mhe-ax", "oracle")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of ``fricenv train``."""
     parser.add_argument("--env", choices=ENV_CHOICES, default="braking", help="task (default %(default)s)")
     parser.add_argument("--estimator", default="none",
-                        help="observation estimator: braking none|ekf|mhe|ekf-rls|oracle|ekf-full|mhe-full, "
+                        help="observation estimator: braking " + "|".join(BRAKING_ESTIMATORS) + ", "
                              "payload none|rls|oracle (default %(default)s)")
     parser.add_argument("--algo", choices=("ppo", "sac", "recurrent-ppo"), default="ppo",
                         help="algorithm (default %(default)s)")

@@ -198,3 +198,13 @@ def test_two_runs_of_one_algorithm_get_distinct_rows(ppo_run, tmp_path):
     assert rows[0]["ratio_mean"] == rows[1]["ratio_mean"]  # same policy, same seed
     with pytest.raises(ValueError, match="distinct"):
         evaluate(["rule-abs", "rule-abs"], scenarios=[Scenario("dry", 20.0)], seeds=1, workers=1, progress=False)
+
+
+def test_the_train_commands_choices_are_the_librarys():
+    """The command names its choices without importing the library (start-up time); they must not drift."""
+    from agents.commands.train import BRAKING_ESTIMATORS, VEC_CHOICES
+    from agents.training import VEC_KINDS
+    from fricenv.envs.estimator_observation import ESTIMATOR_NAMES
+
+    assert BRAKING_ESTIMATORS == ESTIMATOR_NAMES
+    assert tuple(VEC_CHOICES) == tuple(VEC_KINDS)
