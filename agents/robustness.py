@@ -38,9 +38,15 @@ if TYPE_CHECKING:
 __all__ = [
     "DRIVERS",
     "ESTIMATORS",
+    "MAX_ERROR",
+    "MAX_FLAGS",
+    "RMS_FACTOR",
+    "RMS_MARGIN",
     "ROADS",
     "SETTLE_S",
     "Stop",
+    "mark_targets",
+    "meets_target",
     "model_params",
     "run_estimator",
     "simulate_stop",
@@ -57,6 +63,13 @@ DURATION = 5.0  # longest stop [s]
 DT = 0.01  # sample time [s]
 SUBSTEPS = 5  # physics substeps per 10 ms sample (the plant's verified setting)
 A_X_NOISE_STD = 0.1  # accelerometer noise [m/s^2], as the gap tool's stand-in
+# The estimators' target under an effect: rms speed error within RMS_FACTOR x the same stop's error on the nominal
+# plant + RMS_MARGIN, never MAX_ERROR off the true speed, OUTLIER and REINITIALISED flags on at most MAX_FLAGS of the
+# samples (the flags are false: a stop has no spike).
+RMS_FACTOR = 2.0  # [-]
+RMS_MARGIN = 0.1  # [m/s]
+MAX_ERROR = 1.5  # [m/s]
+MAX_FLAGS = 0.01  # [-]
 
 
 @dataclass(frozen=True)
@@ -216,6 +229,15 @@ def model_params(stop: Stop, told_radius: bool = False) -> QuarterCarParams:
     return replace(PAPER_PARAMS, r=float(radius[0])) if radius else PAPER_PARAMS
 
 
+def meets_target(rms: float, nominal_rms: float, worst: float, flags: float) -> bool:
+    """The estimators' target under an effect (``RMS_FACTOR``, ``RMS_MARGIN``, ``MAX_ERROR``, ``MAX_FLAGS``).
+
+    :param rms: rms speed error of the stop [m/s]; :param nominal_rms: the same estimator's on the same stop of the
+        nominal plant; :param worst: largest speed error [m/s]; :param flags: share of samples flagged [-].
+    """
+    return rms <= RMS_FACTOR * nominal_rms + RMS_MARGIN and worst <= MAX_ERROR and flags <= MAX_FLAGS
+
+
 def _stops_job(cells: tuple[GridCell, ...], road: str, driver: str, seed: int, estimators: tuple[str, ...],
                told_radius: bool = False) -> list[dict[str, Any]]:
     """The stops of every cell for one (road, driver, seed), every estimator over them (each batch of stops with
@@ -243,7 +265,8 @@ def study(estimators: Sequence[str] = ESTIMATORS, cells: Sequence[GridCell] | No
     :param ray: None, ``"auto"`` or a Ray cluster address.
     :param told_radius: the estimators' model takes a ``radius_error`` cell's rolling radius
         (:func:`model_params`); every other cell, and by default every cell, the nominal parameters.
-    :return: rows with ``estimator``, ``cell``, ``effects``, ``road``, ``driver``, ``seed`` and the metrics.
+    :return: rows with ``estimator``, ``cell``, ``effects``, ``road``, ``driver``, ``seed``, the metrics and
+        ``meets_target`` (:func:`mark_targets`).
     """
     from fricenv.envs.estimator_observation import check_estimator_name
     from fricenv.gap.core.pool import default_jobs, map_tasks
@@ -270,12 +293,25 @@ def study(estimators: Sequence[str] = ESTIMATORS, cells: Sequence[GridCell] | No
                 rows.append({"estimator": r["estimator"], "cell": cell.label, "effects": res["effects"],
                              "road": road, "driver": driver, "seed": seed, "v0": res["v0"],
                              **{k: v for k, v in r.items() if k != "estimator"}})
-    return rows
+    return mark_targets(rows)
+
+
+def mark_targets(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
+    """The rows of :func:`study` with ``meets_target``: :func:`meets_target` against the same estimator's row on the
+    same stop (road, driver, seed) of the nominal plant; None on the nominal plant or without its row."""
+    nominal = {(r["estimator"], r["road"], r["driver"], r["seed"]): r["v_rms"] for r in rows if r["cell"] == "nominal"}
+    out = []
+    for r in rows:
+        base = nominal.get((r["estimator"], r["road"], r["driver"], r["seed"]))
+        flags = r["health"]["outlier"] + r["health"]["reinitialised"]
+        met = None if r["cell"] == "nominal" or base is None else meets_target(r["v_rms"], base, r["v_worst"], flags)
+        out.append({**r, "meets_target": met})
+    return out
 
 
 def summarize(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
     """Per (estimator, cell) over drivers, roads and seeds: mean of the rms errors (rms over stops), the worst
-    speed error, and the mean health shares."""
+    speed error, the mean health shares and the stops missing the target (``missed``; nan on the nominal plant)."""
     groups: dict[tuple[str, str], list[dict]] = {}
     for r in rows:
         groups.setdefault((r["estimator"], r["cell"]), []).append(r)
@@ -287,5 +323,7 @@ def summarize(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
                        ("v_rms", "slip_rms", "mu_rms")},
                     "v_worst": float(np.nanmax([m["v_worst"] for m in mine])),
                     "health": {h: float(np.mean([m["health"][h] for m in mine])) for h in health_names},
+                    "missed": (float("nan") if any(m.get("meets_target") is None for m in mine)
+                               else float(sum(not m["meets_target"] for m in mine))),
                     "stops": len(mine)})
     return out

@@ -25,6 +25,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from agents.robustness import MAX_ERROR, MAX_FLAGS, RMS_FACTOR, RMS_MARGIN  # the targets, in one place
 from estimators.base import Health, run
 from estimators.registry import make_estimator
 from fricenv.effects.grid import EFFECT_GRID, GRID_SIZES, grid_effect
@@ -36,10 +37,6 @@ from fricenv.plants.tire import ROADS
 __all__ = ["MismatchRow", "format_table", "main", "measure", "run_cell"]
 
 SETTLE_TIME = 0.5  # errors over t >= this [s]
-RMS_FACTOR = 2.0  # rms target: this times the nominal rms ... [-]
-RMS_MARGIN = 0.1  # ... plus this [m/s]
-MAX_ERROR = 1.5  # largest speed error after SETTLE_TIME [m/s]
-MAX_FLAGS = 0.01  # share of samples flagged on a spike-free log [-]
 NOMINAL = "nominal"
 
 

@@ -6,8 +6,8 @@ the same stops: the gap tool's stand-in with its ``abs`` and ``open-loop`` drive
 the nominal plant and on every cell of the effect grid (each library effect at its low and high size; radius and
 friction change relative to the road, the change at mid-stop). Errors count from 0.5 s after the brake is first
 applied: rms speed, slip and friction-in-use error (rms over the stops of a cell), the worst speed error over the
-whole stop, and the share of samples with each health value (ok, not_excited, solver_failed, invalid_input,
-outlier, reinitialised, ...). Every estimator's model has the nominal vehicle parameters, as the env builds it;
+whole stop, the share of samples with each health value (ok, not_excited, solver_failed, invalid_input,
+outlier, reinitialised, ...), and the stops that miss the target (``agents.robustness.meets_target``). Every estimator's model has the nominal vehicle parameters, as the env builds it;
 with ``--told-radius`` a radius-error cell's estimators are given that cell's rolling radius, as a calibration (the
 gap tool's ``radius_error`` verdict) would give it.
 
@@ -71,7 +71,16 @@ def run(args) -> int:
     import sys
     import time
 
-    from agents.robustness import DRIVERS, ROADS, study, summarize
+    from agents.robustness import (
+        DRIVERS,
+        MAX_ERROR,
+        MAX_FLAGS,
+        RMS_FACTOR,
+        RMS_MARGIN,
+        ROADS,
+        study,
+        summarize,
+    )
     from agents.robustness_report import format_matrix, write_matrix
 
     estimators, cells = _check(args)
@@ -93,6 +102,11 @@ def run(args) -> int:
         print(f"{what}, {span} ({', '.join(DRIVERS)}; {', '.join(ROADS)}; {len(seeds)} seeds)")
         print(format_matrix(matrix, "estimator", key, "{:.3f}" if key in ("slip_rms", "outlier") else "{:.2f}"))
         print()
+    print(f"stops missing the target (rms within {RMS_FACTOR:g}x the same stop's nominal error + {RMS_MARGIN:g} m/s, "
+          f"never {MAX_ERROR:g} m/s off, flags on at most {MAX_FLAGS:.0%} of the samples), of "
+          f"{len(DRIVERS) * len(ROADS) * len(seeds)} per cell")
+    print(format_matrix([m for m in matrix if m["cell"] != "nominal"], "estimator", "missed", "{:.0f}"))
+    print()
     print(f"wall time {wall:.1f} s ({engine})")
     written = write_matrix(args.out, matrix, "estimator", "v_rms",
                            f"estimators under the effect grid: rms speed error [m/s] after 0.5 s of braking "

@@ -7,6 +7,8 @@ import pytest
 
 from agents.robustness import (
     _run_single,
+    mark_targets,
+    meets_target,
     model_params,
     run_estimator,
     simulate_stop,
@@ -64,6 +66,23 @@ def test_study_rows_and_summary():
     assert matrix[0]["v_rms"] == pytest.approx(rows[0]["v_rms"])
     with pytest.raises(ValueError, match="runs no estimator"):
         study(("oracle",), cells)
+    # the target against the same stop's nominal plant
+    flags = rows[1]["health"]["outlier"] + rows[1]["health"]["reinitialised"]
+    assert rows[0]["meets_target"] is None
+    assert rows[1]["meets_target"] == meets_target(rows[1]["v_rms"], rows[0]["v_rms"], rows[1]["v_worst"], flags)
+    assert np.isnan(matrix[0]["missed"]) and matrix[1]["missed"] == float(not rows[1]["meets_target"])
+
+
+def test_the_target_is_twice_the_nominal_error_plus_a_margin_never_1_5_m_s_off_and_1_percent_flags():
+    assert meets_target(0.5, 0.2, 1.5, 0.01)  # on every bound
+    assert not meets_target(0.51, 0.2, 1.0, 0.0)
+    assert not meets_target(0.3, 0.2, 1.51, 0.0)
+    assert not meets_target(0.3, 0.2, 1.0, 0.011)
+    base = {"estimator": "ekf", "road": "dry", "driver": "abs", "seed": 0, "v_worst": 1.0,
+            "health": {"outlier": 0.0, "reinitialised": 0.0}}
+    rows = [{**base, "cell": "nominal", "v_rms": 0.2}, {**base, "cell": "drag:high", "v_rms": 0.6},
+            {**base, "cell": "drag:low", "v_rms": 0.3, "seed": 1}]  # no nominal row for seed 1
+    assert [r["meets_target"] for r in mark_targets(rows)] == [None, False, None]
 
 
 def test_told_the_radius_the_study_gives_a_radius_cell_its_rolling_radius():
