@@ -188,12 +188,11 @@ class WheelSpeedGuard:
             a_x = self.model.speed_from_a_x  # (M2'): a run may start at the passing sample before, and fall back
             grown = (a_x and s.run == 0 and np.sign(s.e_passed) == sign
                      and s.nis_passed >= MISMATCH_TREND_NIS * self.params.bound)
-            if grown:
-                s.sign, s.e_prev = sign, s.e_passed
-            persistent = physical and (s.run >= 1 or grown) and sign == s.sign
-            grows = (e - s.e_prev) ** 2 <= 2.0 * S * self.params.bound
-            recedes = a_x and np.sign(s.e_prev) == sign and abs(e) <= abs(s.e_prev)
-            smooth = np.isfinite(s.e_prev) and (grows or recedes)
+            e_prev = s.e_passed if grown else s.e_prev  # the run's last innovation
+            persistent = physical and (grown or (s.run >= 1 and sign == s.sign))
+            grows = (e - e_prev) ** 2 <= 2.0 * S * self.params.bound
+            recedes = a_x and np.sign(e_prev) == sign and abs(e) <= abs(e_prev)
+            smooth = np.isfinite(e_prev) and (grows or recedes)
             if persistent and smooth and value <= MISMATCH_NIS_MAX * self.params.bound:  # (M1): the model is off
                 raised = slice(1, 2) if a_x else slice(0, 2)  # (M2'): not the speed
                 Hq = H[0, raised]
