@@ -57,6 +57,21 @@ def test_every_event_of_one_second_or_more_is_found_and_the_rest_skipped_with_wh
     assert any(x["reason"].startswith("slower than 5") and x["t_start"] > 40 for x in skipped)
 
 
+def test_a_braking_run_that_turns_into_a_corner_keeps_its_straight_part_as_an_event():
+    s = _session()
+    _brake(s, 4.0, 8.0)
+    s.yaw_rate[(s.t >= 6.4 - 1e-9) & (s.t < 8.0 - 1e-9)] = 0.5  # 7.5 m/s^2 lateral from 6.4 s: the turn-in
+    _brake(s, 20.0, 23.0)
+    s.yaw_rate[(s.t >= 20.4 - 1e-9) & (s.t < 22.2 - 1e-9)] = 0.5  # straight 0.4 s, corner 1.8 s, straight 0.8 s
+    events, skipped = find_events(s, EventRules(), 2.98)
+    assert [(round(e.t_start, 2), round(e.t_end + DT, 2), e.skip) for e in events] == [(4.0, 6.4, None),
+                                                                                       (20.0, 23.0, events[1].skip)]
+    assert events[1].skip.startswith("cornering")  # no straight part of 1 s: found, not diagnosed
+    corner = [x for x in skipped if x["reason"].startswith("cornering")]
+    assert [(round(x["t_start"], 2), round(x["t_end"] + DT, 2)) for x in corner] == [(6.4, 8.0)]
+    assert "7.50 m/s^2 > 6" in corner[0]["reason"]
+
+
 def test_an_event_is_split_by_a_throttle_blip():
     s = _session()
     _brake(s, 4.0, 8.0)

@@ -5,7 +5,9 @@ other braking stretch was skipped.
 A brake is applied when ``T_b`` is above its resting level (the 1st percentile over the moving samples: a pedal at
 rest is its lowest reading) by more than its resting noise (:func:`applied`); the same rule with ``throttle`` finds a
 drive. The path is straight enough when the lateral acceleration ``v |yaw rate|`` (else ``v^2 |steer| / L``)
-stays below ``max_lateral`` [m/s^2] over the event.
+stays below ``max_lateral`` [m/s^2] over the event. A braking run that turns into a corner (a road course's braking
+zone ends in a turn-in) keeps each straight part of ``min_duration`` or more as an event, and its cornering part is
+skipped with why; a run without such a part is one event, found and not diagnosed.
 """
 
 from __future__ import annotations
@@ -121,16 +123,21 @@ def find_events(s: Session, rules: EventRules = DEFAULT_RULES, wheelbase: float 
     in_event = np.zeros(len(s), dtype=bool)
     for a, b in runs(st["brake"] & ~st["drive"] & st["moving"]):
         duration = (b - a) * s.dt
-        top = float(np.max(lat[a:b]))
         if duration < rules.min_duration - 1e-9:
             skipped.append(_skip(t, a, b, f"shorter than {rules.min_duration:g} s ({duration:.2f} s)"))
         else:
-            before = drive_at[drive_at < a]
-            fit_start = min(max(a, int(before[-1]) + 1 + settle if before.size else a), b - 1)
-            corner = (f"cornering: lateral acceleration {top:.2f} m/s^2 > {rules.max_lateral:g}, outside the "
-                      "longitudinal model") if top > rules.max_lateral else None
-            events.append(Event(len(events), a, b, float(t[a]), float(t[b - 1]), float(s.v[a]), float(s.v[b - 1]),
-                                top, fit_start, float(t[fit_start]), corner))
+            parts = _straight_parts(lat[a:b] <= rules.max_lateral, rules.min_duration / s.dt)
+            for x, y in parts or [(0, b - a)]:  # no straight part of min_duration: the whole run, not diagnosed
+                events.append(_event(len(events), s, lat, a + x, a + y, drive_at[drive_at < a + x], settle, rules))
+            kept = np.zeros(b - a, dtype=bool)
+            for x, y in parts:
+                kept[x:y] = True
+            for x, y in runs(~kept) if parts else []:
+                top = float(np.max(lat[a + x:a + y]))
+                reason = (f"cornering: lateral acceleration {top:.2f} m/s^2 > {rules.max_lateral:g}" if
+                          top > rules.max_lateral else
+                          f"shorter than {rules.min_duration:g} s ({(y - x) * s.dt:.2f} s) beside cornering")
+                skipped.append(_skip(t, a + x, a + y, reason))
         in_event[a:b] = True
     for a, b in runs(st["brake"] & ~in_event):
         why = np.where(st["drive"][a:b], 0, 1)  # what is left: a drive, or too slow
@@ -139,6 +146,27 @@ def find_events(s: Session, rules: EventRules = DEFAULT_RULES, wheelbase: float 
             skipped.append(_skip(t, a + x, a + y, reason))
     skipped.sort(key=lambda r: r["t_start"])
     return events, skipped
+
+
+def _event(index: int, s: Session, lat: np.ndarray, a: int, b: int, drives_before: np.ndarray, settle: int,
+           rules: EventRules) -> Event:
+    """The event of samples ``a`` to ``b``: fitted from ``settle`` samples after the last drive before it; marked
+    cornering (found, not diagnosed) when its lateral acceleration exceeds ``max_lateral``."""
+    t = s.t - s.t[0]
+    top = float(np.max(lat[a:b]))
+    fit_start = min(max(a, int(drives_before[-1]) + 1 + settle if drives_before.size else a), b - 1)
+    corner = (f"cornering: lateral acceleration {top:.2f} m/s^2 > {rules.max_lateral:g}, outside the longitudinal "
+              "model") if top > rules.max_lateral else None
+    return Event(index, a, b, float(t[a]), float(t[b - 1]), float(s.v[a]), float(s.v[b - 1]), top, fit_start,
+                 float(t[fit_start]), corner)
+
+
+def _straight_parts(straight: np.ndarray, min_samples: float) -> list[tuple[int, int]]:
+    """The runs of ``straight`` (a braking run's samples) that last ``min_samples`` or more: the whole run when it is
+    straight throughout, [] when no straight part is long enough."""
+    if np.all(straight):
+        return [(0, len(straight))]
+    return [(x, y) for x, y in runs(straight) if y - x >= min_samples - 1e-9]
 
 
 def _split(codes: np.ndarray):
