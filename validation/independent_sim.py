@@ -369,7 +369,8 @@ def diagnose_case(case: IndependentCase) -> dict:
                          "robust_gap": float(t["robust_gap"]), "significant": bool(t["significant"])}
                      for e, t in dg.where.get("tests", {}).items()},
            "sensors": report_check.sensor_flags(dg), "periodic": dg.where.get("periodic"),
-           "guard": dg.where.get("false_discovery_guard"), "true_noise": case_noise(case)}
+           "guard": dg.where.get("false_discovery_guard"), "told_apart": dg.where.get("told_apart"),
+           "true_noise": case_noise(case)}
     out["right_or_untestable"] = right_or_untestable(out)
     _selection_figures(out, case, dg)
     if case.category in LIBRARY_EFFECTS:

@@ -13,7 +13,9 @@ writes:
 
 and, where the suite ran it, a fourth: the right verdicts on the shown logs whose data also tell the answer from the
 best other library effect (``apart``, :func:`validation.quarter_car_oracle.alternative_oracle`; a one-effect log
-without that oracle counts as apart).
+without that oracle counts as apart). Where the rows carry the tool's own test (``told_apart``, the report's
+``where["told_apart"]``), the right share of the effect verdicts it tells apart from its runner-up and of those it
+does not.
 
 Every oracle judges with the noise levels the source drew (``true_noise`` of each row, :mod:`validation.true_noise`),
 not with the tool's estimate. A ``fricenv gap validate --json`` result carries no oracle: its effect logs are
@@ -89,6 +91,11 @@ def quarter_car_numbers(rows: Sequence[dict]) -> dict:
     if any("apart" in r for r in rows):
         pairs = Counter(f"{r['category']}->{r['alternative']}" for r in shown if not _apart(r))
         out.update(apart=len(apart), right_on_apart=sum(_right(r) for r in apart), alternatives=dict(pairs))
+    flagged = [r for r in rows if r.get("told_apart")]
+    if flagged:
+        split = {k: [r for r in flagged if bool(r["told_apart"]["apart"]) is v] for k, v in (("apart", True),
+                                                                                            ("not_apart", False))}
+        out["tool_told_apart"] = {k: {"verdicts": len(v), "right": sum(_right(r) for r in v)} for k, v in split.items()}
     return out
 
 
@@ -101,6 +108,10 @@ def format_numbers(q: dict, label: str = "") -> str:
         told = ", ".join(f"{k} {v}" for k, v in sorted(q["alternatives"].items())) or "none"
         line += (f"; told apart from the best other effect on {q['apart']}/{q['shown']}, right on those "
                  f"{q['right_on_apart']}/{q['apart']} (not apart: {told})")
+    if "tool_told_apart" in q:
+        a, b = q["tool_told_apart"]["apart"], q["tool_told_apart"]["not_apart"]
+        line += (f"; effect verdicts the tool tells apart from its runner-up right on {a['right']}/{a['verdicts']}, "
+                 f"those it does not on {b['right']}/{b['verdicts']}")
     return line
 
 

@@ -69,6 +69,9 @@ Method (every error measure is computed on data not used for fitting):
    effect that an untested one would imitate on this log's channels comes with that effect's equivalent size
    (:mod:`fricenv.gap.quarter_car.alternatives`, ``where["alternatives"]``: a brake gain without ``v`` and ``a_x``
    may be a rolling-radius error).
+10. **Told apart.** The verdict's effect is tested against the best other significant candidate by the same paired
+   z (:func:`fricenv.gap.quarter_car.verdict.told_apart`, ``where["told_apart"]``): below ``sig_z`` the log reads as
+   well with the other effect, and the report says so.
 """
 
 from __future__ import annotations
@@ -108,7 +111,7 @@ from fricenv.gap.quarter_car.stats import (
     fold_data,
     robust_gap,
 )
-from fricenv.gap.quarter_car.verdict import at_range_edge, explains, gap_is_real, significant
+from fricenv.gap.quarter_car.verdict import at_range_edge, explains, gap_is_real, significant, told_apart
 from fricenv.gap.quarter_car.windows import prepare, window_nuisances, window_residuals
 from fricenv.logs import QuarterCarLog, read_log
 from fricenv.plants import quarter_car as qc
@@ -307,6 +310,8 @@ def diagnose(log: QuarterCarLog, p: qc.QuarterCarParams = qc.PAPER_PARAMS,
     findings.alternatives = alternatives(effects, not_testable, p)
     if s.guard is not None:
         findings.extra["false_discovery_guard"] = s.guard
+    if s.chosen is not None:
+        findings.extra["told_apart"] = told_apart(s.chosen, s.significant, d, cfg)
     findings.extra.update(time_base={"origin": "first_sample", "offset_s": float(log.t_offset)},
                           warnings=list(log.warnings))
     verdict = effects[0]["effect"] if effects else s.verdict  # a discovery before an expected calibration

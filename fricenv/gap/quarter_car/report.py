@@ -53,8 +53,11 @@ def summary_line(dg: Diagnosis) -> str:
     also = f"; with {', '.join(more)}" if more else ""
     untested = sorted(dg.where.get("not_testable", {}))
     untested = f"; not testable on this log: {', '.join(untested)}" if untested else ""
+    apart = dg.where.get("told_apart")
+    apart = (f"; not told apart from {apart['from']} (z paired {apart['z_paired']:.1f})"
+             if apart and not apart["apart"] else "")
     return (f"verdict: {verdict}{also}; gap_before {dg.gap_before:.3g} -> gap_after {dg.gap_after:.3g} "
-            f"(noise units, held-out){worst}{untested}")
+            f"(noise units, held-out){apart}{worst}{untested}")
 
 
 def report_markdown(dg: Diagnosis, report: dict, images: Sequence[str] = (PLOT_TIME, PLOT_REGIMES)) -> str:
@@ -99,6 +102,14 @@ def report_markdown(dg: Diagnosis, report: dict, images: Sequence[str] = (PLOT_T
                      f"{t.get('z_paired', float('nan')):.1f} | {_z(t.get('z_without_effect'))} | "
                      f"{t.get('significant', False)} |")
     lines += _testability_lines(w)
+    if w.get("told_apart") and w["told_apart"]["from"] is not None:
+        a = w["told_apart"]
+        params = ", ".join(f"{k}={v:.4g}" for k, v in a["params"].items())
+        lines += ["", (f"Told apart: `{a['effect']}` against the best other significant candidate, `{a['from']}` "
+                       f"({params}; gap after {a['gap_after']:.3f}): z paired {a['z_paired']:.1f}. "
+                       + ("The log tells them apart." if a["apart"] else
+                          "Below the significance bound: the log reads as well with either effect, and the "
+                          "verdict is the better fit of the two."))]
     if "joint_fit" in w:
         j = w["joint_fit"]
         lines += ["", f"Joint fit of {' + '.join(j['effects'])}: gap after {j['gap_after']:.3f}, params {j['params']}"]

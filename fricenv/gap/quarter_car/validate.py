@@ -146,7 +146,7 @@ def run_case(case: Case, cfg: DiagnoseConfig | None = None, via_file: bool = Tru
            "gap_after": dg.gap_after, "params": dg.params, "seconds": seconds, "samples": len(log),
            "candidates": [c.effect for c in dg.candidates[:3]], "periodic": dg.where.get("periodic"),
            "named": [e["effect"] for e in dg.effects] or [dg.verdict], "true_noise": true_noise(case),
-           "guard": dg.where.get("false_discovery_guard")}
+           "guard": dg.where.get("false_discovery_guard"), "told_apart": dg.where.get("told_apart")}
     if case.category in EFFECTS:
         out["ratio"] = dg.gap_after / dg.gap_before if dg.gap_before > 0 else np.nan
         if oracle is not None:

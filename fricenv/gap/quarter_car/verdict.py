@@ -10,10 +10,11 @@ import numpy as np
 from fricenv.effects.quarter_car import ModelBatch
 from fricenv.gap.quarter_car.config import DiagnoseConfig
 from fricenv.gap.quarter_car.params import ROAD_NAMES, effect_param, road_of
-from fricenv.gap.quarter_car.stats import CandidateFit, robust_gap
+from fricenv.gap.quarter_car.data import Data
+from fricenv.gap.quarter_car.stats import CandidateFit, paired_z, robust_gap
 from fricenv.plants import quarter_car as qc
 
-__all__ = ["RANGE_EDGE", "at_range_edge", "explains", "gap_is_real", "significant"]
+__all__ = ["RANGE_EDGE", "at_range_edge", "explains", "gap_is_real", "significant", "told_apart"]
 
 # A fitted effect parameter within this share of its range (the registry's bounds) from a bound sits at the bound [-]
 RANGE_EDGE = 1e-3
@@ -73,3 +74,22 @@ def explains(f: CandidateFit, nominal: CandidateFit, cfg: DiagnoseConfig) -> boo
     """Whether ``f`` closes a clear share of the gap on held-out data: its robust gap is at most
     ``ratio_explained`` of the nominal one, or within the noise (``gap_within_noise``)."""
     return robust_gap(f) <= cfg.ratio_explained * robust_gap(nominal) or robust_gap(f) <= cfg.gap_within_noise
+
+
+def told_apart(chosen: CandidateFit, significant: Sequence[CandidateFit], d: Data, cfg: DiagnoseConfig) -> dict:
+    """Whether the log tells the verdict's effect from the best other significant candidate (lowest held-out error):
+    the verdict's held-out improvement over that candidate, :func:`paired_z` with the candidate as the base, above
+    ``sig_z``. Below it the data read as well with either effect (a brake delay and a lag on ABS ramps, a brake gain
+    and drag under steady braking), and the verdict is the better fit of two the log does not separate.
+
+    :return: ``{"effect", "from", "params", "gap_after", "z_paired", "apart"}`` (``from`` None and ``apart`` True
+        when no other candidate is significant).
+    """
+    others = sorted((f for f in significant if f.effect != chosen.effect), key=lambda f: f.adjusted_mse)
+    if not others:
+        return {"effect": chosen.effect, "from": None, "params": {}, "gap_after": None, "z_paired": None,
+                "apart": True}
+    other = others[0]
+    z = paired_z(other, chosen, d)
+    return {"effect": chosen.effect, "from": other.effect, "params": other.effect_params(), "gap_after": other.gap,
+            "z_paired": z, "apart": bool(z > cfg.sig_z)}
