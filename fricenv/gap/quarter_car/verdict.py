@@ -9,8 +9,8 @@ import numpy as np
 
 from fricenv.effects.quarter_car import ModelBatch
 from fricenv.gap.quarter_car.config import DiagnoseConfig
-from fricenv.gap.quarter_car.params import ROAD_NAMES, effect_param, road_of
 from fricenv.gap.quarter_car.data import Data
+from fricenv.gap.quarter_car.params import ROAD_NAMES, effect_param, road_of
 from fricenv.gap.quarter_car.stats import CandidateFit, paired_z, robust_gap
 from fricenv.plants import quarter_car as qc
 
