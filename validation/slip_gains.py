@@ -1,5 +1,5 @@
-"""What a fixed-gain controller can reach on cells of the effect grid: the slip PI on the true slip, its gains chosen
-for those cells.
+"""What a fixed-gain controller can reach on cells of the effect grid: the slip PI on the true slip (or on an
+estimator's), its gains chosen for those cells.
 
 The effect grid's policy table (``fricenv evaluate --effect-grid``) runs every controller with its nominal tuning.
 Where every policy stays above a target, this asks whether the target is within reach of a controller at all: the
@@ -7,12 +7,15 @@ slip controller that reads the true slip (:class:`agents.controllers.OracleSlipC
 gains of a grid, on dry and wet at 20 m/s on each chosen cell (``effect:size``). The gains are chosen on the tuning
 reset seeds (``--tune-seeds``, default 100-102): among the pairs that lock the wheel in no episode of any cell, the
 one whose worst cell (mean ratio of the two roads) is lowest. They are reported on the evaluation seeds of the
-policy table (``--seeds``, default 0-2), which never chose them.
+policy table (``--seeds``, default 0-2), which never chose them. With ``--estimator NAME`` the controller is the
+classical pipeline on that estimator's outputs instead (:class:`agents.pipeline.EstimatorSlipPipeline`: the slip
+from ``v_hat``, the reference from the estimated curve's peak), the row "slip PI on EKF/RLS" of the policy table
+with other gains.
 
 Command::
 
     python -m validation.slip_gains --cells brake_delay:high [brake_gain:high ...] [--kp 5 10 20 40]
-        [--ki 25 50 100 200 400] [--tune-seeds 100 101 102] [--seeds 0 1 2]
+        [--ki 25 50 100 200 400] [--tune-seeds 100 101 102] [--seeds 0 1 2] [--estimator ekf-rls]
 """
 
 from __future__ import annotations
@@ -26,7 +29,11 @@ import numpy as np
 import fricenv  # noqa: F401  (registers the envs)
 from agents.controllers import OracleSlipController, SlipControllerParams, rollout
 from agents.effect_scenarios import GRID_SCENARIOS
+from agents.evaluation import CHANGE_DISTANCE
+from agents.pipeline import EstimatorSlipPipeline
+from estimators.registry import OBSERVATION_ESTIMATORS
 from fricenv.effects.grid import EFFECT_GRID, GRID_SIZES, grid_effect
+from fricenv.envs.factory import make_braking
 
 __all__ = ["main", "parse_cell", "score"]
 
@@ -40,21 +47,29 @@ def parse_cell(text: str) -> tuple[str, str]:
     return effect, size
 
 
-def score(effect: str, size: str, gains: SlipControllerParams, seeds: list[int]) -> tuple[float, int]:
+def score(effect: str, size: str, gains: SlipControllerParams, seeds: list[int],
+          estimator: str | None = None) -> tuple[float, int]:
     """Mean stopping ratio over the grid's scenarios (dry and wet at 20 m/s) and ``seeds``, and the lock events.
 
     :param effect: a grid effect; :param size: ``low`` or ``high``; :param gains: the slip PI's gains.
     :param seeds: reset seeds.
+    :param estimator: None: the PI on the true slip; else the pipeline on this estimator's outputs.
     :return: (mean ratio, episodes that locked the wheel); the ratio is inf if an episode did not stop.
     """
     ratios, locks = [], 0
     for sc in GRID_SCENARIOS:
         effects = [grid_effect(effect, size, sc.road, sc.v0)]
-        env = gym.make("fricenv/Braking-v0", road=sc.road, v0=sc.v0, observation="oracle", effects=effects)
+        if estimator is None:
+            env = gym.make("fricenv/Braking-v0", road=sc.road, v0=sc.v0, observation="oracle", effects=effects)
+        else:
+            env = make_braking(estimator, road=sc.road, v0=sc.v0, change_distance=CHANGE_DISTANCE, effects=effects)
         for seed in seeds:
-            info = rollout(env, OracleSlipController(env.unwrapped, gains=gains), seed=seed).info
+            ctl = OracleSlipController(env.unwrapped, gains=gains) if estimator is None else \
+                EstimatorSlipPipeline(env, gains=gains)
+            info = rollout(env, ctl, seed=seed).info
             ratios.append(info["ratio"] if info["stopped"] else np.inf)
             locks += bool(info["lock_seen"])
+        env.close()
     return float(np.mean(ratios)), locks
 
 
@@ -70,19 +85,22 @@ def main(argv: list[str] | None = None) -> dict:
                     help="integral gains [1/s^2]")
     ap.add_argument("--tune-seeds", type=int, nargs="+", default=[100, 101, 102], help="seeds that choose the gains")
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2], help="seeds the chosen gains are reported on")
+    ap.add_argument("--estimator", choices=OBSERVATION_ESTIMATORS, default=None,
+                    help="the pipeline on this estimator's outputs (default: the PI on the true slip)")
     args = ap.parse_args(argv)
     tuned = []
     for kp, ki in itertools.product(args.kp, args.ki):
-        scores = [score(e, s, SlipControllerParams(kp=kp, ki=ki), args.tune_seeds) for e, s in args.cells]
+        scores = [score(e, s, SlipControllerParams(kp=kp, ki=ki), args.tune_seeds, args.estimator)
+                  for e, s in args.cells]
         tuned.append((any(n for _, n in scores), max(r for r, _ in scores), kp, ki))
         print(f"tuning seeds, kp {kp:g} ki {ki:g}: {_line(args.cells, scores)}", flush=True)
     locked, _, kp, ki = min(tuned)
     if locked:
         print("every pair of gains locks the wheel in some cell; the lowest worst cell among them:")
     out = {"cells": [f"{e}:{s}" for e, s in args.cells], "seeds": args.seeds, "tune_seeds": args.tune_seeds,
-           "every_pair_locks": locked}
+           "every_pair_locks": locked, "estimator": args.estimator}
     for name, gains in (("nominal", SlipControllerParams()), ("chosen", SlipControllerParams(kp=kp, ki=ki))):
-        scores = [score(e, s, gains, args.seeds) for e, s in args.cells]
+        scores = [score(e, s, gains, args.seeds, args.estimator) for e, s in args.cells]
         out[name] = {"kp": gains.kp, "ki": gains.ki, "cells": [{"ratio": r, "lock_episodes": n} for r, n in scores]}
         print(f"{name} gains (kp {gains.kp:g}, ki {gains.ki:g}) on seeds {args.seeds}: {_line(args.cells, scores)}")
     return out
