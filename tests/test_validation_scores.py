@@ -53,3 +53,16 @@ def test_the_fourth_figure_counts_right_verdicts_on_shown_logs_told_apart():
     assert (q["shown"], q["right_on_shown"], q["apart"], q["right_on_apart"]) == (4, 2, 2, 1)
     assert q["alternatives"] == {"brake_delay->brake_lag": 1, "brake_lag->brake_delay": 1}
     assert "apart" not in quarter_car_numbers(rows[:1] + rows[-1:])  # a suite without the oracle: three numbers
+
+
+def test_the_tools_own_told_apart_test_splits_the_effect_verdicts():
+    apart = {"apart": True}
+    rows = [
+        {"category": "drag", "verdict": "drag", "right": True, "detectable": True, "told_apart": apart},
+        {"category": "drag", "verdict": "brake_gain", "right": False, "detectable": True, "told_apart": apart},
+        {"category": "brake_lag", "verdict": "brake_delay", "right": False, "detectable": False,
+         "told_apart": {"apart": False}},
+        {"category": "none", "verdict": "none", "right": True, "told_apart": None},  # no effect named: not counted
+    ]
+    q = quarter_car_numbers(rows)
+    assert q["tool_told_apart"] == {"apart": {"verdicts": 2, "right": 1}, "not_apart": {"verdicts": 1, "right": 0}}
