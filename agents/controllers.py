@@ -300,8 +300,13 @@ class SlipController(_GainScheduledSlip):
         v_hat = np.asarray(v_hat, dtype=float)
         lam_ref = np.asarray(lam_ref, dtype=float)
         lam = ecu_slip(values[FIELD_WHEEL_SPEED], v_hat, p.r, CONTROL_SPEED_FLOOR)
-        mu_hat = np.maximum(-p.m * values[FIELD_AX] / p.Fz, 0.0)
-        return self._pi(v_hat, lam, lam_ref, _equilibrium_torque(mu_hat, lam_ref, p))
+        return self._pi(v_hat, lam, lam_ref, _equilibrium_torque(self._feedforward_mu(values, lam_ref), lam_ref, p))
+
+    def _feedforward_mu(self, values: dict, lam_ref: np.ndarray) -> np.ndarray:
+        """The friction the feedforward holds the reference slip at: the one the accelerometer measures,
+        ``-m a_x / F_z``."""
+        p = self.spec.params
+        return np.maximum(-p.m * values[FIELD_AX] / p.Fz, 0.0)
 
 
 class OracleSlipController(_GainScheduledSlip):

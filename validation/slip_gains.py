@@ -10,12 +10,15 @@ one whose worst cell (mean ratio of the two roads) is lowest. They are reported 
 policy table (``--seeds``, default 0-2), which never chose them. With ``--estimator NAME`` the controller is the
 classical pipeline on that estimator's outputs instead (:class:`agents.pipeline.EstimatorSlipPipeline`: the slip
 from ``v_hat``, the reference from the estimated curve's peak), the row "slip PI on EKF/RLS" of the policy table
-with other gains.
+with other gains; ``--feedforward road`` gives that pipeline the true road's friction at its reference slip in place
+of the measured deceleration (a bound that reads the truth, to tell what the estimates cost from what the
+feedforward does behind a delay).
 
 Command::
 
     python -m validation.slip_gains --cells brake_delay:high [brake_gain:high ...] [--kp 5 10 20 40]
-        [--ki 25 50 100 200 400] [--tune-seeds 100 101 102] [--seeds 0 1 2] [--estimator ekf-rls]
+        [--ki 25 50 100 200 400] [--tune-seeds 100 101 102] [--seeds 0 1 2] [--estimator ekf-rls
+        [--feedforward road]]
 """
 
 from __future__ import annotations
@@ -34,8 +37,22 @@ from agents.pipeline import EstimatorSlipPipeline
 from estimators.registry import OBSERVATION_ESTIMATORS
 from fricenv.effects.grid import EFFECT_GRID, GRID_SIZES, grid_effect
 from fricenv.envs.factory import make_braking
+from fricenv.plants.tire import magic_formula
 
-__all__ = ["main", "parse_cell", "score"]
+__all__ = ["RoadFeedforwardPipeline", "main", "parse_cell", "score"]
+
+
+class RoadFeedforwardPipeline(EstimatorSlipPipeline):
+    """The classical pipeline whose feedforward holds the reference slip at the true road's friction there, in place
+    of the friction the accelerometer measures (it reads the truth: a bound, not a controller)."""
+
+    def __init__(self, env, gains: SlipControllerParams | None = None):
+        super().__init__(env, gains)
+        self._plant = env.unwrapped
+
+    def _feedforward_mu(self, values: dict, lam_ref: np.ndarray) -> np.ndarray:
+        road = self._plant.road  # the road under the car now
+        return magic_formula(np.asarray(lam_ref, dtype=float), road.B, road.C, road.E, road.theta)
 
 
 def parse_cell(text: str) -> tuple[str, str]:
@@ -48,12 +65,14 @@ def parse_cell(text: str) -> tuple[str, str]:
 
 
 def score(effect: str, size: str, gains: SlipControllerParams, seeds: list[int],
-          estimator: str | None = None) -> tuple[float, int]:
+          estimator: str | None = None, feedforward: str = "measured") -> tuple[float, int]:
     """Mean stopping ratio over the grid's scenarios (dry and wet at 20 m/s) and ``seeds``, and the lock events.
 
     :param effect: a grid effect; :param size: ``low`` or ``high``; :param gains: the slip PI's gains.
     :param seeds: reset seeds.
     :param estimator: None: the PI on the true slip; else the pipeline on this estimator's outputs.
+    :param feedforward: the pipeline's feedforward friction: ``measured`` (its own, from ``a_x``) or ``road`` (the
+        true road's at the reference slip, :class:`RoadFeedforwardPipeline`).
     :return: (mean ratio, episodes that locked the wheel); the ratio is inf if an episode did not stop.
     """
     ratios, locks = [], 0
@@ -64,8 +83,12 @@ def score(effect: str, size: str, gains: SlipControllerParams, seeds: list[int],
         else:
             env = make_braking(estimator, road=sc.road, v0=sc.v0, change_distance=CHANGE_DISTANCE, effects=effects)
         for seed in seeds:
-            ctl = OracleSlipController(env.unwrapped, gains=gains) if estimator is None else \
-                EstimatorSlipPipeline(env, gains=gains)
+            if estimator is None:
+                ctl = OracleSlipController(env.unwrapped, gains=gains)
+            elif feedforward == "road":
+                ctl = RoadFeedforwardPipeline(env, gains=gains)
+            else:
+                ctl = EstimatorSlipPipeline(env, gains=gains)
             info = rollout(env, ctl, seed=seed).info
             ratios.append(info["ratio"] if info["stopped"] else np.inf)
             locks += bool(info["lock_seen"])
@@ -87,10 +110,14 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2], help="seeds the chosen gains are reported on")
     ap.add_argument("--estimator", choices=OBSERVATION_ESTIMATORS, default=None,
                     help="the pipeline on this estimator's outputs (default: the PI on the true slip)")
+    ap.add_argument("--feedforward", choices=("measured", "road"), default="measured",
+                    help="with --estimator: the feedforward friction, measured (a_x) or the true road's")
     args = ap.parse_args(argv)
+    if args.feedforward == "road" and args.estimator is None:
+        ap.error("--feedforward road needs --estimator (the true-slip controller's feedforward is the road's already)")
     tuned = []
     for kp, ki in itertools.product(args.kp, args.ki):
-        scores = [score(e, s, SlipControllerParams(kp=kp, ki=ki), args.tune_seeds, args.estimator)
+        scores = [score(e, s, SlipControllerParams(kp=kp, ki=ki), args.tune_seeds, args.estimator, args.feedforward)
                   for e, s in args.cells]
         tuned.append((any(n for _, n in scores), max(r for r, _ in scores), kp, ki))
         print(f"tuning seeds, kp {kp:g} ki {ki:g}: {_line(args.cells, scores)}", flush=True)
@@ -98,9 +125,10 @@ def main(argv: list[str] | None = None) -> dict:
     if locked:
         print("every pair of gains locks the wheel in some cell; the lowest worst cell among them:")
     out = {"cells": [f"{e}:{s}" for e, s in args.cells], "seeds": args.seeds, "tune_seeds": args.tune_seeds,
-           "every_pair_locks": locked, "estimator": args.estimator}
+           "every_pair_locks": locked, "estimator": args.estimator,
+           "feedforward": args.feedforward}
     for name, gains in (("nominal", SlipControllerParams()), ("chosen", SlipControllerParams(kp=kp, ki=ki))):
-        scores = [score(e, s, gains, args.seeds, args.estimator) for e, s in args.cells]
+        scores = [score(e, s, gains, args.seeds, args.estimator, args.feedforward) for e, s in args.cells]
         out[name] = {"kp": gains.kp, "ki": gains.ki, "cells": [{"ratio": r, "lock_episodes": n} for r, n in scores]}
         print(f"{name} gains (kp {gains.kp:g}, ki {gains.ki:g}) on seeds {args.seeds}: {_line(args.cells, scores)}")
     return out

@@ -20,3 +20,16 @@ def test_on_the_ekf_rls_estimates_the_same_gains_stay_above_the_target():
     chosen, chosen_locks = score("brake_delay", "high", SlipControllerParams(kp=20.0, ki=25.0), [0],
                                  estimator="ekf-rls")
     assert nominal > 2.0 and 1.10 < chosen < nominal and chosen_locks == 0
+
+
+def test_behind_the_delay_the_measured_deceleration_feedforward_is_what_fails():
+    """The same pipeline with its feedforward at the true road's friction at the reference slip (a bound that reads
+    the truth) in place of the friction a_x measures, reset seed 0: the oscillation of the nominal gains is gone
+    (about 1.4 against 2.6), and the delay's gains come close to the true-slip controller."""
+    measured, _ = score("brake_delay", "high", SlipControllerParams(), [0], estimator="ekf-rls")
+    road, road_locks = score("brake_delay", "high", SlipControllerParams(), [0], estimator="ekf-rls",
+                             feedforward="road")
+    slow, _ = score("brake_delay", "high", SlipControllerParams(kp=10.0, ki=25.0), [0], estimator="ekf-rls",
+                    feedforward="road")
+    assert road < 0.7 * measured and road_locks == 0
+    assert slow < 1.15
