@@ -126,9 +126,10 @@ def find_events(s: Session, rules: EventRules = DEFAULT_RULES, wheelbase: float 
         if duration < rules.min_duration - 1e-9:
             skipped.append(_skip(t, a, b, f"shorter than {rules.min_duration:g} s ({duration:.2f} s)"))
         else:
-            parts = _straight_parts(lat[a:b] <= rules.max_lateral, rules.min_duration / s.dt)
+            parts = _straight_parts(lat[a:b] <= rules.max_lateral, s.dt, rules.min_duration)
             for x, y in parts or [(0, b - a)]:  # no straight part of min_duration: the whole run, not diagnosed
-                events.append(_event(len(events), s, lat, a + x, a + y, drive_at[drive_at < a + x], settle, rules))
+                events.append(_event(len(events), s, t, lat, a + x, a + y, drive_at[drive_at < a + x], settle,
+                                     rules))
             kept = np.zeros(b - a, dtype=bool)
             for x, y in parts:
                 kept[x:y] = True
@@ -148,11 +149,11 @@ def find_events(s: Session, rules: EventRules = DEFAULT_RULES, wheelbase: float 
     return events, skipped
 
 
-def _event(index: int, s: Session, lat: np.ndarray, a: int, b: int, drives_before: np.ndarray, settle: int,
-           rules: EventRules) -> Event:
-    """The event of samples ``a`` to ``b``: fitted from ``settle`` samples after the last drive before it; marked
-    cornering (found, not diagnosed) when its lateral acceleration exceeds ``max_lateral``."""
-    t = s.t - s.t[0]
+def _event(index: int, s: Session, t: np.ndarray, lat: np.ndarray, a: int, b: int, drives_before: np.ndarray,
+           settle: int, rules: EventRules) -> Event:
+    """The event of samples ``a`` to ``b`` (``t`` the times from the first sample): fitted from ``settle`` samples after
+    the last drive before it; marked cornering (found, not diagnosed) when its lateral acceleration exceeds
+    ``max_lateral``."""
     top = float(np.max(lat[a:b]))
     fit_start = min(max(a, int(drives_before[-1]) + 1 + settle if drives_before.size else a), b - 1)
     corner = (f"cornering: lateral acceleration {top:.2f} m/s^2 > {rules.max_lateral:g}, outside the longitudinal "
@@ -161,12 +162,11 @@ def _event(index: int, s: Session, lat: np.ndarray, a: int, b: int, drives_befor
                  float(t[fit_start]), corner)
 
 
-def _straight_parts(straight: np.ndarray, min_samples: float) -> list[tuple[int, int]]:
-    """The runs of ``straight`` (a braking run's samples) that last ``min_samples`` or more: the whole run when it is
-    straight throughout, [] when no straight part is long enough."""
-    if np.all(straight):
-        return [(0, len(straight))]
-    return [(x, y) for x, y in runs(straight) if y - x >= min_samples - 1e-9]
+def _straight_parts(straight: np.ndarray, dt: float, min_duration: float) -> list[tuple[int, int]]:
+    """The runs of ``straight`` (a braking run's samples, ``dt`` apart) that last ``min_duration`` or more, by the
+    rule that makes a braking run long enough: [(0, n)] for a run straight throughout, [] when no straight part is
+    long enough."""
+    return [(x, y) for x, y in runs(straight) if (y - x) * dt >= min_duration - 1e-9]
 
 
 def _split(codes: np.ndarray):
