@@ -32,7 +32,7 @@ from estimators.curve_shape import ShapeFit
 from estimators.ekf_rls import KS0, PHI_MIN_SLIP, RLS_P0, QuarterCarEkfRls
 from estimators.jump import jump_test
 from estimators.mhe_batched import BATCHED_MHE
-from estimators.speed_reference import brake_lag_shift, speed_step
+from estimators.speed_reference import FREE_ROLLING_RATE, brake_lag_shift, speed_step
 from fricenv.plants.quarter_car import QuarterCarParams
 from fricenv.plants.tire import SLIP_SPEED_FLOOR
 
@@ -151,7 +151,8 @@ def _core_rows(omega, a_x, T_b, k, gated, gc, gx, gP, started, rejected, gj, gh,
             c_new = c[i] + corr * (abs(a_x[i]) - R_g[i] - c[i])
             dead = np.sign(c[i]) * max(abs(c[i]) - db, 0.0) + np.sign(c_new) * max(abs(c_new) - db, 0.0)
             rate = max(R_g[i] + 0.5 * dead, 0.0)
-            y[i] = speed_step(y[i], wr, rate, dt, d, k[13] > 0.0 and torque < 0.0, k[14])
+            y[i] = speed_step(y[i], wr, rate, dt, d, k[13] > 0.0 and torque < 0.0, k[14],
+                              k[13] > 0.0 and R_g[i] <= FREE_ROLLING_RATE)
             c[i] = c_new
         R_g[i] = abs(torque) / (m_eff * R_w)  # eq. (5)
         S = (wr - y[i]) / max(max(y[i], wr), SLIP_SPEED_FLOOR)  # 2. slip, eq. (3)

@@ -73,7 +73,7 @@ def test_the_env_entries_carry_the_mismatch_settings():
     for name in ("ekf", "mhe", "ekf-full", "mhe-full"):
         assert make_estimator(name).model.extras == ("k_T", "a_b")
     assert make_estimator("ekf", mismatch_states=()).model.extras == ()
-    assert make_estimator("ekf-rls").core.cfg.K == 10.0
+    assert make_estimator("ekf-rls").core.cfg.K == 20.0
 
 
 def test_every_entry_builds_with_its_declared_outputs_and_values():
