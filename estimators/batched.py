@@ -32,7 +32,7 @@ from estimators.curve_shape import ShapeFit
 from estimators.ekf_rls import KS0, PHI_MIN_SLIP, RLS_P0, QuarterCarEkfRls
 from estimators.jump import jump_test
 from estimators.mhe_batched import BATCHED_MHE
-from estimators.speed_reference import FREE_ROLLING_RATE, brake_lag_shift, speed_step
+from estimators.speed_reference import FREE_ROLLING_RATE, brake_lag_shift, release_shift, speed_step
 from fricenv.plants.quarter_car import QuarterCarParams
 from fricenv.plants.tire import SLIP_SPEED_FLOOR
 
@@ -73,6 +73,11 @@ def _gate_row(i, omega, torque_prev, ceiling, gc, x, P, started, rejected, jump,
         if (e - shift) * (e - shift) / S <= bound:
             x0, e = x0 + shift, e - shift
             nis = e * e / S
+        else:  # (B6): a released wheel spinning up through the tire's peak?
+            shift = release_shift(e, x1, torque_prev, t_min, dt, gc[7])
+            if (e - shift) * (e - shift) / S <= bound:
+                x0, x1, e = x0 + shift, x1 - shift / dt, e - shift
+                nis = e * e / S
     if nis <= bound:  # accepted: the Kalman update
         rejected[i] = 0
         k0, k1 = p00 / S, p10 / S
@@ -183,7 +188,8 @@ def _core_kernel():
 
         jit = numba.njit(cache=True, error_model="numpy")
         gate_row = types.FunctionType(_gate_row.__code__, {**globals(), "jump_test": jit(jump_test),
-                                                            "brake_lag_shift": jit(brake_lag_shift)}, "_gate_row")
+                                                            "brake_lag_shift": jit(brake_lag_shift),
+                                                            "release_shift": jit(release_shift)}, "_gate_row")
         deps = {"_gate_row": jit(gate_row), "_ekf_row": jit(_ekf_row), "speed_step": jit(speed_step)}
         _COMPILED_CORE.append(jit(types.FunctionType(_core_rows.__code__, {**globals(), **deps}, "_core_rows")))
     return _COMPILED_CORE[0]

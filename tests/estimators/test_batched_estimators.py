@@ -77,3 +77,20 @@ def test_make_batched_answers_none_without_a_batched_form():
 def test_batched_rejects_a_map_without_batch_form():
     with pytest.raises(TypeError, match="batch"):
         BatchedEkfRls(2, DT, PAPER_PARAMS, mu_map=lambda k_s, s_bar: 0.1 * k_s)
+
+
+def test_batched_ekf_rls_equals_single_estimators_on_a_stop_with_a_free_roll_and_releases():
+    """The gap tool's open-loop stop (dry, seed 18): a free roll, then torque released from past the road's peak,
+    where rules (B5) and (B6) of :mod:`estimators.speed_reference` act."""
+    from fricenv.gap.quarter_car.simulate import simulate_log
+    from fricenv.plants.tire import DRY
+
+    log, _ = simulate_log([], DRY, "open-loop", seed=18)
+    batched, single = make_batched("ekf-rls", 1, PAPER_PARAMS, DT), make_estimator("ekf-rls", PAPER_PARAMS, DT)
+    batched.reset(v0=np.full(1, np.nan))
+    single.reset()
+    for k in range(log.t.size):
+        values, health = batched.update(log.omega[k:k + 1], log.a_x[k:k + 1], log.T_b[k:k + 1])
+        ref = single.update((log.omega[k], log.a_x[k]), (log.T_b[k],))
+        assert health[0] == int(ref.health), k
+        np.testing.assert_allclose(values["v"][0], ref.values["v"], rtol=1e-9, atol=1e-9, err_msg=f"step {k}")
