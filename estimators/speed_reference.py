@@ -52,9 +52,11 @@ Measured by ``fricenv paper robustness --seeds 3`` (rms speed error after the fi
 ABS and open-loop stops): nominal plant 0.15 -> 0.12 m/s, relaxation length 0.3 m 0.75 -> 0.25, 0.6 m 0.94 ->
 0.32 (worst sample 2.83 -> 1.29 m/s), the other cells of the effect grid equal or better in the rms but the 4 %
 radius error (0.80 -> 0.83); outlier and re-initialisation flags on the worst nominal stop 1.2 -> 0.4 %. The paper's
-rows (``fricenv paper ekf-rls``) keep eq. (4) and the gate as they are. With (B5) (the same command, at the a_x
-loop's 20 1/s): nominal 0.124 -> 0.083 m/s, drag 0.22 / 0.26 -> 0.10 / 0.10, the other cells equal or better but
-the relaxation lengths (0.18 / 0.23 -> 0.19 / 0.22) and the radius errors (0.86 / 0.83 -> 0.82 / 0.83).
+rows (``fricenv paper ekf-rls``) keep eq. (4) and the gate (with (B4) and (B6), which leave its figures as they
+were). With (B5) and (B6) (the same command, the a_x loop at 20 1/s): nominal 0.12 -> 0.08 m/s, drag 0.22 / 0.26
+-> 0.10 / 0.10, no flag on any stop outside the relaxation lengths (0.8 % of the worst nominal stop before), the
+other cells equal or better but the relaxation lengths (0.18 / 0.23 -> 0.22 / 0.24; worst sample 1.33 -> 1.63
+m/s) and the radius errors (0.86 / 0.83 -> 0.82 / 0.83).
 """
 
 from __future__ import annotations
