@@ -1,13 +1,14 @@
 """Wheel-speed spikes against the quarter-car estimators' outlier gate (:mod:`estimators.outliers`).
 
-On each study log (the MHE paper's cases 1-4 for the EKF and the MHE, the EKF/RLS paper's stop for the EKF/RLS) a
-share ``SPIKE_FRACTION`` of the wheel speeds is multiplied by a spike factor; the run is compared with the clean run
+On each study log (the MHE paper's cases 1-4 for the EKF and the MHE, the EKF/RLS paper's stop for the EKF/RLS; with
+``--stops stand-in`` the gap tool's stand-in stops instead, ABS and open-loop on dry, wet and snow, whose brake
+releases the paper's stops do not have) a share ``SPIKE_FRACTION`` of the wheel speeds is multiplied by a spike factor; the run is compared with the clean run
 of the same log: the rms speed error after ``SETTLE_TIME``, the share of spiked samples marked ``Health.OUTLIER``
 and the share of the other samples marked ``OUTLIER`` or ``REINITIALISED``.
 
 Command (tuning seeds 0-2; the test runs seeds 7-8)::
 
-    python -m validation.estimator_spikes --seeds 0 1 2 [--estimators ekf mhe] [--json PATH]
+    python -m validation.estimator_spikes --seeds 0 1 2 [--estimators ekf mhe] [--stops paper|stand-in] [--json PATH]
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ from __future__ import annotations
 import argparse
 import json
 from dataclasses import asdict, dataclass
+from typing import Any
 
 import numpy as np
 
@@ -25,7 +27,9 @@ from estimators.ekf_rls import QuarterCarEkfRls
 from estimators.mhe import RegularizedMHE
 from estimators.outliers import DEFAULT_GATE
 from estimators.registry import make_estimator
+from fricenv.gap.quarter_car.simulate import DRIVERS, simulate_log
 from fricenv.plants.sui_johansen import OMEGA_NOISE_VAR
+from fricenv.plants.tire import ROADS
 
 __all__ = ["STUDY_ESTIMATORS", "StudyRow", "format_table", "main", "spike_indices", "study"]
 
@@ -65,8 +69,25 @@ def spike_indices(n: int, rng: np.random.Generator, fraction: float = SPIKE_FRAC
     return np.sort(rng.choice(np.arange(start, n), size=count, replace=False))
 
 
-def _logs(estimator: str, seed: int):
+@dataclass(frozen=True)
+class StandInStop:
+    """A stand-in stop as a study log: the log, its true speed and no estimated parameters."""
+
+    log: Any  # fricenv.gap.quarter_car.simulate's log (t, omega, T_b, a_x)
+    v: np.ndarray  # true speed [m/s]
+    estimated: tuple = ()
+
+
+STOP_SOURCES = ("paper", "stand-in")
+STAND_IN_ESTIMATORS = ("ekf-rls-env", "ekf-ax", "mhe-ax")  # the env's estimators the study builds
+STAND_IN_ROADS = ("dry", "wet", "snow")
+
+
+def _logs(estimator: str, seed: int, stops: str = "paper"):
     """(log, true speed, estimated parameters) of every study log of an estimator for one seed."""
+    if stops == "stand-in":
+        return [StandInStop(log, truth["v"]) for driver in DRIVERS for road in STAND_IN_ROADS
+                for log, truth in [simulate_log([], ROADS[road], driver, seed=seed)]]
     if estimator.startswith("ekf-rls") or estimator.endswith("-ax"):  # the stop with a (noisy) a_x
         pc = scenarios.ekf_rls_scenario(noisy=True, seed=seed, omega_noise_var=OMEGA_NOISE_VAR)
         return [pc]
@@ -95,21 +116,27 @@ def _run_one(est, pc, omega: np.ndarray) -> tuple[float, np.ndarray]:
     return float(np.sqrt(np.mean((out["v"][settled] - pc.v[settled]) ** 2))), out["health"]
 
 
-def study(estimator: str, seeds, factors=SPIKE_FACTORS, gated: bool = True) -> list[StudyRow]:
+def study(estimator: str, seeds, factors=SPIKE_FACTORS, gated: bool = True, stops: str = "paper") -> list[StudyRow]:
     """Run one estimator over its study logs, clean and with spikes of every size (module docstring).
 
-    :param estimator: one of :data:`STUDY_ESTIMATORS`.
+    :param estimator: one of :data:`STUDY_ESTIMATORS` (with ``stops="stand-in"``: of :data:`STAND_IN_ESTIMATORS`).
     :param seeds: noise seeds of the logs (the spike places are drawn from (seed, log, factor)).
     :param factors: spike sizes.
     :param gated: False runs the estimators without the gate (the behaviour before it, for comparison).
+    :param stops: ``paper`` (the papers' scenarios) or ``stand-in`` (the gap tool's stand-in stops).
     """
     if estimator not in STUDY_ESTIMATORS:
         raise ValueError(f"estimator must be one of {', '.join(STUDY_ESTIMATORS)}, got {estimator!r}")
+    if stops not in STOP_SOURCES:
+        raise ValueError(f"stops must be one of {', '.join(STOP_SOURCES)}, got {stops!r}")
+    if stops == "stand-in" and estimator not in STAND_IN_ESTIMATORS:
+        raise ValueError(f"--stops stand-in runs the env's estimators ({', '.join(STAND_IN_ESTIMATORS)}), "
+                         f"got {estimator!r}")
     cache: dict = {}
     acc = {f: {"clean": [], "spiked": [], "ratio": [], "hits": 0, "spikes": 0, "false": 0, "other": 0}
            for f in factors}
     for seed in seeds:
-        for j, pc in enumerate(_logs(estimator, seed)):
+        for j, pc in enumerate(_logs(estimator, seed, stops)):
             if pc.estimated not in cache:
                 cache[pc.estimated] = _factory(estimator, pc.estimated, gated)
             est = cache[pc.estimated]
@@ -155,12 +182,18 @@ def main(argv=None) -> int:
     ap.add_argument("--estimators", nargs="+", choices=STUDY_ESTIMATORS, default=list(STUDY_ESTIMATORS))
     ap.add_argument("--json", default=None, help="write the rows to this JSON file")
     ap.add_argument("--no-gate", action="store_true", help="run without the outlier gate (for comparison)")
+    ap.add_argument("--stops", choices=STOP_SOURCES, default="paper",
+                    help="study logs: the papers' scenarios, or the gap tool's stand-in stops (ABS and open-loop, dry, "
+                         f"wet, snow; with the env's estimators {', '.join(STAND_IN_ESTIMATORS)})")
     args = ap.parse_args(argv)
-    rows = [row for name in args.estimators for row in study(name, args.seeds, args.factors, not args.no_gate)]
+    if args.stops == "stand-in" and not set(args.estimators) <= set(STAND_IN_ESTIMATORS):
+        ap.error(f"--stops stand-in runs the env's estimators: --estimators {' '.join(STAND_IN_ESTIMATORS)}")
+    rows = [row for name in args.estimators
+            for row in study(name, args.seeds, args.factors, not args.no_gate, args.stops)]
     print(format_table(rows))
     if args.json:
         with open(args.json, "w") as fh:
-            json.dump({"seeds": args.seeds, "gated": not args.no_gate, "rows": [{**asdict(r), "meets_target": r.meets_target} for r in rows]},
+            json.dump({"seeds": args.seeds, "gated": not args.no_gate, "stops": args.stops, "rows": [{**asdict(r), "meets_target": r.meets_target} for r in rows]},
                       fh, indent=1)
     return 0
 

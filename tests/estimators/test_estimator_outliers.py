@@ -189,3 +189,14 @@ def test_spike_targets_on_unseen_seeds(estimator):
         assert r.hit_rate >= 0.95, r
         assert r.false_rate < 0.01, r
         assert r.spikes >= 6, r
+
+
+def test_the_spike_study_on_the_stand_in_stops_runs_the_env_estimators_only():
+    """``--stops stand-in``: the gap tool's ABS and open-loop stops (6 a seed) with the env's estimators; the
+    papers' forms of the EKF and the MHE are refused with a message naming the ones it runs."""
+    rows = study("ekf-rls-env", seeds=[7], factors=(5.0,), stops="stand-in")
+    assert rows[0].runs == 6 and rows[0].spikes >= 6 * 4
+    with pytest.raises(ValueError, match="ekf-rls-env, ekf-ax, mhe-ax"):
+        study("ekf", seeds=[7], stops="stand-in")
+    with pytest.raises(ValueError, match="stops must be one of paper, stand-in"):
+        study("ekf-rls-env", seeds=[7], stops="stand_in")
