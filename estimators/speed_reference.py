@@ -203,12 +203,12 @@ class WheelSpeedGate:
             span[:-1], span[-1] = span[1:], torque_prev[i]  # in place: this sample's command newest
             if before == 0 and nis(e, S) > self.params.bound:  # (B4): the first failing sample, the brake's lag?
                 room = ceiling - x[0] if torque_prev[i] < 0 else np.inf
-                shift = brake_lag_shift(e, float(torque_prev[i]), float(np.nanmin(span)), float(np.nanmax(span)), room,
-                                        self.dt, self.I_w)
+                t_min, t_max = float(np.nanmin(span)), float(np.nanmax(span))
+                shift = brake_lag_shift(e, float(torque_prev[i]), t_min, t_max, room, self.dt, self.I_w)
                 if nis(e - shift, S) <= self.params.bound:
                     x[0], e = x[0] + shift, e - shift
                 else:  # (B6): a released wheel spinning up through the tire's peak?
-                    shift = release_shift(e, float(x[1]), float(torque_prev[i]), float(np.nanmin(span)), self.dt,
+                    shift = release_shift(e, float(x[1]), float(torque_prev[i]), t_min, self.dt,
                                           float(self.b_bound[i]))
                     if nis(e - shift, S) <= self.params.bound:
                         x[0], x[1], e = x[0] + shift, x[1] - shift / self.dt, e - shift

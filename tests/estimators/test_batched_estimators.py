@@ -93,4 +93,5 @@ def test_batched_ekf_rls_equals_single_estimators_on_a_stop_with_a_free_roll_and
         values, health = batched.update(log.omega[k:k + 1], log.a_x[k:k + 1], log.T_b[k:k + 1])
         ref = single.update((log.omega[k], log.a_x[k]), (log.T_b[k],))
         assert health[0] == int(ref.health), k
-        np.testing.assert_allclose(values["v"][0], ref.values["v"], rtol=1e-9, atol=1e-9, err_msg=f"step {k}")
+        for key in single.names:
+            np.testing.assert_allclose(values[key][0], ref.values[key], rtol=1e-9, atol=1e-9, err_msg=f"{key} step {k}")
