@@ -1,19 +1,28 @@
 """The quarter-car estimators on plants with the effect grid's effects: do they keep the speed?
 
-For each estimator (registry name), driver (``abs``, ``open-loop``), road and seed, the gap tool's stand-in
-(:func:`fricenv.gap.quarter_car.simulate.simulate_log`) writes a stop on the nominal plant and one per effect of
-:data:`fricenv.effects.grid.EFFECT_GRID` at the chosen size (``mu_change`` switches at the nominal stop's mid
-time); the estimator runs on the logged wheel speed and commanded torque (and ``a_x`` if it reads it). Figures per
-run: rms and largest speed error after ``SETTLE_TIME``, and the share of samples flagged ``OUTLIER`` or
-``REINITIALISED`` (the logs hold no spike, so every flag is false), the first half second included.
+For each estimator (registry name), driver, road and seed, a simulator writes a stop on the nominal plant and one
+per effect of :data:`fricenv.effects.grid.EFFECT_GRID` at the chosen size (``mu_change`` switches at the nominal
+stop's mid time, :func:`fricenv.effects.grid.grid_effect`); the estimator runs on the logged wheel speed and
+commanded torque (and ``a_x`` if it reads it). Figures per run: rms and largest speed error after ``SETTLE_TIME``
+(of the log, which starts with a free roll), and the share of samples flagged ``OUTLIER`` or ``REINITIALISED``
+(the logs hold no spike, so every flag is false), the first half second included.
 
-Targets: rms <= ``RMS_FACTOR`` x the same estimator's nominal rms (same road, driver, seed) + ``RMS_MARGIN``;
-largest error <= ``MAX_ERROR``; flags <= ``MAX_FLAGS``.
+Sources (``--source``):
+
+- ``stand-in``: the gap tool's stand-in (:func:`fricenv.gap.quarter_car.simulate.simulate_log`), drivers ``abs``
+  and ``open-loop``;
+- ``independent``: :mod:`validation.independent_sim`, written apart from fricenv's plant and effects, with its own
+  drivers (``pedal``, ``bosch-abs``, ``sine``), free roll, initial speed and ``a_x`` noise drawn from the seed; the
+  same grid cell's parameters on its plant (its effect implementations and its RK4).
+
+Targets: rms <= ``RMS_FACTOR`` x the same estimator's nominal rms (same source, road, driver, seed) +
+``RMS_MARGIN``; largest error <= ``MAX_ERROR``; flags <= ``MAX_FLAGS``.
 
 Command::
 
-    python -m validation.estimator_mismatch [--estimators ekf mhe ekf-rls] [--roads dry wet snow]
-        [--drivers abs open-loop] [--seeds 0 1 2] [--size high] [--effects brake_lag ...] [--jobs 2] [--json PATH]
+    python -m validation.estimator_mismatch [--source stand-in|independent] [--estimators ekf mhe ekf-rls]
+        [--roads dry wet snow] [--drivers ...] [--seeds 0 1 2] [--size high] [--effects brake_lag ...] [--jobs 2]
+        [--json PATH]
 """
 
 from __future__ import annotations
@@ -21,7 +30,8 @@ from __future__ import annotations
 import argparse
 import json
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
+from types import SimpleNamespace
 
 import numpy as np
 
@@ -33,11 +43,13 @@ from fricenv.effects.quarter_car import make_effect
 from fricenv.gap.quarter_car.simulate import DRIVERS, simulate_log
 from fricenv.plants.quarter_car import PAPER_PARAMS
 from fricenv.plants.tire import ROADS
+from validation import independent_sim as ind
 
 __all__ = ["MismatchRow", "format_table", "main", "measure", "run_cell"]
 
 SETTLE_TIME = 0.5  # errors over t >= this [s]
 NOMINAL = "nominal"
+SOURCE_DRIVERS = {"stand-in": DRIVERS, "independent": ind.DRIVERS}  # source -> its drivers
 
 
 @dataclass(frozen=True)
@@ -65,27 +77,60 @@ def _errors(name: str, log, v_true: np.ndarray) -> tuple[float, float, float, in
             int(np.sum(out["health"] == Health.REINITIALISED)))
 
 
-def run_cell(task: tuple) -> list[MismatchRow]:
-    """Every estimator on the nominal log and every effect's log of one (driver, road, seed).
-
-    :param task: (estimators, driver, road, seed, size, effects).
-    """
-    names, driver, road_name, seed, size, effects = task
+def _stand_in_logs(driver: str, road_name: str, seed: int, size: str, effects) -> list[tuple[str, object, np.ndarray]]:
+    """(effect or nominal, log, true speed) of the stand-in's nominal stop and its stop with each effect."""
     road = ROADS[road_name]
     log, truth = simulate_log([], road, driver, seed=seed)
-    rows = [MismatchRow(n, driver, road_name, seed, NOMINAL, *_errors(n, log, truth["v"])) for n in names]
+    out = [(NOMINAL, log, truth["v"])]
     for effect in effects:
         cell = grid_effect(effect, size, road_name, truth["v0"], PAPER_PARAMS)
-        spec = make_effect(cell["effect"], **cell["params"])
-        elog, etruth = simulate_log([spec], road, driver, seed=seed)
-        rows += [MismatchRow(n, driver, road_name, seed, effect, *_errors(n, elog, etruth["v"])) for n in names]
-    return rows
+        elog, etruth = simulate_log([make_effect(cell["effect"], **cell["params"])], road, driver, seed=seed)
+        out.append((effect, elog, etruth["v"]))
+    return out
+
+
+def _independent_logs(driver: str, road_name: str, seed: int, size: str,
+                      effects) -> list[tuple[str, object, np.ndarray]]:
+    """The same from :mod:`validation.independent_sim`: one drawn case (initial speed, free roll, noise) per seed,
+    the nominal plant and each grid cell on it with the driver's and the noise's random stream unchanged."""
+    case = ind.draw_independent_case(ind.NONE, np.random.default_rng([seed, 39]), driver=driver,
+                                     road=ind.ROADS[road_name])
+    out = []
+    for effect in (NOMINAL, *effects):
+        if effect != NOMINAL:
+            cell = grid_effect(effect, size, road_name, case.v0, PAPER_PARAMS)
+            case_e = replace(case, category=effect, effects=(ind.Effect(effect, dict(cell["params"])),))
+        sim = ind.simulate_case(case if effect == NOMINAL else case_e)
+        log = SimpleNamespace(t=sim["t"], omega=sim["omega"], T_b=sim["T_b"], a_x=sim["a_x"])
+        out.append((effect, log, sim["v_true"]))
+    return out
+
+
+def run_cell(task: tuple) -> list[MismatchRow]:
+    """Every estimator on the nominal log and every effect's log of one (source, driver, road, seed).
+
+    :param task: (estimators, driver, road, seed, size, effects, source).
+    """
+    names, driver, road_name, seed, size, effects, source = task
+    logs = (_stand_in_logs if source == "stand-in" else _independent_logs)(driver, road_name, seed, size, effects)
+    return [MismatchRow(n, driver, road_name, seed, effect, *_errors(n, log, v)) for effect, log, v in logs
+            for n in names]
 
 
 def measure(estimators, drivers, roads, seeds, size: str = "high", effects=tuple(EFFECT_GRID),
-            jobs: int = 1) -> list[MismatchRow]:
-    """All cells (see :func:`run_cell`), on ``jobs`` processes."""
-    tasks = [(tuple(estimators), d, r, int(s), size, tuple(effects)) for d in drivers for r in roads for s in seeds]
+            jobs: int = 1, source: str = "stand-in") -> list[MismatchRow]:
+    """All cells (see :func:`run_cell`), on ``jobs`` processes.
+
+    :param source: ``stand-in`` or ``independent`` (module docstring); ``drivers`` must be that source's.
+    """
+    if source not in SOURCE_DRIVERS:
+        raise ValueError(f"source must be one of {', '.join(SOURCE_DRIVERS)}, got {source!r}")
+    bad = [d for d in drivers if d not in SOURCE_DRIVERS[source]]
+    if bad:
+        raise ValueError(f"driver(s) {', '.join(bad)} not of the {source} source; its drivers: "
+                         f"{', '.join(SOURCE_DRIVERS[source])}")
+    tasks = [(tuple(estimators), d, r, int(s), size, tuple(effects), source)
+             for d in drivers for r in roads for s in seeds]
     if jobs <= 1:
         return [row for t in tasks for row in run_cell(t)]
     with ProcessPoolExecutor(max_workers=jobs) as pool:
@@ -124,7 +169,9 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="python -m validation.estimator_mismatch",
                                  description="Quarter-car estimators on plants with the effect grid's effects.")
     ap.add_argument("--estimators", nargs="+", default=["ekf", "mhe", "ekf-rls"])
-    ap.add_argument("--drivers", nargs="+", choices=DRIVERS, default=list(DRIVERS))
+    ap.add_argument("--source", choices=tuple(SOURCE_DRIVERS), default="stand-in")
+    ap.add_argument("--drivers", nargs="+", choices=sorted({d for ds in SOURCE_DRIVERS.values() for d in ds}),
+                    default=None, help="the source's drivers (default: all of them)")
     ap.add_argument("--roads", nargs="+", choices=("dry", "wet", "snow"), default=["dry", "wet", "snow"])
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     ap.add_argument("--size", choices=GRID_SIZES, default="high")
@@ -132,7 +179,12 @@ def main(argv=None) -> int:
     ap.add_argument("--jobs", type=int, default=1)
     ap.add_argument("--json", default=None, help="write every run and its verdicts to this JSON file")
     args = ap.parse_args(argv)
-    rows = measure(args.estimators, args.drivers, args.roads, args.seeds, args.size, args.effects, args.jobs)
+    drivers = args.drivers or list(SOURCE_DRIVERS[args.source])
+    bad = [d for d in drivers if d not in SOURCE_DRIVERS[args.source]]
+    if bad:
+        ap.error(f"--drivers: {', '.join(bad)} not of the {args.source} source; its drivers: "
+                 f"{', '.join(SOURCE_DRIVERS[args.source])}")
+    rows = measure(args.estimators, drivers, args.roads, args.seeds, args.size, args.effects, args.jobs, args.source)
     print(format_table(rows))
     if args.json:
         with open(args.json, "w") as fh:
