@@ -31,7 +31,6 @@ import argparse
 import json
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict, dataclass, replace
-from types import SimpleNamespace
 
 import numpy as np
 
@@ -93,16 +92,12 @@ def _independent_logs(driver: str, road_name: str, seed: int, size: str,
                       effects) -> list[tuple[str, object, np.ndarray]]:
     """The same from :mod:`validation.independent_sim`: one drawn case (initial speed, free roll, noise) per seed,
     the nominal plant and each grid cell on it with the driver's and the noise's random stream unchanged."""
-    case = ind.draw_independent_case(ind.NONE, np.random.default_rng([seed, 39]), driver=driver,
-                                     road=ind.ROADS[road_name])
-    out = []
-    for effect in (NOMINAL, *effects):
-        if effect != NOMINAL:
-            cell = grid_effect(effect, size, road_name, case.v0, PAPER_PARAMS)
-            case_e = replace(case, category=effect, effects=(ind.Effect(effect, dict(cell["params"])),))
-        sim = ind.simulate_case(case if effect == NOMINAL else case_e)
-        log = SimpleNamespace(t=sim["t"], omega=sim["omega"], T_b=sim["T_b"], a_x=sim["a_x"])
-        out.append((effect, log, sim["v_true"]))
+    case = ind.study_case(driver, road_name, seed)
+    out = [(NOMINAL, *ind.study_log(case))]
+    for effect in effects:
+        cell = grid_effect(effect, size, road_name, case.v0, PAPER_PARAMS)
+        on = replace(case, category=effect, effects=(ind.Effect(effect, dict(cell["params"])),))
+        out.append((effect, *ind.study_log(on)))
     return out
 
 

@@ -2,13 +2,15 @@
 
 On each study log (the MHE paper's cases 1-4 for the EKF and the MHE, the EKF/RLS paper's stop for the EKF/RLS; with
 ``--stops stand-in`` the gap tool's stand-in stops instead, ABS and open-loop on dry, wet and snow, whose brake
-releases the paper's stops do not have) a share ``SPIKE_FRACTION`` of the wheel speeds is multiplied by a spike factor; the run is compared with the clean run
+releases the paper's stops do not have; with ``--stops independent`` the stops of :mod:`validation.independent_sim`,
+its pedal press, threshold ABS and sine-modulated torque on dry, wet and snow) a share ``SPIKE_FRACTION`` of the wheel speeds is multiplied by a spike factor; the run is compared with the clean run
 of the same log: the rms speed error after ``SETTLE_TIME``, the share of spiked samples marked ``Health.OUTLIER``
 and the share of the other samples marked ``OUTLIER`` or ``REINITIALISED``.
 
 Command (tuning seeds 0-2; the test runs seeds 7-8)::
 
-    python -m validation.estimator_spikes --seeds 0 1 2 [--estimators ekf mhe] [--stops paper|stand-in] [--json PATH]
+    python -m validation.estimator_spikes --seeds 0 1 2 [--estimators ekf mhe] [--stops paper|stand-in|independent]
+        [--json PATH]
 """
 
 from __future__ import annotations
@@ -30,6 +32,7 @@ from estimators.registry import make_estimator
 from fricenv.gap.quarter_car.simulate import DRIVERS, simulate_log
 from fricenv.plants.sui_johansen import OMEGA_NOISE_VAR
 from fricenv.plants.tire import ROADS
+from validation import independent_sim as ind
 
 __all__ = ["STUDY_ESTIMATORS", "StudyRow", "format_table", "main", "spike_indices", "study"]
 
@@ -70,24 +73,28 @@ def spike_indices(n: int, rng: np.random.Generator, fraction: float = SPIKE_FRAC
 
 
 @dataclass(frozen=True)
-class StandInStop:
-    """A stand-in stop as a study log: the log, its true speed and no estimated parameters."""
+class SimulatedStop:
+    """A simulated stop as a study log: the log, its true speed and no estimated parameters."""
 
     log: Any  # fricenv.gap.quarter_car.simulate's log (t, omega, T_b, a_x)
     v: np.ndarray  # true speed [m/s]
     estimated: tuple = ()
 
 
-STOP_SOURCES = ("paper", "stand-in")
-STAND_IN_ESTIMATORS = ("ekf-rls-env", "ekf-ax", "mhe-ax")  # the env's estimators the study builds
-STAND_IN_ROADS = ("dry", "wet", "snow")
+STOP_SOURCES = ("paper", "stand-in", "independent")
+SIMULATED = ("stand-in", "independent")  # the sources of simulated stops, which the env's estimators read
+ENV_ESTIMATORS = ("ekf-rls-env", "ekf-ax", "mhe-ax")  # the env's estimators the study builds
+SIMULATED_ROADS = ("dry", "wet", "snow")
 
 
 def _logs(estimator: str, seed: int, stops: str = "paper"):
     """(log, true speed, estimated parameters) of every study log of an estimator for one seed."""
     if stops == "stand-in":
-        return [StandInStop(log, truth["v"]) for driver in DRIVERS for road in STAND_IN_ROADS
+        return [SimulatedStop(log, truth["v"]) for driver in DRIVERS for road in SIMULATED_ROADS
                 for log, truth in [simulate_log([], ROADS[road], driver, seed=seed)]]
+    if stops == "independent":
+        return [SimulatedStop(*ind.study_log(ind.study_case(driver, road, seed))) for driver in ind.DRIVERS
+                for road in SIMULATED_ROADS]
     if estimator.startswith("ekf-rls") or estimator.endswith("-ax"):  # the stop with a (noisy) a_x
         pc = scenarios.ekf_rls_scenario(noisy=True, seed=seed, omega_noise_var=OMEGA_NOISE_VAR)
         return [pc]
@@ -119,7 +126,7 @@ def _run_one(est, pc, omega: np.ndarray) -> tuple[float, np.ndarray]:
 def study(estimator: str, seeds, factors=SPIKE_FACTORS, gated: bool = True, stops: str = "paper") -> list[StudyRow]:
     """Run one estimator over its study logs, clean and with spikes of every size (module docstring).
 
-    :param estimator: one of :data:`STUDY_ESTIMATORS` (with ``stops="stand-in"``: of :data:`STAND_IN_ESTIMATORS`).
+    :param estimator: one of :data:`STUDY_ESTIMATORS` (with simulated stops: of :data:`ENV_ESTIMATORS`).
     :param seeds: noise seeds of the logs (the spike places are drawn from (seed, log, factor)).
     :param factors: spike sizes.
     :param gated: False runs the estimators without the gate (the behaviour before it, for comparison).
@@ -129,8 +136,8 @@ def study(estimator: str, seeds, factors=SPIKE_FACTORS, gated: bool = True, stop
         raise ValueError(f"estimator must be one of {', '.join(STUDY_ESTIMATORS)}, got {estimator!r}")
     if stops not in STOP_SOURCES:
         raise ValueError(f"stops must be one of {', '.join(STOP_SOURCES)}, got {stops!r}")
-    if stops == "stand-in" and estimator not in STAND_IN_ESTIMATORS:
-        raise ValueError(f"--stops stand-in runs the env's estimators ({', '.join(STAND_IN_ESTIMATORS)}), "
+    if stops in SIMULATED and estimator not in ENV_ESTIMATORS:
+        raise ValueError(f"--stops {stops} runs the env's estimators ({', '.join(ENV_ESTIMATORS)}), "
                          f"got {estimator!r}")
     cache: dict = {}
     acc = {f: {"clean": [], "spiked": [], "ratio": [], "hits": 0, "spikes": 0, "false": 0, "other": 0}
@@ -183,11 +190,12 @@ def main(argv=None) -> int:
     ap.add_argument("--json", default=None, help="write the rows to this JSON file")
     ap.add_argument("--no-gate", action="store_true", help="run without the outlier gate (for comparison)")
     ap.add_argument("--stops", choices=STOP_SOURCES, default="paper",
-                    help="study logs: the papers' scenarios, or the gap tool's stand-in stops (ABS and open-loop, dry, "
-                         f"wet, snow; with the env's estimators {', '.join(STAND_IN_ESTIMATORS)})")
+                    help="study logs: the papers' scenarios, the gap tool's stand-in stops (ABS and open-loop, dry, "
+                         "wet, snow) or the independent simulator's (pedal, threshold ABS, sine; dry, wet, snow); "
+                         f"simulated stops with the env's estimators {', '.join(ENV_ESTIMATORS)}")
     args = ap.parse_args(argv)
-    if args.stops == "stand-in" and not set(args.estimators) <= set(STAND_IN_ESTIMATORS):
-        ap.error(f"--stops stand-in runs the env's estimators: --estimators {' '.join(STAND_IN_ESTIMATORS)}")
+    if args.stops in SIMULATED and not set(args.estimators) <= set(ENV_ESTIMATORS):
+        ap.error(f"--stops {args.stops} runs the env's estimators: --estimators {' '.join(ENV_ESTIMATORS)}")
     rows = [row for name in args.estimators
             for row in study(name, args.seeds, args.factors, not args.no_gate, args.stops)]
     print(format_table(rows))

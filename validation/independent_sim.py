@@ -37,6 +37,7 @@ import time
 import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
+from types import SimpleNamespace
 
 import numpy as np
 
@@ -88,7 +89,8 @@ from validation.true_noise import real_like_noise, white_noise
 
 __all__ = ["CATEGORIES", "DRIVERS", "EFFECT_PARAMS", "H_STEP", "LIBRARY_EFFECTS", "OUT_OF_LIBRARY_EFFECTS", "ROADS",
            "V_STOP", "Effect", "G", "IndependentCase", "Road", "Vehicle", "case_noise", "draw_independent_case",
-           "initial_state", "integrate", "make_model", "measure", "simulate_case", "stopping_distance",
+           "initial_state", "integrate", "make_model", "measure", "simulate_case", "stopping_distance", "study_case",
+           "study_log",
            "write_independent_log", "write_real_log"]
 
 
@@ -237,6 +239,18 @@ def simulate_case(case: IndependentCase, veh: Vehicle = VEHICLE) -> dict:
         rec["T_applied"].append(model.applied(t, x))
         x = integrate(model, x, t, t + DT)
     return {k: np.asarray(v, dtype=float) for k, v in rec.items()}
+
+
+def study_case(driver: str, road: str, seed: int) -> IndependentCase:
+    """The nominal case the estimator studies (:mod:`validation.estimator_mismatch`, :mod:`validation.estimator_spikes`)
+    take for a driver, a preset road and a seed: initial speed, free roll and noise drawn from the seed."""
+    return draw_independent_case(NONE, np.random.default_rng([seed, 39]), driver=driver, road=ROADS[road])
+
+
+def study_log(case: IndependentCase):
+    """A case's measured log as the estimators read it (``t``, ``omega``, ``T_b``, ``a_x``) and its true speed."""
+    sim = simulate_case(case)
+    return SimpleNamespace(t=sim["t"], omega=sim["omega"], T_b=sim["T_b"], a_x=sim["a_x"]), sim["v_true"]
 
 
 def case_noise(case: IndependentCase) -> dict[str, float]:

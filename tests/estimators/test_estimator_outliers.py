@@ -198,5 +198,5 @@ def test_the_spike_study_on_the_stand_in_stops_runs_the_env_estimators_only():
     assert rows[0].runs == 6 and rows[0].spikes >= 6 * 4
     with pytest.raises(ValueError, match="ekf-rls-env, ekf-ax, mhe-ax"):
         study("ekf", seeds=[7], stops="stand-in")
-    with pytest.raises(ValueError, match="stops must be one of paper, stand-in"):
+    with pytest.raises(ValueError, match="stops must be one of paper, stand-in, independent"):
         study("ekf-rls-env", seeds=[7], stops="stand_in")
