@@ -200,3 +200,13 @@ def test_the_spike_study_on_the_stand_in_stops_runs_the_env_estimators_only():
         study("ekf", seeds=[7], stops="stand-in")
     with pytest.raises(ValueError, match="stops must be one of paper, stand-in, independent"):
         study("ekf-rls-env", seeds=[7], stops="stand_in")
+
+
+def test_the_spike_study_on_the_independent_stops_flags_the_spikes_of_the_a_x_speed_filter():
+    """``--stops independent``: the independent simulator's pedal, threshold ABS and sine stops on dry, wet and snow
+    (9 a seed); on seed 7 ``ekf-ax`` flags all 43 x5 spikes and no other sample."""
+    (row,) = study("ekf-ax", seeds=[7], factors=(5.0,), stops="independent")
+    assert row.runs == 9 and row.spikes >= 9 * 3
+    assert row.hit_rate == 1.0 and row.false_rate == 0.0, row
+    with pytest.raises(ValueError, match="--stops independent runs the env's estimators"):
+        study("mhe", seeds=[7], stops="independent")
