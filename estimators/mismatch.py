@@ -51,7 +51,8 @@ filter until the re-initialisation, which then took the speed from a wheel that 
      held over ``BRAKE_SETTLE_S``, as rule (B4) of :mod:`estimators.speed_reference` reads a lagging brake): it is
      an outlier and joins no run. The rule waits until the wheel speeds the filter used have been below its speed
      for that span: a tire wound up under a relaxation length spins the wheel past the car and pulls it back below
-     faster than the brake (open-loop dry stop, seed 1, 0.6 m: 3 such samples). The gate of the filters whose slip
+     faster than the brake (without the wait, 3 samples of the open-loop dry stop of seed 1 at 0.6 m were flagged
+     so). The gate of the filters whose slip
      takes a random walk (``ekf-ax``, ``mhe-ax``) is wide in a slip dip (about 3 m/s at the wheel's surface at 25
      m/s): a wheel speed halved there passed it, and the sample after it failed against the prediction it had
      moved.
