@@ -60,6 +60,7 @@ filter until the re-initialisation, which then took the speed from a wheel that 
 
 from __future__ import annotations
 
+from collections import deque
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -67,12 +68,12 @@ import numpy as np
 from estimators.outliers import GateParams, Verdict, gate, nis
 from estimators.tuning import (
     A_REF,
-    BRAKE_SETTLE_S,
     JUMP_MU_MAX,
     MISMATCH_NIS_MAX,
     MISMATCH_TREND_NIS,
     REF_MARGIN_STD,
     SLIP_PRIOR,
+    brake_settle_samples,
 )
 
 __all__ = ["WheelSpeedGuard"]
@@ -89,7 +90,7 @@ class _State:
     e_prev: float = np.nan  # the run's last innovation [rad/s]
     e_passed: float = np.nan  # the innovation of the sample before this one if it passed the gate [rad/s]
     nis_passed: float = 0.0  # its NIS [-]
-    brakes: list = field(default_factory=list)  # the brake torques held over the last BRAKE_SETTLE_S, newest last
+    brakes: deque = field(default_factory=deque)  # the brake torques held over the last BRAKE_SETTLE_S, newest last
     below: int = 0  # samples in a row whose wheel speed the filter used lay below the car's speed [-]
 
 
@@ -107,11 +108,11 @@ class WheelSpeedGuard:
         self.noise_std = float(noise_std)
         p = model.p
         self.b_bound = JUMP_MU_MAX * p.Fz * p.r / p.J
-        self.settle = round(BRAKE_SETTLE_S / model.dt) + 1  # brake torques (M4) reads
+        self.settle = brake_settle_samples(model.dt)  # brake torques (M4) reads
         self.reset()
 
     def reset(self) -> None:
-        self.s = _State()
+        self.s = _State(brakes=deque(maxlen=self.settle))
 
     @property
     def rejected(self) -> int:
@@ -201,7 +202,7 @@ class WheelSpeedGuard:
         S = float((H @ (P @ H.T) + R)[0, 0])  # as estimators.ekf.innovation_covariance
         e = omega - float(self.model.h(x))
         s = self.s
-        s.brakes = (s.brakes + [float(brake_torque)])[-self.settle:]
+        s.brakes.append(float(brake_torque))
         floor = self._below_brake_floor(x, omega)  # (M4)
         value = np.inf if floor else nis(e, S)
         verdict, rejected = gate(value, s.rejected, self.params)

@@ -65,7 +65,7 @@ import numpy as np
 
 from estimators.jump import JUMP_MU_MAX, jump_test
 from estimators.outliers import GateParams, Verdict, gate, nis
-from estimators.tuning import BRAKE_SETTLE_S
+from estimators.tuning import brake_settle_samples
 
 __all__ = ["WHEEL_B_STD", "WheelSpeedGate", "brake_lag_shift", "release_shift", "speed_step"]
 
@@ -160,7 +160,7 @@ class WheelSpeedGate:
         self.R = float(omega_std) ** 2
         self.b_std0 = np.asarray(Fz, dtype=float) * R_w / I_w  # [rad/s^2]
         self.b_bound = JUMP_MU_MAX * self.b_std0  # largest tire term a road can produce (estimators.jump) [rad/s^2]
-        self.settle = round(BRAKE_SETTLE_S / self.dt) + 1  # commands the applied torque may still follow, (B4)
+        self.settle = brake_settle_samples(self.dt)  # commands the applied torque may still follow, (B4)
         self.Q = np.diag([0.0, WHEEL_B_STD**2])
         self.F = np.array([[1.0, -self.dt], [0.0, 1.0]])
         self.reset()

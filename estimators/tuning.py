@@ -35,6 +35,7 @@ __all__ = [
     "SLIP_PRIOR",
     "STATE_SCALES",
     "V_PRIOR",
+    "brake_settle_samples",
 ]
 
 # ---- the mismatch states (estimators.quarter_car_model.EXTRA_NAMES) of the env estimators
@@ -98,3 +99,8 @@ MISMATCH_TREND_NIS = 0.25  # an a_x-speed filter's run may start at a passing sa
 
 # ---- the EKF/RLS's wheel-speed gate (estimators.speed_reference)
 BRAKE_SETTLE_S = 0.1  # the torque a brake applies lies within its commands over this span, rule (B4) [s]
+
+
+def brake_settle_samples(dt: float) -> int:
+    """The commands of the ``BRAKE_SETTLE_S`` span at sample time ``dt``, the one held now included."""
+    return round(BRAKE_SETTLE_S / dt) + 1
