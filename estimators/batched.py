@@ -32,7 +32,7 @@ from estimators.curve_shape import ShapeFit
 from estimators.ekf_rls import KS0, PHI_MIN_SLIP, RLS_P0, QuarterCarEkfRls
 from estimators.jump import jump_test
 from estimators.mhe_batched import BATCHED_MHE
-from estimators.speed_reference import FREE_ROLLING_RATE, brake_lag_shift, release_shift, speed_step
+from estimators.speed_reference import FREE_ROLLING_RATE, a_x_loop_step, brake_lag_shift, release_shift, speed_step
 from fricenv.plants.quarter_car import QuarterCarParams
 from fricenv.plants.tire import SLIP_SPEED_FLOOR
 
@@ -153,7 +153,7 @@ def _core_rows(omega, a_x, T_b, k, gated, gc, gx, gP, started, rejected, gj, gh,
         if np.isnan(y[i]):  # 1. velocity filter, eqs. (4)-(6) with the a_x loop
             y[i] = wr
         else:
-            c_new = c[i] + corr * (abs(a_x[i]) - R_g[i] - c[i])
+            c_new = a_x_loop_step(c[i], a_x[i], R_g[i], corr, k[13] > 0.0 and torque <= 0.0)
             dead = np.sign(c[i]) * max(abs(c[i]) - db, 0.0) + np.sign(c_new) * max(abs(c_new) - db, 0.0)
             rate = max(R_g[i] + 0.5 * dead, 0.0)
             y[i] = speed_step(y[i], wr, rate, dt, d, k[13] > 0.0 and torque < 0.0, k[14],
@@ -190,7 +190,8 @@ def _core_kernel():
         gate_row = types.FunctionType(_gate_row.__code__, {**globals(), "jump_test": jit(jump_test),
                                                             "brake_lag_shift": jit(brake_lag_shift),
                                                             "release_shift": jit(release_shift)}, "_gate_row")
-        deps = {"_gate_row": jit(gate_row), "_ekf_row": jit(_ekf_row), "speed_step": jit(speed_step)}
+        deps = {"_gate_row": jit(gate_row), "_ekf_row": jit(_ekf_row), "speed_step": jit(speed_step),
+                "a_x_loop_step": jit(a_x_loop_step)}
         _COMPILED_CORE.append(jit(types.FunctionType(_core_rows.__code__, {**globals(), **deps}, "_core_rows")))
     return _COMPILED_CORE[0]
 

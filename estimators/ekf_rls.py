@@ -8,7 +8,9 @@ Steps per sample (Section III of the paper), for n wheels (quarter car n = 1, tw
    (``m_eff = m + n I_w / R_w^2``; the paper's 466.5 is this number for its Table I), optionally corrected by the
    a_x loop of Fig. 2: ``c' = K (|a_x| - R_g - c)``, ``R = max(R_g + dz(c), 0)`` (discretized exactly, trapezoid
    over each sample; ``dz`` an optional dead zone, 0 by default). Whenever the wheel slips by more than d the
-   filter integrates R, and it follows the wheel when it rolls freely.
+   filter integrates R, and it follows the wheel when it rolls freely. With ``braking_reference`` and no torque
+   driving the wheel the loop reads the deceleration ``max(-a_x, 0)`` in place of ``|a_x|``
+   (:func:`~estimators.speed_reference.a_x_loop_step`).
 
    Reading of the a_x loop (Fig. 2 is a block diagram we only have the caption of; K = 100 1/s in Table I). Taken
    literally (``correction_gain=PAPER_CORRECTION_GAIN``), the loop makes R follow |a_x| within 10 ms, so the
@@ -77,7 +79,7 @@ from estimators.curve_shape import DEFAULT_BANK, ShapeBank, ShapeFit, ShapeFitPa
 from estimators.ekf import ekf_predict, ekf_update
 from estimators.outliers import DEFAULT_GATE, GateParams, Verdict, check_gate
 from estimators.slope_maps import PAPER_MAP, MagicFormulaFamilyMap
-from estimators.speed_reference import FREE_ROLLING_RATE, WheelSpeedGate, speed_step
+from estimators.speed_reference import FREE_ROLLING_RATE, WheelSpeedGate, a_x_loop_step, speed_step
 from estimators.tuning import REF_MARGIN_STD
 from fricenv.plants.quarter_car import PAPER_PARAMS, QuarterCarParams
 from fricenv.plants.sui_johansen import OMEGA_NOISE_STD
@@ -228,7 +230,7 @@ class EkfRlsCore:
         if self.y is None:
             y = x_ref
         else:
-            c_new = self.c + self.corr_factor * (abs(a_x) - self.R_g - self.c)
+            c_new = a_x_loop_step(self.c, a_x, self.R_g, self.corr_factor, cfg.braking_reference and T_total <= 0)
             rate = max(self.R_g + 0.5 * (self._dead(self.c) + self._dead(c_new)), 0.0)
             free = cfg.braking_reference and self.R_g <= FREE_ROLLING_RATE  # (B5): the torque held leaves the wheel free
             y = speed_step(self.y, x_ref, rate, self.dt, cfg.d, cfg.braking_reference and T_total < 0,

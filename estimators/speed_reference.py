@@ -67,11 +67,29 @@ from estimators.jump import JUMP_MU_MAX, jump_test
 from estimators.outliers import GateParams, Verdict, gate, nis
 from estimators.tuning import brake_settle_samples
 
-__all__ = ["WHEEL_B_STD", "WheelSpeedGate", "brake_lag_shift", "release_shift", "speed_step"]
+__all__ = ["WHEEL_B_STD", "WheelSpeedGate", "a_x_loop_step", "brake_lag_shift", "release_shift", "speed_step"]
 
 FREE_ROLLING_TAU = 0.2  # (B5): time constant of the estimate's approach to a free-rolling wheel [s]
 FREE_ROLLING_RATE = 0.1  # (B5): a torque whose feedforward R_g is at most this leaves the wheel free [m/s^2]
 WHEEL_B_STD = 100.0  # random walk of the tire torque over inertia in the wheel-speed gate, per sample [rad/s^2]
+
+
+def a_x_loop_step(c: float, a_x: float, R_g: float, gain: float, braked: bool) -> float:
+    """The a_x loop of Fig. 2 from one sample to the next: the correction ``c`` of the rate R moves a share ``gain``
+    of the way to the measured rate less the torque's feedforward R_g (eq. (5)). The paper's rate is ``|a_x|``, the
+    speed of eq. (4)'s approach in traction and in braking alike. With the rules of this module on and no torque
+    driving the wheel (``braked``), the estimate only falls ((B1), (B2), (B5)), and the rate is the car's
+    deceleration, ``max(-a_x, 0)`` (``a_x`` is positive forward, docs/contracts.md): a car pushed forward, as a tire
+    with a relaxation length unwinds after a release, does not decelerate, and reading its push as braking pulled
+    the estimate below the car. Plain arithmetic: the batched estimator compiles it.
+
+    :param c: correction [m/s^2]; :param a_x: longitudinal acceleration, negative when braking [m/s^2].
+    :param R_g: feedforward of the torque held [m/s^2]; :param gain: the loop's gain over one sample [-].
+    :param braked: the rules are on and the torque brakes or is zero.
+    :return: the next correction [m/s^2].
+    """
+    measured = max(-a_x, 0.0) if braked else abs(a_x)
+    return c + gain * (measured - R_g - c)
 
 
 def speed_step(y: float, x_ref: float, rate: float, dt: float, d: float, braking: bool, margin: float,
