@@ -32,7 +32,13 @@ from estimators.curve_shape import ShapeFit
 from estimators.ekf_rls import KS0, PHI_MIN_SLIP, RLS_P0, QuarterCarEkfRls
 from estimators.jump import jump_test
 from estimators.mhe_batched import BATCHED_MHE
-from estimators.speed_reference import FREE_ROLLING_RATE, a_x_loop_step, brake_lag_shift, release_shift, speed_step
+from estimators.speed_reference import (
+    FREE_ROLLING_RATE,
+    a_x_loop_step,
+    brake_lag_shift,
+    release_shift,
+    speed_step,
+)
 from fricenv.plants.quarter_car import QuarterCarParams
 from fricenv.plants.tire import SLIP_SPEED_FLOOR
 
