@@ -80,7 +80,8 @@ def a_x_loop_step(c: float, a_x: float, R_g: float, gain: float, braked: bool) -
     """The a_x loop of Fig. 2 from one sample to the next: the correction ``c`` of the rate R moves a share ``gain``
     of the way to the measured rate less the torque's feedforward R_g (eq. (5)). The paper's rate is ``|a_x|``, the
     speed of eq. (4)'s approach in traction and in braking alike. With the rules of this module on and no torque
-    driving the wheel (``braked``), the estimate only falls ((B1), (B2), (B5)), and the rate is the car's
+    driving the wheel (``braked``), R is a fall: the estimate never rises under a brake (B1), falls at R past a wheel
+    faster than it (B2) and is predicted at R while the wheel rolls freely (B5). The rate is then the car's
     deceleration, ``max(-a_x, 0)`` (``a_x`` is positive forward, docs/contracts.md): a car pushed forward, as a tire
     with a relaxation length unwinds after a release, does not decelerate, and reading its push as braking pulled
     the estimate below the car. Plain arithmetic: the batched estimator compiles it.
