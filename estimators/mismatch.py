@@ -127,7 +127,7 @@ class WheelSpeedGuard:
         wheel = -np.inf if omega is None else omega * r - REF_MARGIN_STD * self.noise_std * r
         self.s.v_ref = max(fallen, wheel)
 
-    def _below_brake_floor(self, x: np.ndarray, omega: float) -> bool:
+    def _below_brake_floor(self, omega: float) -> bool:
         """(M4): a braked wheel below the car falls no faster than the strongest brake torque of the settling span
         pulls it, from the last wheel speed the filter used (both samples' noise within the gate's bound)."""
         s, p, dt = self.s, self.model.p, self.model.dt
@@ -203,7 +203,7 @@ class WheelSpeedGuard:
         e = omega - float(self.model.h(x))
         s = self.s
         s.brakes.append(float(brake_torque))
-        floor = self._below_brake_floor(x, omega)  # (M4)
+        floor = self._below_brake_floor(omega)  # (M4)
         value = np.inf if floor else nis(e, S)
         verdict, rejected = gate(value, s.rejected, self.params)
         inflation = 0.0
