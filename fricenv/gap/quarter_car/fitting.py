@@ -23,11 +23,11 @@ from fricenv.gap.quarter_car.windows import (
     window_nuisances,
     window_residuals,
 )
-from fricenv.gap.signals.sensors import QUIET_MIN, correlation_time
+from fricenv.gap.signals.sensors import correlation_time
 from fricenv.plants.tire import ROADS
 
 __all__ = ["FIT_LOSS_SCALE", "bounds", "distinct_starts", "effect_start_matrix", "fit", "fit_loss", "fit_nominal",
-           "free_rolling_level", "refine_noise", "road_starts", "score"]
+           "refine_noise", "road_starts", "score"]
 
 # Residual scale (noise std) of the fits' robust loss; the change-point search bounds a sample's squared residual
 # at (2 FIT_LOSS_SCALE)^2. Either way one lock-up cannot place the road or the change.
@@ -223,9 +223,7 @@ def refine_noise(nominal: CandidateFit, d: Data) -> None:
     error at a few brake transitions does not set it), times the square root of the residual's integrated
     autocorrelation time (its windows hold that many times fewer independent samples), unless its filter is known
     and undone (``white``, :func:`fricenv.gap.signals.filters.undone`): its noise is white again, and read as an
-    unfiltered channel's. The wheel speed's level is at least its free-rolling residual's (:func:`free_rolling_level`,
-    within the training residual's), since noise that neighbouring samples share reads low in their differences.
-    No channel goes below its quantisation floor ``q / sqrt(12)`` or ``NOISE_FLOOR``."""
+    unfiltered channel's. No channel goes below its quantisation floor ``q / sqrt(12)`` or ``NOISE_FLOOR``."""
     train = np.flatnonzero(~d.test)
     _, r_ch = window_residuals([], nominal.names, nominal.x, d, train, per_channel=True)
     sensors = d.sensors or {}
@@ -245,34 +243,6 @@ def refine_noise(nominal: CandidateFit, d: Data) -> None:
             level = robust_rms(r) * d.sigma[c] * dof if certain else rms
             d.sigma[c] = max(level * np.sqrt(tau), floor)
         else:
-            level = min(d.sigma[c], rms)
-            free = free_rolling_level(nominal, d) if c == "omega" else float("nan")
-            if np.isfinite(free):  # the differences read a wheel speed's correlated noise low
-                info["free_rolling_noise"] = free
-                level = max(level, min(free, rms))
-            d.sigma[c] = max(level, floor)
+            d.sigma[c] = max(min(d.sigma[c], rms), floor)
         if c in sensors:
             info["noise_std"] = d.sigma[c]
-
-
-def free_rolling_level(nominal: CandidateFit, d: Data) -> float:
-    """The wheel speed's noise std read from the calibrated nominal model's residual over the free-rolling start
-    (the prediction windows that end before the brake acts), or NaN when those windows hold fewer than
-    ``QUIET_MIN`` samples.
-
-    No library effect acts there but drag, whose deceleration (300 N on the paper's car) bends a 0.1 s window's
-    wheel speed by 0.08 rad/s rms, a few per cent of the noise's variance: the residual there is the sensor's noise. The difference-based estimate reads the noise low when
-    neighbouring samples share it: white noise of a 100 Hz wheel speed interpolated at 80-97 Hz (a logger or a
-    resampling between bus samples) correlates neighbours by up to 0.25, and its second differences read 0.77-0.88
-    of its per-sample std (at 96-97 Hz the true model of two real-like logs left gaps of 0.76 and 0.90 noise units).
-    """
-    h = d.horizon
-    widx = np.flatnonzero(d.starts + h <= d.free_end)
-    if widx.size * h < QUIET_MIN:
-        return float("nan")
-    _, r_ch = window_residuals([], nominal.names, nominal.x, d, widx, per_channel=True)
-    r = r_ch["omega"][0]
-    r = r[np.isfinite(r) & (r != 0.0)]  # missing samples
-    if r.size < QUIET_MIN:
-        return float("nan")
-    return float(np.sqrt(np.mean(r ** 2) * h / (h - 1.0))) * d.sigma["omega"]  # one fitted wheel speed a window
