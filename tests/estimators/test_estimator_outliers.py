@@ -16,7 +16,7 @@ from estimators.mhe import RegularizedMHE
 from estimators.outliers import DEFAULT_GATE, GateParams, Verdict, gate, nis
 from estimators.scenarios import ekf_rls_scenario, mhe_case
 from fricenv.plants.sui_johansen import OMEGA_NOISE_VAR
-from validation.estimator_spikes import STUDY_ESTIMATORS, spike_indices, study
+from validation.estimator_spikes import STUDY_ESTIMATORS, _logs, spike_indices, spike_moves, study
 
 BAD = (Health.OUTLIER, Health.REINITIALISED)
 
@@ -189,6 +189,26 @@ def test_spike_targets_on_unseen_seeds(estimator):
         assert r.hit_rate >= 0.95, r
         assert r.false_rate < 0.01, r
         assert r.spikes >= 6, r
+
+
+def test_a_spike_counts_only_where_it_moves_the_wheel_speed_beyond_the_noise():
+    """A locked wheel's zero halved or doubled is still zero, and a crawling wheel halved moves by less than the
+    noise: neither is a spike the gate could see. A halved or doubled wheel at speed is one."""
+    noise = 0.45
+    omega = np.array([0.0, 0.8, 2.5, 30.0])
+    np.testing.assert_array_equal(spike_moves(omega, 0.5, noise), [False, False, False, True])
+    np.testing.assert_array_equal(spike_moves(omega, 2.0, noise), [False, False, True, True])
+    np.testing.assert_array_equal(spike_moves(omega, 10.0, noise), [False, True, True, True])
+
+
+def test_the_spike_study_leaves_a_locked_wheel_s_halved_zero_out_of_its_hit_rate():
+    """The stand-in's dry ABS stop of seed 9 locks the wheel where a x0.5 spike falls (3.85 s): that sample is
+    listed within the noise, and the spikes counted are the others drawn."""
+    (row,) = study("ekf-ax", seeds=[9], factors=(0.5,), stops="stand-in")
+    assert row.within_noise >= 1
+    drawn = sum(len(spike_indices(len(pc.log.t), np.random.default_rng([9, j, 0])))
+                for j, pc in enumerate(_logs("ekf-ax", 9, "stand-in")))
+    assert row.spikes + row.within_noise == drawn
 
 
 def test_the_spike_study_on_the_stand_in_stops_runs_the_env_estimators_only():
