@@ -36,7 +36,8 @@ from fricenv.plants.sui_johansen import OMEGA_NOISE_STD, OMEGA_NOISE_VAR
 from fricenv.plants.tire import ROADS
 from validation import independent_sim as ind
 
-__all__ = ["STUDY_ESTIMATORS", "StudyRow", "format_table", "main", "spike_indices", "spike_moves", "study"]
+__all__ = ["STUDY_ESTIMATORS", "StudyRow", "format_table", "main", "spike_indices", "spike_moves", "study",
+           "study_logs"]
 
 SPIKE_FACTORS = (0.5, 2.0, 5.0, 10.0)  # wheel speed multiplied by this on a spiked sample [-]
 SPIKE_FRACTION = 0.01  # share of the samples spiked [-]
@@ -100,10 +101,11 @@ ENV_ESTIMATORS = ("ekf-rls-env", "ekf-ax", "mhe-ax")  # the env's estimators the
 SIMULATED_ROADS = ("dry", "wet", "snow")
 
 
-def _logs(estimator: str, seed: int, stops: str = "paper"):
-    """(log, true speed, estimated parameters) of every study log of an estimator for one seed."""
+def study_logs(estimator: str, seed: int, stops: str = "paper") -> list:
+    """Every study log of an estimator for one seed: :class:`SimulatedStop` rows on simulated stops, the papers'
+    :class:`estimators.scenarios.PaperCase` rows otherwise (each with ``log``, ``v`` and ``estimated``)."""
     if stops == "stand-in":
-        return [SimulatedStop(log, truth["v"], np.sqrt(OMEGA_NOISE_VAR)) for driver in DRIVERS
+        return [SimulatedStop(log, truth["v"], OMEGA_NOISE_STD) for driver in DRIVERS
                 for road in SIMULATED_ROADS for log, truth in [simulate_log([], ROADS[road], driver, seed=seed)]]
     if stops == "independent":
         cases = [ind.study_case(driver, road, seed) for driver in ind.DRIVERS for road in SIMULATED_ROADS]
@@ -157,7 +159,7 @@ def study(estimator: str, seeds, factors=SPIKE_FACTORS, gated: bool = True, stop
     acc = {f: {"clean": [], "spiked": [], "ratio": [], "hits": 0, "spikes": 0, "false": 0, "other": 0, "within": 0}
            for f in factors}
     for seed in seeds:
-        for j, pc in enumerate(_logs(estimator, seed, stops)):
+        for j, pc in enumerate(study_logs(estimator, seed, stops)):
             if pc.estimated not in cache:
                 cache[pc.estimated] = _factory(estimator, pc.estimated, gated)
             est = cache[pc.estimated]

@@ -16,7 +16,7 @@ from estimators.mhe import RegularizedMHE
 from estimators.outliers import DEFAULT_GATE, GateParams, Verdict, gate, nis
 from estimators.scenarios import ekf_rls_scenario, mhe_case
 from fricenv.plants.sui_johansen import OMEGA_NOISE_VAR
-from validation.estimator_spikes import STUDY_ESTIMATORS, _logs, spike_indices, spike_moves, study
+from validation.estimator_spikes import STUDY_ESTIMATORS, spike_indices, spike_moves, study, study_logs
 
 BAD = (Health.OUTLIER, Health.REINITIALISED)
 
@@ -207,7 +207,7 @@ def test_the_spike_study_leaves_a_locked_wheel_s_halved_zero_out_of_its_hit_rate
     (row,) = study("ekf-ax", seeds=[9], factors=(0.5,), stops="stand-in")
     assert row.within_noise >= 1
     drawn = sum(len(spike_indices(len(pc.log.t), np.random.default_rng([9, j, 0])))
-                for j, pc in enumerate(_logs("ekf-ax", 9, "stand-in")))
+                for j, pc in enumerate(study_logs("ekf-ax", 9, "stand-in")))
     assert row.spikes + row.within_noise == drawn
 
 
