@@ -406,6 +406,35 @@ def test_paired_z_one_window_decides_neither_way():
     assert paired_z(base, fit(e + 2.0 * a - lock), d) < 0.0  # worse everywhere, its one big win left out
 
 
+def test_the_paired_test_orders_two_candidates_the_mean_error_ranks_otherwise():
+    """The true model times one lock-up a little off (60 noise std in one window); a wrong one is 0.3 noise std off
+    everywhere else but has that window right. The mean held-out error ranks the wrong one first (1.09 against
+    1.63); the paired test, its one window of largest loss left out, prefers the true one, which goes first."""
+    from types import SimpleNamespace
+
+    from fricenv.gap.quarter_car.stats import CandidateFit, soft_cap
+    from fricenv.gap.quarter_car.verdict import paired_order
+
+    def fit(effect, resid):
+        wm = soft_cap(np.mean(resid**2, axis=-1))
+        return CandidateFit(effect=effect, names=(), x=np.zeros(0), train_mse=0.0, test_mse=float(np.mean(wm)),
+                            window_mse=wm, resid=resid)
+
+    rng = np.random.default_rng(3)
+    d = SimpleNamespace(horizon=10, channels=["omega"])
+    e = rng.standard_normal((51, 10))
+    lock = np.zeros((51, 10))
+    lock[-1] = 60.0
+    off = np.full((51, 10), 0.3)
+    off[-1] = 0.0
+    true, wrong = fit("brake_gain", e + lock), fit("drag", e + off)
+    assert wrong.adjusted_mse < true.adjusted_mse
+    assert [f.effect for f in paired_order([wrong, true], d)] == ["brake_gain", "drag"]
+    right_there = fit("brake_gain", e)  # the true model without the mistimed lock-up: first by either measure
+    assert [f.effect for f in paired_order([right_there, wrong], d)] == ["brake_gain", "drag"]
+    assert paired_order([wrong], d) == [wrong]
+
+
 def test_paired_z_discounts_a_nuisance_state_fitted_on_each_window():
     """A candidate that only fits one more state per window on the window's own samples (the relaxation model's
     transient slip) removes the noise's projection on that state: about one noise variance per window, which

@@ -42,7 +42,9 @@ Method (every error measure is computed on data not used for fitting):
    effect that shows in few windows is still seen.
 7. **Verdict.** An effect when it is significant and closes a clear share of the gap (robust held-out gap, the worst
    ``TRIM_SHARE`` of windows left out, at most ``ratio_explained`` of the nominal one, or below
-   ``gap_within_noise``; the best-ranked of those, ahead of a better-ranked one that does not close it alone);
+   ``gap_within_noise``; the best-ranked of those, ahead of a better-ranked one that does not close it alone;
+   ranked by the adjusted held-out error, except that the paired test orders the first two where it prefers the
+   second, :func:`fricenv.gap.quarter_car.verdict.paired_order`);
    ``unexplained`` when the gap is real (nominal gap above ``gap_none`` and not only in the
    trimmed windows, a significant candidate, or a periodic line in the wheel-speed residual that no library effect
    makes, :mod:`fricenv.gap.quarter_car.periodic`) and no candidate closes it; ``none`` otherwise. The two best
@@ -111,7 +113,14 @@ from fricenv.gap.quarter_car.stats import (
     fold_data,
     robust_gap,
 )
-from fricenv.gap.quarter_car.verdict import at_range_edge, explains, gap_is_real, significant, told_apart
+from fricenv.gap.quarter_car.verdict import (
+    at_range_edge,
+    explains,
+    gap_is_real,
+    paired_order,
+    significant,
+    told_apart,
+)
 from fricenv.gap.quarter_car.windows import prepare, window_nuisances, window_residuals
 from fricenv.logs import QuarterCarLog, read_log
 from fricenv.plants import quarter_car as qc
@@ -252,7 +261,7 @@ def _select(ctx: FitContext, nominal: CandidateFit, fits: list) -> _Selection:
         s.joint_wins = significant(s.joint, nominal, cfg) and explains(s.joint, nominal, cfg) and \
             not at_range_edge(s.joint, p) and s.joint.adjusted_mse < eligible[0].adjusted_mse
     line = periodic_line(nominal, d)
-    s.verdict, s.chosen, s.fits = decide_verdict(eligible, fits, lambda f: explains(f, nominal, cfg), s.joint_wins,
+    s.verdict, s.chosen, s.fits = decide_verdict(paired_order(eligible, d), fits, lambda f: explains(f, nominal, cfg), s.joint_wins,
                                                  gap_is_real(nominal, sig, cfg, periodic=line is not None))
     if line is not None:  # the line decided the verdict when the gap is real only through it
         line["decided"] = s.verdict == "unexplained" and not gap_is_real(nominal, sig, cfg)
@@ -326,7 +335,7 @@ def _forward(ctx: FitContext, s: _Selection, nominal: CandidateFit, expected: tu
     """Forward selection from the verdict's effect; on an ``unexplained`` verdict with significant candidates (and
     no drift), from the best of them, and the set becomes the verdict if it closes the gap (:func:`explains`) where
     no single effect did. Returns (the whole set's model or None, the steps tried)."""
-    eligible = [f for f in s.significant if not s.edges.get(f.effect)]
+    eligible = paired_order([f for f in s.significant if not s.edges.get(f.effect)], ctx.d)
     drifted = s.drift is not None and s.drift["drifts"]  # the nearest effect imitates a drift: no set rescues it
     first = s.chosen if s.chosen is not None else \
         (eligible[0] if s.verdict == "unexplained" and eligible and not drifted else None)

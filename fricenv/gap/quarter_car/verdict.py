@@ -14,7 +14,7 @@ from fricenv.gap.quarter_car.params import ROAD_NAMES, effect_param, road_of
 from fricenv.gap.quarter_car.stats import CandidateFit, paired_z, robust_gap
 from fricenv.plants import quarter_car as qc
 
-__all__ = ["RANGE_EDGE", "at_range_edge", "explains", "gap_is_real", "significant", "told_apart"]
+__all__ = ["RANGE_EDGE", "at_range_edge", "explains", "gap_is_real", "paired_order", "significant", "told_apart"]
 
 # A fitted effect parameter within this share of its range (the registry's bounds) from a bound sits at the bound [-]
 RANGE_EDGE = 1e-3
@@ -74,6 +74,22 @@ def explains(f: CandidateFit, nominal: CandidateFit, cfg: DiagnoseConfig) -> boo
     """Whether ``f`` closes a clear share of the gap on held-out data: its robust gap is at most
     ``ratio_explained`` of the nominal one, or within the noise (``gap_within_noise``)."""
     return robust_gap(f) <= cfg.ratio_explained * robust_gap(nominal) or robust_gap(f) <= cfg.gap_within_noise
+
+
+def paired_order(ranked: Sequence[CandidateFit], d: Data) -> list[CandidateFit]:
+    """The candidates ``ranked`` (best first by the adjusted held-out MSE), with the first two swapped when the
+    paired test on held-out data prefers the second (:func:`paired_z` of the second over the first above 0).
+
+    The adjusted MSE averages every held-out window; the paired test leaves out the windows of largest gain and
+    loss and soft-caps the rest, as the significance test does. Where the two disagree the mean rests on a few
+    windows (a lock-up timed a little better), and the paired test, which the verdict's evidence is measured with,
+    decides. The swap only reorders two candidates the data hardly separate; :func:`told_apart` then reports the
+    verdict's paired z over the other, positive and usually below ``sig_z``.
+    """
+    out = list(ranked)
+    if len(out) >= 2 and paired_z(out[0], out[1], d) > 0.0:
+        out[0], out[1] = out[1], out[0]
+    return out
 
 
 def told_apart(chosen: CandidateFit, significant: Sequence[CandidateFit], d: Data, cfg: DiagnoseConfig) -> dict:
