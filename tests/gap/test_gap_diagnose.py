@@ -408,8 +408,8 @@ def test_paired_z_one_window_decides_neither_way():
 
 def test_the_paired_test_orders_two_candidates_the_mean_error_ranks_otherwise():
     """The true model times one lock-up a little off (60 noise std in one window); a wrong one is 0.3 noise std off
-    everywhere else but has that window right. The mean held-out error ranks the wrong one first (1.09 against
-    1.63); the paired test, its one window of largest loss left out, prefers the true one, which goes first."""
+    everywhere else but has that window right. The mean held-out error ranks the wrong one first (adjusted MSE 2.12 against
+    2.64); the paired test, its one window of largest loss left out, prefers the true one, which goes first."""
     from types import SimpleNamespace
 
     from fricenv.gap.quarter_car.stats import CandidateFit, soft_cap

@@ -261,8 +261,8 @@ def _select(ctx: FitContext, nominal: CandidateFit, fits: list) -> _Selection:
         s.joint_wins = significant(s.joint, nominal, cfg) and explains(s.joint, nominal, cfg) and \
             not at_range_edge(s.joint, p) and s.joint.adjusted_mse < eligible[0].adjusted_mse
     line = periodic_line(nominal, d)
-    s.verdict, s.chosen, s.fits = decide_verdict(paired_order(eligible, d), fits, lambda f: explains(f, nominal, cfg), s.joint_wins,
-                                                 gap_is_real(nominal, sig, cfg, periodic=line is not None))
+    s.verdict, s.chosen, s.fits = decide_verdict(paired_order(eligible, d), fits, lambda f: explains(f, nominal, cfg),
+                                                 s.joint_wins, gap_is_real(nominal, sig, cfg, periodic=line is not None))
     if line is not None:  # the line decided the verdict when the gap is real only through it
         line["decided"] = s.verdict == "unexplained" and not gap_is_real(nominal, sig, cfg)
     s.periodic = line

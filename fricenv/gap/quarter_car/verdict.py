@@ -83,8 +83,7 @@ def paired_order(ranked: Sequence[CandidateFit], d: Data) -> list[CandidateFit]:
     The adjusted MSE averages every held-out window; the paired test leaves out the windows of largest gain and
     loss and soft-caps the rest, as the significance test does. Where the two disagree the mean rests on a few
     windows (a lock-up timed a little better), and the paired test, which the verdict's evidence is measured with,
-    decides. The swap only reorders two candidates the data hardly separate; :func:`told_apart` then reports the
-    verdict's paired z over the other, positive and usually below ``sig_z``.
+    decides. :func:`told_apart` then tests the verdict against the other as it tests any verdict.
     """
     out = list(ranked)
     if len(out) >= 2 and paired_z(out[0], out[1], d) > 0.0:
