@@ -430,6 +430,8 @@ def test_the_paired_test_orders_two_candidates_the_mean_error_ranks_otherwise():
     true, wrong = fit("brake_gain", e + lock), fit("drag", e + off)
     assert wrong.adjusted_mse < true.adjusted_mse
     assert [f.effect for f in paired_order([wrong, true], d)] == ["brake_gain", "drag"]
+    near = off / 3.0  # 0.1 noise std off: the paired test prefers the true one by z 2.0, below sig_z, and still orders
+    assert [f.effect for f in paired_order([fit("drag", e + near), true], d)] == ["brake_gain", "drag"]
     right_there = fit("brake_gain", e)  # the true model without the mistimed lock-up: first by either measure
     assert [f.effect for f in paired_order([right_there, wrong], d)] == ["brake_gain", "drag"]
     assert paired_order([wrong], d) == [wrong]
