@@ -80,8 +80,10 @@ def format_power(pw: dict) -> str:
 
 
 def sensor_flags(dg) -> dict:
-    """Per logged channel what the report saw: ``{"filtered": bool, "outliers": int}``."""
-    return {c: {"filtered": bool(k.get("filtered")), "outliers": int(k.get("outliers", 0))}
+    """Per logged channel what the report saw: ``{"filtered": bool, "outliers": int, "noise_std": float}`` (the
+    noise level the diagnosis normalised the channel by, SI)."""
+    return {c: {"filtered": bool(k.get("filtered")), "outliers": int(k.get("outliers", 0)),
+                "noise_std": float(dg.data.sigma[c])}
             for c, k in (dg.data.sensors or {}).items()}
 
 

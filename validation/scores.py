@@ -18,8 +18,10 @@ without that oracle counts as apart). Where the rows carry the tool's own test (
 does not.
 
 Every oracle judges with the noise levels the source drew (``true_noise`` of each row, :mod:`validation.true_noise`),
-not with the tool's estimate. A ``fricenv gap validate --json`` result carries no oracle: its effect logs are
-refused here (run the same seed through ``python -m validation.stand_in_suite``).
+not with the tool's estimate. Where the rows carry the level the tool used (``sensors[c]["noise_std"]``), a second
+line gives its ratio to the source's per channel (:func:`noise_levels`). A ``fricenv gap validate --json`` result
+carries no oracle: its effect logs are refused here (run the same seed through ``python -m
+validation.stand_in_suite``).
 
 Command::
 
@@ -33,7 +35,7 @@ import sys
 from collections import Counter
 from collections.abc import Sequence
 
-__all__ = ["format_numbers", "quarter_car_numbers"]
+__all__ = ["format_noise", "format_numbers", "noise_levels", "quarter_car_numbers"]
 
 NONE, OUT = "none", "out_of_library"
 
@@ -115,6 +117,49 @@ def format_numbers(q: dict, label: str = "") -> str:
     return line
 
 
+RATE_BANDS = ((0.0, 50.0), (50.0, 85.0), (85.0, float("inf")))  # logger rates of a real-like export [Hz]
+
+
+def _band_name(lo: float, hi: float) -> str:
+    if lo <= 0.0:
+        return f"below {hi:g} Hz"
+    return f"{lo:g} Hz and above" if hi == float("inf") else f"{lo:g}-{hi:g} Hz"
+
+
+def noise_levels(rows: Sequence[dict]) -> dict:
+    """Per channel, the noise level the diagnosis used over the one the source drew (``sensors[c]["noise_std"]``
+    over ``true_noise[c]``, rows that carry both): the median, the range and the logs, over every such row and, for
+    the rows of a real-like export, per band of its logger rate (:data:`RATE_BANDS`). A level read low makes every
+    gap larger in noise units, so that a right effect can leave more than the verdict rule allows."""
+    import numpy as np
+
+    def stats(values: list[float]) -> dict:
+        return {"logs": len(values), "median": float(np.median(values)), "min": float(np.min(values)),
+                "max": float(np.max(values))}
+
+    out: dict = {}
+    for c in ("omega", "v", "a_x"):
+        pairs = [(r, r["sensors"][c]["noise_std"] / r["true_noise"][c]) for r in rows
+                 if "noise_std" in (r.get("sensors") or {}).get(c, {}) and (r.get("true_noise") or {}).get(c)]
+        if not pairs:
+            continue
+        out[c] = {"all": stats([x for _, x in pairs])}
+        for lo, hi in RATE_BANDS:
+            band = [x for r, x in pairs if lo <= ((r.get("truth") or {}).get("real") or {}).get("rate_hz", -1) < hi]
+            if band:
+                out[c][_band_name(lo, hi)] = stats(band)
+    return out
+
+
+def format_noise(levels: dict, label: str = "") -> str:
+    """One line of :func:`noise_levels`."""
+    parts = []
+    for c, groups in levels.items():
+        parts.append(f"{c} " + ", ".join(f"{k} {g['median']:.2f} ({g['min']:.2f}-{g['max']:.2f}, {g['logs']} logs)"
+                                         for k, g in groups.items()))
+    return f"{label}noise level used / the source's, median (range): " + "; ".join(parts)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Print the three numbers of each result file."""
     paths = list(sys.argv[1:] if argv is None else argv)
@@ -130,6 +175,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             print(f"{path}: {exc}", file=sys.stderr)
             return 2
         print(format_numbers(q, f"{path}: "))
+        levels = noise_levels(s["logs"])
+        if levels:
+            print(format_noise(levels, f"{path}: "))
     return 0
 
 
