@@ -82,3 +82,19 @@ def test_noise_levels_compare_the_level_the_tool_used_with_the_sources_by_logger
     assert levels["all"]["logs"] == 4 and levels["all"]["median"] == pytest.approx(0.75)
     assert levels["85 Hz and above"] == pytest.approx({"logs": 2, "median": 0.55, "min": 0.5, "max": 0.6})
     assert levels["below 50 Hz"]["logs"] == 1 and "50-85 Hz" not in levels
+
+
+def test_pool_adds_a_line_over_every_files_logs(tmp_path, capsys):
+    import json
+
+    from validation.scores import main
+
+    files = []
+    for i, rows in enumerate(([{"category": "none", "verdict": "none", "right": True}],
+                              [{"category": "drag", "verdict": "brake_gain", "right": False, "detectable": True}])):
+        files.append(tmp_path / f"r{i}.json")
+        files[-1].write_text(json.dumps({"logs": rows}))
+    assert main(["--pool", *map(str, files)]) == 0
+    last = capsys.readouterr().out.strip().splitlines()[-1]
+    assert last.startswith("2 files pooled: data show the answer on 2/2") and "right on those 1/2" in last
+    assert "wrong named effects 1/2" in last

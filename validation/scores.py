@@ -23,9 +23,10 @@ line gives its ratio to the source's per channel (:func:`noise_levels`). A ``fri
 carries no oracle: its effect logs are refused here (run the same seed through ``python -m
 validation.stand_in_suite``).
 
-Command::
+Command (``--pool``: a last line with the numbers of every file's logs together, as the validation page's
+summary over seeds gives them)::
 
-    python -m validation.scores RESULT.json [RESULT.json ...]
+    python -m validation.scores [--pool] RESULT.json [RESULT.json ...]
 """
 
 from __future__ import annotations
@@ -161,23 +162,29 @@ def format_noise(levels: dict, label: str = "") -> str:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Print the three numbers of each result file."""
-    paths = list(sys.argv[1:] if argv is None else argv)
+    """Print the three numbers of each result file, and with ``--pool`` those of all their logs together."""
+    args = list(sys.argv[1:] if argv is None else argv)
+    pool = "--pool" in args
+    paths = [a for a in args if a != "--pool"]
     if not paths:
-        print("usage: python -m validation.scores RESULT.json [RESULT.json ...]", file=sys.stderr)
+        print("usage: python -m validation.scores [--pool] RESULT.json [RESULT.json ...]", file=sys.stderr)
         return 2
+    pooled: list[dict] = []
     for path in paths:
         with open(path) as fh:
-            s = json.load(fh)
+            rows = json.load(fh)["logs"]
         try:
-            q = quarter_car_numbers(s["logs"])
+            q = quarter_car_numbers(rows)
         except ValueError as exc:
             print(f"{path}: {exc}", file=sys.stderr)
             return 2
+        pooled += rows
         print(format_numbers(q, f"{path}: "))
-        levels = noise_levels(s["logs"])
+        levels = noise_levels(rows)
         if levels:
             print(format_noise(levels, f"{path}: "))
+    if pool:
+        print(format_numbers(quarter_car_numbers(pooled), f"{len(paths)} files pooled: "))
     return 0
 
 
