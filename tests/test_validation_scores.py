@@ -69,6 +69,8 @@ def test_the_tools_own_told_apart_test_splits_the_effect_verdicts():
 
 
 def test_noise_levels_compare_the_level_the_tool_used_with_the_sources_by_logger_rate():
+    import pytest
+
     from validation.scores import noise_levels
 
     def row(ratio, rate=None):
@@ -77,8 +79,6 @@ def test_noise_levels_compare_the_level_the_tool_used_with_the_sources_by_logger
 
     rows = [row(0.5, 97.0), row(0.6, 90.0), row(1.0, 40.0), row(0.9), {"sensors": {"omega": {}}}]
     levels = noise_levels(rows)["omega"]
-    import pytest
-
     assert levels["all"]["logs"] == 4 and levels["all"]["median"] == pytest.approx(0.75)
     assert levels["85 Hz and above"] == pytest.approx({"logs": 2, "median": 0.55, "min": 0.5, "max": 0.6})
     assert levels["below 50 Hz"]["logs"] == 1 and "50-85 Hz" not in levels
