@@ -163,12 +163,14 @@ def format_noise(levels: dict, label: str = "") -> str:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Print the three numbers of each result file, and with ``--pool`` those of all their logs together."""
-    args = list(sys.argv[1:] if argv is None else argv)
-    pool = "--pool" in args
-    paths = [a for a in args if a != "--pool"]
-    if not paths:
-        print("usage: python -m validation.scores [--pool] RESULT.json [RESULT.json ...]", file=sys.stderr)
-        return 2
+    import argparse
+
+    ap = argparse.ArgumentParser(prog="python -m validation.scores", description="The three numbers of quarter-car suite results "
+                                 "(docs/validation.md) and the noise levels the diagnosis used.")
+    ap.add_argument("results", nargs="+", metavar="RESULT.json", help="a suite's --json result")
+    ap.add_argument("--pool", action="store_true", help="a last line with the numbers of every file's logs together")
+    args = ap.parse_args(argv)
+    paths = args.results
     pooled: list[dict] = []
     for path in paths:
         with open(path) as fh:
@@ -183,7 +185,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         levels = noise_levels(rows)
         if levels:
             print(format_noise(levels, f"{path}: "))
-    if pool:
+    if args.pool:
         print(format_numbers(quarter_car_numbers(pooled), f"{len(paths)} files pooled: "))
     return 0
 
