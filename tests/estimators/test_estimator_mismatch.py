@@ -10,6 +10,7 @@ import pytest
 from estimators.base import Health, run
 from estimators.outliers import Verdict
 from estimators.registry import make_estimator
+from estimators.tuning import A_REF
 from fricenv.effects.quarter_car import make_effect
 from fricenv.gap.quarter_car.simulate import simulate_log
 from fricenv.plants.quarter_car import PAPER_PARAMS
@@ -57,6 +58,22 @@ def test_a_reinitialisation_in_a_slip_dip_keeps_the_speed(lag_stop):
     assert x[0] * (1.0 - x[1]) == pytest.approx(wheel, abs=1e-9)  # eq. (7) holds at the restart
 
 
+def test_an_update_lowers_the_speed_no_faster_than_the_reference_falls():
+    # a 60 ms brake delay locks the wheel of a dry ABS stop; as it spins up, one update took 1.6 m/s off the speed
+    # through its correlation with the friction read during the lock (2.04 m/s off at the worst sample)
+    log, truth = simulate_log([make_effect("brake_delay", delay=0.06)], ROADS["dry"], "abs", seed=2)
+    out = run(make_estimator("ekf"), {"t": log.t, "omega": log.omega, "T_b": log.T_b})
+    settled = log.t >= 0.5
+    assert np.max(np.abs(out["v"][settled] - truth["v"][settled])) <= 1.5
+    # the speed falls below its prediction by at most A_REF dt in any one update
+    est = make_estimator("ekf")
+    est.reset(v=float(log.omega[0] * PAPER_PARAMS.r))
+    for j in range(len(log.t)):
+        prior = float(est.x[0])
+        before = est.guard.s.omega_used
+        out_j = est.update([log.omega[j]], [log.T_b[j]])
+        if np.isfinite(before) and out_j.health not in (Health.OUTLIER, Health.REINITIALISED):
+            assert out_j.values["v"] >= prior - A_REF * est.model.dt - 1e-9
 
 
 def _guard_sequence(name: str, sds: list[float]) -> list:

@@ -63,15 +63,18 @@ def _speed_errors(name, log, truth):
 @pytest.mark.parametrize("effect, params", [("relaxation_length", {"sigma": 0.6}), ("brake_delay", {"delay": 0.06})])
 def test_the_speed_from_a_x_is_kept_where_the_tire_force_speed_is_lost(effect, params, name):
     """The target on these stops: rms within 2x the nominal stop's + 0.1 m/s, never 1.5 m/s off, flags on at most
-    1 % of the samples. EKF (speed from the tire force): 2.88 m/s rms, 4.97 at the worst sample, 8.8 % flagged
-    (relaxation), 0.28 and 1.74 (delay). Speed from a_x (rms / worst / flags): EKF 0.19 / 0.37 / 0.6 % and 0.17 /
-    0.24 / 0 (nominal 0.16 rms), MHE 0.25 / 0.68 / 1.0 % and 0.17 / 0.36 / 0 (nominal 0.16)."""
+    1 % of the samples. EKF (speed from the tire force): 2.28 m/s rms, 4.16 at the worst sample, 10 % flagged
+    under the relaxation length; under the delay 0.21 and 0.83 (its updates lower the speed no faster than the reference
+    falls, rule (M2) of estimators/mismatch.py; 1.74 at the worst sample without that bound). Speed from a_x (rms / worst /
+    flags): EKF 0.19 / 0.37 / 0.6 % and 0.17 / 0.24 / 0 (nominal 0.16 rms), MHE 0.25 / 0.68 / 1.0 % and 0.17 / 0.36
+    / 0 (nominal 0.16)."""
     log, truth = simulate_log([make_effect(effect, **params)], ROADS["dry"], "abs", seed=0)
     rms, worst, flags = _speed_errors(name, log, truth)
     nominal, _, _ = _speed_errors(name, *simulate_log([], ROADS["dry"], "abs", seed=0))
     assert rms <= 2 * nominal + 0.1 and worst <= 1.5 and flags <= 0.01, (rms, worst, flags, nominal)
-    _, worst_force, _ = _speed_errors("ekf", log, truth)
-    assert worst_force > 1.5, worst_force  # the stop is one where the tire-force speed fails the target
+    if effect == "relaxation_length":
+        _, worst_force, _ = _speed_errors("ekf", log, truth)
+        assert worst_force > 1.5, worst_force  # the stop is one where the tire-force speed fails the target
 
 
 def test_the_slip_noise_rises_once_the_brake_has_acted_and_a_start_spread_is_taken():
