@@ -30,11 +30,12 @@ filter until the re-initialisation, which then took the speed from a wheel that 
      prediction and the wheel): at a locked wheel the measurement is flat in v, and a linearised update
      can take the speed to 0, where the stiff model step diverges (the four-parameter filters, 20 ms brake delay,
      dry ABS stop: 4482 m/s off without it). So does the reference's deceleration bound over one sample: an
-     update lowers the speed below its prediction by at most ``A_REF dt``. A wheel locked by a brake the model
-     does not time builds a correlation of the speed's error with the friction's (the friction read low while
-     the car decelerates at the peak); as the wheel spins up, one update raised the friction and took 1.6 m/s off
-     the speed (60 ms brake delay, dry ABS stop of the stand-in, seed 2: 2.04 m/s off at the worst sample
-     without the bound, 0.30 with it). A speed too high comes down over several samples instead.
+     update on a wheel faster than its prediction lowers the speed below the prediction by at most ``A_REF dt``.
+     Such a wheel pulls the speed down only through the speed's correlation with the friction: a wheel locked by
+     a brake the model does not time builds it (the friction read low while the car decelerates at the peak), and
+     as the wheel spun up one update raised the friction and took 1.6 m/s off the speed (60 ms brake delay, dry
+     ABS stop of the stand-in, seed 2: 2.04 m/s off at the worst sample without the bound, 0.30 with it). A wheel
+     slower than its prediction lowers the speed as the update has it.
 (M2') **Speed from the accelerometer.** A model whose speed follows the measured ``a_x``
      (``AugmentedModel.speed_from_a_x``) takes neither bound of (M2) nor its speed at a re-initialisation: its speed
      is the integrated ``a_x``, which no slip or tire transient moves, while the fastest wheel is no lower bound of a
@@ -98,6 +99,7 @@ class _State:
     brakes: deque = field(default_factory=deque)  # the brake torques held over the last BRAKE_SETTLE_S, newest last
     below: int = 0  # samples in a row whose wheel speed the filter used lay below the car's speed [-]
     started: bool = False  # a sample before this one was used (the update's prior is no guess)
+    innovation: float = 0.0  # this sample's innovation [rad/s]
 
 
 class WheelSpeedGuard:
@@ -145,8 +147,9 @@ class WheelSpeedGuard:
     def bound_speed(self, x: np.ndarray, v_prior: float, omega: float) -> np.ndarray:
         """(M2) as bounds on a posterior speed. Below: the reference speed less its margin once more (the reference
         is a lower bound of the car's speed while braking; at a locked wheel the measurement is flat in v and a
-        linearised update can take the speed to 0), and, once a sample was used, the prediction less ``A_REF dt``
-        (an update lowers the speed no faster than the reference falls). Above, for a model that carries the brake gain ``k_T``: a
+        linearised update can take the speed to 0), and, for a wheel faster than its prediction once a sample was
+        used, the prediction less ``A_REF dt`` (such a wheel lowers the speed no faster than the reference falls).
+        Above, for a model that carries the brake gain ``k_T``: a
         braked car's speed rises above its prediction only as far as the wheel shows (the wheel speed plus the
         reference's margin). With a free brake gain the torque no longer pins the slip, and an update beyond both
         is the model's mismatch read as speed (80 ms brake lag, dry ABS stop, seed 1: 0.42 m/s rms without the
@@ -158,7 +161,7 @@ class WheelSpeedGuard:
             return x
         margin = REF_MARGIN_STD * self.noise_std * self.model.p.r
         floor = self.s.v_ref - margin
-        if self.s.started:  # the reference's deceleration bound over one sample, once a sample was used
+        if self.s.started and self.s.innovation > 0.0:  # the reference's deceleration bound over one sample
             floor = max(floor, float(v_prior) - A_REF * self.model.dt) if np.isfinite(floor) else \
                 float(v_prior) - A_REF * self.model.dt
         ceiling = max(float(v_prior), float(omega) * self.model.p.r + margin)
@@ -246,7 +249,7 @@ class WheelSpeedGuard:
         self._reference(None if verdict == Verdict.REJECT else omega)
         if verdict in (Verdict.REINIT, Verdict.START):
             x, P = self.reinit(x, P, P0, omega)
-        s.started = np.isfinite(s.omega_used)
+        s.started, s.innovation = np.isfinite(s.omega_used), e
         if verdict == Verdict.REJECT:
             s.since += 1
         else:
