@@ -98,8 +98,7 @@ class _State:
     nis_passed: float = 0.0  # its NIS [-]
     brakes: deque = field(default_factory=deque)  # the brake torques held over the last BRAKE_SETTLE_S, newest last
     below: int = 0  # samples in a row whose wheel speed the filter used lay below the car's speed [-]
-    started: bool = False  # a sample before this one was used (the update's prior is no guess)
-    innovation: float = 0.0  # this sample's innovation [rad/s]
+    faster: bool = False  # the wheel reads faster than its prediction, and a sample before it was used
 
 
 class WheelSpeedGuard:
@@ -161,9 +160,8 @@ class WheelSpeedGuard:
             return x
         margin = REF_MARGIN_STD * self.noise_std * self.model.p.r
         floor = self.s.v_ref - margin
-        if self.s.started and self.s.innovation > 0.0:  # the reference's deceleration bound over one sample
-            floor = max(floor, float(v_prior) - A_REF * self.model.dt) if np.isfinite(floor) else \
-                float(v_prior) - A_REF * self.model.dt
+        if self.s.faster:  # the reference's deceleration bound over one sample (fmax: no reference yet is NaN)
+            floor = float(np.fmax(floor, float(v_prior) - A_REF * self.model.dt))
         ceiling = max(float(v_prior), float(omega) * self.model.p.r + margin)
         v = float(x[0])
         if np.isfinite(floor) and v < floor:
@@ -249,7 +247,7 @@ class WheelSpeedGuard:
         self._reference(None if verdict == Verdict.REJECT else omega)
         if verdict in (Verdict.REINIT, Verdict.START):
             x, P = self.reinit(x, P, P0, omega)
-        s.started, s.innovation = np.isfinite(s.omega_used), e
+        s.faster = e > 0.0 and np.isfinite(s.omega_used)
         if verdict == Verdict.REJECT:
             s.since += 1
         else:

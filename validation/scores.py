@@ -31,10 +31,13 @@ summary over seeds gives them)::
 
 from __future__ import annotations
 
+import argparse
 import json
 import sys
 from collections import Counter
 from collections.abc import Sequence
+
+import numpy as np
 
 __all__ = ["format_noise", "format_numbers", "noise_levels", "quarter_car_numbers"]
 
@@ -132,8 +135,6 @@ def noise_levels(rows: Sequence[dict]) -> dict:
     over ``true_noise[c]``, rows that carry both): the median, the range and the logs, over every such row and, for
     the rows of a real-like export, per band of its logger rate (:data:`RATE_BANDS`). A level read low makes every
     gap larger in noise units, so that a right effect can leave more than the verdict rule allows."""
-    import numpy as np
-
     def stats(values: list[float]) -> dict:
         return {"logs": len(values), "median": float(np.median(values)), "min": float(np.min(values)),
                 "max": float(np.max(values))}
@@ -163,8 +164,6 @@ def format_noise(levels: dict, label: str = "") -> str:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Print the three numbers of each result file, and with ``--pool`` those of all their logs together."""
-    import argparse
-
     ap = argparse.ArgumentParser(prog="python -m validation.scores", description="The three numbers of quarter-car suite results "
                                  "(docs/validation.md) and the noise levels the diagnosis used.")
     ap.add_argument("results", nargs="+", metavar="RESULT.json", help="a suite's --json result")

@@ -64,8 +64,9 @@ def _speed_errors(name, log, truth):
 def test_the_speed_from_a_x_is_kept_where_the_tire_force_speed_is_lost(effect, params, name):
     """The target on these stops: rms within 2x the nominal stop's + 0.1 m/s, never 1.5 m/s off, flags on at most
     1 % of the samples. EKF (speed from the tire force): 1.87 m/s rms, 3.53 at the worst sample, 9 % flagged
-    under the relaxation length; under the delay 0.21 and 0.83 (its updates lower the speed no faster than the reference
-    falls, rule (M2) of estimators/mismatch.py; 1.74 at the worst sample without that bound). Speed from a_x (rms / worst /
+    under the relaxation length; under the delay 0.21 and 0.83 (an update on a wheel faster than its prediction lowers the
+    speed no faster than the reference falls, rule (M2) of estimators/mismatch.py; 1.74 at the worst sample without
+    that bound). Speed from a_x (rms / worst /
     flags): EKF 0.19 / 0.37 / 0.6 % and 0.17 / 0.24 / 0 (nominal 0.16 rms), MHE 0.25 / 0.68 / 1.0 % and 0.17 / 0.36
     / 0 (nominal 0.16)."""
     log, truth = simulate_log([make_effect(effect, **params)], ROADS["dry"], "abs", seed=0)
