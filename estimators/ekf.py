@@ -265,7 +265,7 @@ class QuarterCarEKF(Estimator):
         if verdict == Verdict.REJECT:
             return verdict, self.x, self.P, None, inflation
         x_post, P_post, innov = self.filter.update(self.x, self.P, y)
-        return verdict, self.guard.bound_speed(x_post, float(self.x[0]), float(y[0])), P_post, innov, inflation
+        return verdict, self.guard.bound_posterior(x_post, float(self.x[0]), float(y[0])), P_post, innov, inflation
 
     def propagate(self, x_post: np.ndarray, P_post: np.ndarray, inputs) -> bool:
         """Time update from the posterior (clipped to the bounds) under the input held to the next sample.

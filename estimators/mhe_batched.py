@@ -195,8 +195,8 @@ class BatchedMHE:
         IKH = np.eye(self.nx) - K @ H
         P_post = sym(IKH @ P @ np.swapaxes(IKH, 1, 2) + K @ R @ np.swapaxes(K, 1, 2))
         x_post = x + (K @ (y - hx)[:, None, None])[:, :, 0]
-        for i in np.flatnonzero(active & (verdict != Verdict.REJECT)):  # (M2): the speed stays above the reference
-            x_post[i] = self.guards[i].bound_speed(x_post[i], float(x[i, 0]), float(y[i]))
+        for i in np.flatnonzero(active & (verdict != Verdict.REJECT)):  # (M2), (M5)
+            x_post[i] = self.guards[i].bound_posterior(x_post[i], float(x[i, 0]), float(y[i]))
         upd = active & (verdict != Verdict.REJECT)
         self.post_x = np.where(upd[:, None], x_post, np.where(active[:, None], x, self.post_x))
         self.post_P = np.where(upd[:, None, None], P_post, np.where(active[:, None, None], P, self.post_P))
