@@ -26,7 +26,7 @@ filter until the re-initialisation, which then took the speed from a wheel that 
      (the filter's own speed after a run of rejections is not to be trusted), and the slip that makes eq. (7) hold
      at that speed (a locked wheel or a dropout to zero: slip 1): never the speed of a wheel that may be slipping.
      The reference less its margin once more also bounds every posterior speed from below
-     (:meth:`WheelSpeedGuard.bound_speed`, which also keeps an update from raising the speed above both its
+     (:meth:`WheelSpeedGuard.bound_posterior`, which also keeps an update from raising the speed above both its
      prediction and the wheel): at a locked wheel the measurement is flat in v, and a linearised update
      can take the speed to 0, where the stiff model step diverges (the four-parameter filters, 20 ms brake delay,
      dry ABS stop: 4482 m/s off without it). So does the reference's deceleration bound over one sample: an
