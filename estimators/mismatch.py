@@ -194,11 +194,11 @@ class WheelSpeedGuard:
             v = floor
         if "k_T" in self.model.extras and v > ceiling:
             v = max(ceiling, floor) if np.isfinite(floor) else ceiling
-        theta = float(x[2]) if "theta" in self.model.estimated else np.inf
-        if v != x[0] or theta < self.s.mu_floor:
+        lift = "theta" in self.model.estimated and float(x[2]) < self.s.mu_floor  # (M5)
+        if v != x[0] or lift:
             x = x.copy()
             x[0] = v
-            if theta < self.s.mu_floor:  # (M5)
+            if lift:
                 x[2] = self.s.mu_floor
         return x
 
