@@ -13,6 +13,7 @@ baseline the MHE must beat.
 
 from __future__ import annotations
 
+from collections import deque
 from collections.abc import Callable
 
 import numpy as np
@@ -21,10 +22,17 @@ from estimators.base import Estimate, Estimator, EstimatorConfigError, Health, c
 from estimators.mismatch import WheelSpeedGuard
 from estimators.outliers import DEFAULT_GATE, GateParams, Verdict, check_gate
 from estimators.quarter_car_model import BOUNDS, EXTRA_NAMES, PARAM_NAMES, AugmentedModel
-from estimators.tuning import DEFAULT_EKF_TUNING, HORIZON, PAPER_TUNING, SLIP_PRIOR, V_PRIOR
+from estimators.tuning import (
+    DEFAULT_EKF_TUNING,
+    HORIZON,
+    PAPER_TUNING,
+    SLIP_PRIOR,
+    V_PRIOR,
+    brake_settle_samples,
+)
 
 __all__ = ["DEFAULT_EKF_TUNING", "SLIP_PRIOR", "V_PRIOR", "ExtendedKalmanFilter", "ParameterInformation", "QuarterCarEKF",
-           "ekf_predict", "ekf_update", "innovation_covariance"]
+           "ekf_predict", "ekf_update", "innovation_covariance", "torque_spread_noise"]
 
 
 def _sym(P: np.ndarray) -> np.ndarray:
@@ -41,6 +49,23 @@ def ekf_predict(x_next: np.ndarray, F: np.ndarray, P: np.ndarray, Q: np.ndarray)
     :return: (x+, P+).
     """
     return x_next, _sym(F @ P @ F.T + Q)
+
+
+def torque_spread_noise(G: np.ndarray, commands: np.ndarray, held: np.ndarray) -> np.ndarray:
+    """Process noise of a brake that lags or waits: ``s^2 G G^T``.
+
+    The torque a brake applies lies within its commands over ``BRAKE_SETTLE_S`` (rule (B4) of
+    :mod:`estimators.speed_reference`); ``s``, the distance from the command held to the farthest of them, is taken as
+    the standard deviation of the torque the model holds, and ``G`` maps it to the state over one sample.
+
+    :param G: d x+ / d T_b, shape (..., n).
+    :param commands: the commands of the span, the one held included, shape (..., k) [N m].
+    :param held: the command held over the sample, shape (...) [N m].
+    :return: (..., n, n).
+    """
+    spread = np.max(np.abs(np.asarray(commands) - np.asarray(held)[..., None]), axis=-1)
+    Gs = G * spread[..., None]
+    return Gs[..., :, None] * Gs[..., None, :]
 
 
 def innovation_covariance(P: np.ndarray, H: np.ndarray, R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -185,6 +210,9 @@ class QuarterCarEKF(Estimator):
     :param Q_braking_std: process noise per state name that replaces ``Q_std``'s from the first sample with a brake
         torque on, until the next reset (``ekf-ax``: the slip, whose force law the model holds only approximately
         once the tire is loaded); None: ``Q_std`` throughout.
+    :param torque_spread: add the process noise of a brake that lags or waits (:func:`torque_spread_noise`) at each
+        time update; None: where the model carries the brake gain ``k_T`` and its speed follows the tire
+        (``ekf``, ``ekf-full`` and the arrival filters of ``mhe``, ``mhe-full``).
     """
 
     measurement_columns = ("omega",)
@@ -194,7 +222,7 @@ class QuarterCarEKF(Estimator):
     def __init__(self, estimated: tuple[str, ...] = ("theta",), dt: float = 0.01, P0_std: dict | None = None,
                  Q_std: dict | None = None, R: float = DEFAULT_EKF_TUNING["R"],
                  model: AugmentedModel | None = None, outlier_gate: GateParams | None = DEFAULT_GATE,
-                 Q_braking_std: dict | None = None):
+                 Q_braking_std: dict | None = None, torque_spread: bool | None = None):
         dt = check_dt(dt)
         try:
             self.model = model or AugmentedModel(estimated=tuple(estimated), dt=dt)
@@ -219,6 +247,9 @@ class QuarterCarEKF(Estimator):
         self.Q_braking = None if Q_braking_std is None else \
             np.diag([{**q, **Q_braking_std}[n] ** 2 for n in names])
         self.input_columns = self.model.input_names  # ("T_b",), or ("T_b", "a_x") when the speed follows a_x
+        if torque_spread is None:
+            torque_spread = "k_T" in self.model.extras and not self.model.speed_from_a_x
+        self.torque_spread = bool(torque_spread)
         self.lower, self.upper = self.model.lower(), self.model.upper()
         # the model's speed can change by at most F_z theta_max / m per second (|mu| <= theta <= 1): a predicted
         # step beyond it is a numerical failure of the stiff step (slip near 1, speed near 0) and is clipped to it
@@ -247,6 +278,8 @@ class QuarterCarEKF(Estimator):
         self.guard.reset()
         self._brake_torque = 0.0  # torque held since the last sample [N m]
         self._braked = False  # a brake torque has acted since the reset
+        self._commands = deque(maxlen=brake_settle_samples(self.model.dt))  # the torques commanded, newest last
+        self.torque_variance = np.zeros(2)  # the last time update's torque-spread variance of (v, slip)
         self.information.reset()
         return self._estimate(self.x, Health.OK)
 
@@ -278,7 +311,15 @@ class QuarterCarEKF(Estimator):
         x_post = np.clip(x_post, self.lower, self.upper)
         self._braked = self._braked or self._brake_torque > 0.0
         braked = self.Q_braking is not None and self._braked
-        x_next, P_next = self.filter.predict(x_post, P_post, u, self.Q_braking if braked else None)
+        Q = self.Q_braking if braked else self.filter.Q
+        self._commands.append(self._brake_torque)
+        if self.torque_spread:
+            x_next, F, G = self.model.f_and_jacobians(x_post, u)
+            spread = torque_spread_noise(G[:, 0], np.array(self._commands), np.array(self._brake_torque))
+            x_next, P_next = ekf_predict(x_next, F, P_post, Q + spread)
+            self.torque_variance = np.diag(spread)[:2].copy()
+        else:
+            x_next, P_next = self.filter.predict(x_post, P_post, u, Q)
         if not (np.all(np.isfinite(x_next)) and np.all(np.isfinite(P_next))):
             self.P = self.P0.copy()
             return False

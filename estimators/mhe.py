@@ -112,9 +112,11 @@ class RegularizedMHE(Estimator):
         keyword ``options``. ``arrival="paper"`` is the paper's prior terms beta_i ||(x_i - xbar_i)/D||^2 of (12a),
         ``"ekf"`` the arrival cost of an EKF run alongside (||x(t-N) - xbar||^2 in P^-1, beyond the paper);
         ``model_error`` the process noise in the window (``"auto"``: the EKF's Q_std of v and slip with the EKF
-        arrival cost, else none); ``gate`` returns the alongside EKF's estimate when the solution is further than
-        this squared Mahalanobis distance from it (info ``gated``); ``outlier_gate`` gates the wheel speed on the
-        alongside EKF's innovation (module docstring, "Outliers").
+        arrival cost, else none; with an arrival filter that spreads the torque, each sample's model errors take
+        that filter's torque-spread variance as well, :func:`estimators.ekf.torque_spread_noise`); ``gate``
+        returns the alongside EKF's estimate when the solution is further than this squared Mahalanobis distance
+        from it (info ``gated``); ``outlier_gate`` gates the wheel speed on the alongside EKF's innovation (module
+        docstring, "Outliers").
     :param model: a prebuilt :class:`AugmentedModel` (one whose speed follows ``a_x`` makes the inputs ``(T_b, a_x)``
         per sample, ``mhe-ax``).
     :param filter_options: options of the arrival filter (:class:`QuarterCarEKF`: ``P0_std``, ``Q_std``,
@@ -240,6 +242,8 @@ class RegularizedMHE(Estimator):
         self._w_prev: np.ndarray | None = None
         self._arr_hist: deque = deque(maxlen=self.N + 1)
         self._used: list[bool] = []  # per window sample: False if the gate rejected it
+        # per sample, the arrival filter's torque-spread variance of (v, slip) over its time update
+        self._spread: deque = deque(maxlen=self.N + 1)
         return self._estimate(self.x_prior0, Health.OK)
 
     def _estimate(self, x: np.ndarray, health: Health, info: dict | None = None) -> Estimate:
@@ -265,6 +269,7 @@ class RegularizedMHE(Estimator):
         if verdict in (Verdict.REINIT, Verdict.START):  # the arrival filter restarted from the sample: so does the window
             self._y, self._u, self._used = [], [], []
             self._arr_hist.clear()
+            self._spread.clear()
             self.x_prior0, self._X_prev = f.x.copy(), None
         self._y.append(float(y[0]))
         self._u.append(u.copy())  # the window keeps it: not the caller's buffer
@@ -293,6 +298,8 @@ class RegularizedMHE(Estimator):
         Y = np.asarray(self._y)
         U = np.asarray(self._u[:N]).reshape(N, -1)
         self._w_scale = self._w_scale_braked if self.arrival_filter.braked else self._w_scale_free
+        if self.arrival_filter.torque_spread and len(self._w_scale):  # the window's model errors take it too
+            self._w_scale = np.sqrt(self._w_scale**2 + np.concatenate(list(self._spread)[-N:]))
         try:
             sol, health, info = self._solve(self.x_prior0, Y, U, np.asarray(self._used))
         except Exception as exc:  # noqa: BLE001 - a failed solve must never raise inside a loop
@@ -333,6 +340,7 @@ class RegularizedMHE(Estimator):
     def _ekf_predict(self, u: np.ndarray) -> None:
         """The arrival filter's time update from x(t|t) to the prior of x(t+1)."""
         self.arrival_filter.propagate(*self._ekf_post, u)
+        self._spread.append(self.arrival_filter.torque_variance)
 
     # ------------------------------------------------------------------ weights and solver
     def _masked_weights(self, Phi: np.ndarray, used: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:

@@ -43,11 +43,12 @@ import numpy as np
 
 from estimators.base import EstimatorConfigError, Health
 from estimators.casadi_compiled import BatchCall, compiled, densified
+from estimators.ekf import torque_spread_noise
 from estimators.mhe import PD_JITTER, RegularizedMHE
 from estimators.mhe_solver import BatchedWindowSolver, sym
 from estimators.mismatch import WheelSpeedGuard
 from estimators.outliers import Verdict
-from estimators.tuning import SLIP_PRIOR, V_PRIOR
+from estimators.tuning import SLIP_PRIOR, V_PRIOR, brake_settle_samples
 from fricenv.plants.tire import magic_formula
 
 __all__ = ["BATCHED_MHE", "PARALLEL", "BatchedMHE", "mhe_builder"]
@@ -101,6 +102,9 @@ class BatchedMHE:
         guard = self.t.arrival_filter.guard
         self.guards = [WheelSpeedGuard(guard.model, guard.params, guard.noise_std) for _ in range(n)]
         self.torque_prev = np.zeros(n)  # brake torque held since the last sample, per sub-env [N m]
+        # the torques commanded over the brake's settling span, newest last, per sub-env (NaN: none yet) [N m]
+        self.commands = np.full((n, brake_settle_samples(t.model.dt)), np.nan)
+        self.spread = np.zeros((n, N1, 2))  # per window sample, the torque-spread variance of (v, slip) [-]
         self.y, self.u, self.used = np.zeros((n, N1)), np.zeros((n, N1)), np.ones((n, N1), dtype=bool)
         self.hist_x, self.hist_P = np.zeros((n, N1, nx)), np.zeros((n, N1, nx, nx))
         self.count = np.zeros(n, dtype=int)  # samples in the window buffer
@@ -126,7 +130,7 @@ class BatchedMHE:
         if v0 is not None:
             x0[:, 0] = np.asarray(v0, dtype=float)
         self.ekf_x[m], self.ekf_P[m], self.last[m] = x0[m], self.t._P0, x0[m]
-        self.count[m], self.has_prev[m], self.torque_prev[m] = 0, False, 0.0
+        self.count[m], self.has_prev[m], self.torque_prev[m], self.commands[m] = 0, False, 0.0, np.nan
         for i in np.flatnonzero(m):
             self.guards[i].reset()
         return self.values(), np.full(self.n, int(Health.OK))
@@ -178,7 +182,7 @@ class BatchedMHE:
         reinit = (verdict == Verdict.REINIT) | (verdict == Verdict.START)  # the window restarts
         self.count[reinit], self.has_prev[reinit] = 0, False
         full = active & (self.count == self.N1)  # the window slides: drop the oldest sample
-        for buf in (self.y, self.u, self.used, self.hist_x, self.hist_P):
+        for buf in (self.y, self.u, self.used, self.hist_x, self.hist_P, self.spread):
             buf[full] = np.roll(buf[full], -1, axis=1)
         rows = np.flatnonzero(active)
         pos = np.minimum(self.count[rows], self.N1 - 1)
@@ -206,12 +210,20 @@ class BatchedMHE:
         """The EKF's time update from x(t|t) to the prior of x(t+1); P0 again where the model gives non-finite."""
         lo, hi = self.t.lower, self.t.upper
         x_post = np.clip(self.post_x, lo, hi)
-        xn, F = self._predict(x_post, u)
+        xn, F, G = self._predict(x_post, u)
         xn = xn[:, :, 0]
+        self.commands[active] = np.concatenate([self.commands[active, 1:], u[active, None]], axis=1)
+        Q = self.t._Q
+        if self.t.arrival_filter.torque_spread:  # as the single EKF's time update
+            given = np.where(np.isnan(self.commands), u[:, None], self.commands)  # none yet: the one held
+            spread = torque_spread_noise(G[:, :, 0], given, u)
+            Q = Q + spread
+            rows = np.flatnonzero(active)  # the window's model errors of this sample take it too
+            self.spread[rows, self.count[rows] - 1] = np.diagonal(spread, axis1=1, axis2=2)[rows, :2]
         dv = self.t.arrival_filter.dv_max  # the single EKF's bound on a predicted speed change
         xn[:, 0] = np.clip(xn[:, 0], x_post[:, 0] - dv, x_post[:, 0] + dv)
         good = np.all(np.isfinite(xn), axis=1) & np.all(np.isfinite(F), axis=(1, 2))
-        P_next = sym(F @ self.post_P @ np.swapaxes(F, 1, 2) + self.t._Q)
+        P_next = sym(F @ self.post_P @ np.swapaxes(F, 1, 2) + Q)
         self.ekf_x = np.where((active & good)[:, None], np.clip(xn, lo, hi), self.ekf_x)
         self.ekf_P = np.where(active[:, None, None], np.where(good[:, None, None], P_next, self.t._P0), self.ekf_P)
 
@@ -227,8 +239,11 @@ class BatchedMHE:
             return health
         rows = np.flatnonzero(live)
         warm = np.where(self.has_prev[rows, None], self.w_prev[rows], np.nan)
+        w_scale = None
+        if t.arrival_filter.torque_spread and self.solver.nz > nx:  # as the single MHE's window
+            w_scale = np.sqrt(t._w_scale_free**2 + self.spread[rows, :t.N].reshape(len(rows), -1))
         sol = self.solver.solve(self.hist_x[rows, 0], self.hist_P[rows, 0], self.y[rows], self.u[rows, :t.N],
-                                self.used[rows], warm)
+                                self.used[rows], warm, w_scale)
         good = ~sol.failed
         ok = np.zeros(self.n, dtype=bool)
         ok[rows[good]] = True

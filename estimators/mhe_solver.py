@@ -77,12 +77,9 @@ class BatchedWindowSolver:
     def __init__(self, template: RegularizedMHE, window: Callable[[int], Callable[..., list[np.ndarray]]]):
         self.t, self._make_window, self._windows = template, window, {}
         self.nx, self.N1, self.nz = template.model.nx, template.N + 1, template._nz
-        nw = self.nz - self.nx
         self.zlo, self.zhi = template._zlo, template._zhi
         self.span = np.minimum(self.zhi - self.zlo, 1.0)
-        self.w_scale = template._w_scale
-        self.Jw = np.zeros((nw, self.nz))  # Jacobian of the process-noise terms z[nx:] / w_scale
-        self.Jw[:, self.nx:] = np.diag(1.0 / self.w_scale) if nw else np.zeros((0, 0))
+        self.w_scale = template._w_scale_free  # the model errors' scales, (nz - nx,); solve() may give them per window
 
     # ------------------------------------------------------------------ pieces
     def evaluate(self, z: np.ndarray, U: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -121,18 +118,21 @@ class BatchedWindowSolver:
                 W[np.ix_(rows[sub], pattern, pattern)] = Wg
         return W, rank
 
-    def residual(self, z, e, PhiZ, W, Wa, xb0) -> tuple[np.ndarray, np.ndarray]:
-        """Weighted residual (k, nr) and Jacobian (k, nr, nz) of (12a) with the arrival and process-noise terms."""
+    def residual(self, z, e, PhiZ, W, Wa, xb0, w_scale) -> tuple[np.ndarray, np.ndarray]:
+        """Weighted residual (k, nr) and Jacobian (k, nr, nz) of (12a) with the arrival and process-noise terms
+        (``w_scale`` (k, nz - nx): the model errors' scales)."""
         nx, k = self.nx, len(z)
-        r = [(W @ e[:, :, None])[:, :, 0], (Wa @ (z[:, :nx] - xb0)[:, :, None])[:, :, 0], z[:, nx:] / self.w_scale]
+        r = [(W @ e[:, :, None])[:, :, 0], (Wa @ (z[:, :nx] - xb0)[:, :, None])[:, :, 0], z[:, nx:] / w_scale]
         Ja = np.zeros((k, nx, self.nz))
         Ja[:, :, :nx] = Wa
-        J = [-W @ PhiZ, Ja, np.broadcast_to(self.Jw, (k,) + self.Jw.shape)]
+        Jw = np.zeros((k, self.nz - nx, self.nz))  # of the process-noise terms z[nx:] / w_scale
+        Jw[:, :, nx:] = (1.0 / w_scale)[:, :, None] * np.eye(self.nz - nx)
+        J = [-W @ PhiZ, Ja, Jw]
         return np.concatenate(r, axis=1), np.concatenate(J, axis=1)
 
     # ------------------------------------------------------------------ solve
     def solve(self, xb0: np.ndarray, P: np.ndarray, Y: np.ndarray, U: np.ndarray, used: np.ndarray,
-              w_warm: np.ndarray) -> WindowSolution:
+              w_warm: np.ndarray, w_scale: np.ndarray | None = None) -> WindowSolution:
         """Solve k windows from their a priori starts.
 
         :param xb0: a priori x(t-N) (the EKF's prior), (k, nx).
@@ -141,8 +141,10 @@ class BatchedWindowSolver:
         :param U: window torques, (k, N).
         :param used: samples the outlier gate kept, (k, N+1).
         :param w_warm: the previous solve's model errors (NaN rows: none), (k, nz - nx).
+        :param w_scale: the model errors' scales, (k, nz - nx); None: the template's.
         """
         nx, k = self.nx, len(xb0)
+        w_scale = np.broadcast_to(self.w_scale, (k, self.nz - nx)) if w_scale is None else w_scale
         failed = np.zeros(k, dtype=bool)
         z = np.zeros((k, self.nz))
         z[:, :nx] = xb0
@@ -156,10 +158,10 @@ class BatchedWindowSolver:
         W, rank = self.weights(PhiZ[:, :, :nx], used, L, failed)
         Wa = rowwise(lambda A: np.linalg.solve(A, np.broadcast_to(eye, A.shape)), failed, L)
         W, Wa = np.where(failed[:, None, None], 0.0, W), np.where(failed[:, None, None], 0.0, Wa)
-        r, J = self.residual(z, Y - H, PhiZ, W, Wa, xb0)
+        r, J = self.residual(z, Y - H, PhiZ, W, Wa, xb0, w_scale)
         cost = _dot(r, r)
         failed |= ~np.isfinite(cost)
-        z, X = self._iterate(failed, z, X, r, J, cost, (U, Y, W, Wa, xb0))
+        z, X = self._iterate(failed, z, X, r, J, cost, (U, Y, W, Wa, xb0, w_scale))
         failed |= ~(np.all(np.isfinite(z), axis=1) & np.all(np.isfinite(X), axis=(1, 2)))
         return WindowSolution(z, X, rank, failed)
 
@@ -181,7 +183,7 @@ class BatchedWindowSolver:
     def _iterate(self, failed, z, X, r, J, cost, data):
         """Projected Levenberg-Marquardt in lockstep (estimators.mhe: ``_solve``) on the rows still iterating;
         the solutions (z, X)."""
-        U, Y, W, Wa, xb0 = data
+        U, Y, W, Wa, xb0, w_scale = data
         k = len(z)
         lam = np.full(k, LM_DAMPING0)
         n_eval = np.ones(k, dtype=int)
@@ -207,7 +209,7 @@ class BatchedWindowSolver:
             z_new = np.clip(za + step, self.zlo, self.zhi)  # bounds (12c) by projection
             H_new, PhiZ_new, X_new = self.evaluate(z_new, U[a])
             n_eval[a] += 1
-            r_new, J_new = self.residual(z_new, Y[a] - H_new, PhiZ_new, W[a], Wa[a], xb0[a])
+            r_new, J_new = self.residual(z_new, Y[a] - H_new, PhiZ_new, W[a], Wa[a], xb0[a], w_scale[a])
             cost_new = _dot(r_new, r_new)
             with np.errstate(invalid="ignore"):
                 ok = np.isfinite(cost_new) & (cost_new <= cost[a])

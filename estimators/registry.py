@@ -50,7 +50,7 @@ from estimators.ekf_rls import ENV_CORRECTION_GAIN, PAPER_CORRECTION_GAIN, Quart
 from estimators.mhe import RegularizedMHE
 from estimators.quarter_car_model import PARAM_NAMES, AugmentedModel
 from estimators.slope_maps import PAPER_MAP
-from estimators.tuning import A_X_SLIP_BRAKING_Q_STD, A_X_SPEED_Q_STD, MISMATCH_STATES
+from estimators.tuning import A_X_KT_Q_STD, A_X_SLIP_BRAKING_Q_STD, A_X_SPEED_Q_STD, MISMATCH_STATES
 from fricenv.errors import InvalidInputError
 from fricenv.plants import sui_johansen as sj
 from fricenv.plants.quarter_car import PAPER_PARAMS, QuarterCarParams
@@ -182,7 +182,8 @@ def _entries() -> tuple[EstimatorEntry, ...]:
     mhe_paper = {"arrival": "paper", "model_error": None}
     absorb = MappingProxyType({"mismatch_states": MISMATCH_STATES})  # the env entries' brake gain and drag states
     # the speed from a_x: its model, and its filter's noise (the MHE's arrival filter is that EKF)
-    a_x_filter = {"Q_std": {"v": A_X_SPEED_Q_STD}, "Q_braking_std": {"slip": A_X_SLIP_BRAKING_Q_STD}}
+    a_x_filter = {"Q_std": {"v": A_X_SPEED_Q_STD, "k_T": A_X_KT_Q_STD},
+                  "Q_braking_std": {"slip": A_X_SLIP_BRAKING_Q_STD}}
     a_x_model = {"mismatch_states": ("k_T",), "speed_from_a_x": True}
     return (
         EstimatorEntry("ekf", "default", "augmented EKF, theta, brake gain, deceleration bias", _build_ekf, absorb,

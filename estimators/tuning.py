@@ -15,6 +15,7 @@ __all__ = [
     "AB_P0_STD",
     "AB_Q_STD",
     "A_REF",
+    "A_X_KT_Q_STD",
     "A_X_SLIP_BRAKING_Q_STD",
     "A_X_SPEED_Q_STD",
     "BRAKE_SETTLE_S",
@@ -39,7 +40,9 @@ __all__ = [
 ]
 
 # ---- the mismatch states (estimators.quarter_car_model.EXTRA_NAMES) of the env estimators
-KT_P0_STD, KT_Q_STD = 0.2, 0.1  # brake gain k_T: prior spread, random walk per sample [-]
+# brake gain k_T: prior spread, random walk per sample [-] (slow: a brake's timing is the torque spread's,
+# estimators.ekf.torque_spread_noise; a gain fast enough to follow it takes up a snow road's low friction)
+KT_P0_STD, KT_Q_STD = 0.2, 0.03
 AB_P0_STD, AB_Q_STD = 1.0, 0.05  # deceleration bias a_b: prior spread, random walk per sample [m/s^2]
 MISMATCH_STATES = ("k_T", "a_b")  # what the env entries of the registry carry
 
@@ -56,6 +59,8 @@ DEFAULT_EKF_TUNING = {
 # a speed that follows the measured a_x (estimators.quarter_car_model, speed_from_a_x): its random walk per sample,
 # three times the accelerometer's noise (0.1 m/s^2, the stand-in's and the env's) over a 10 ms sample [m/s]
 A_X_SPEED_Q_STD = 0.003
+# ... and its brake gain's random walk per sample: with no torque spread, the gain also takes the brake's timing [-]
+A_X_KT_Q_STD = 0.1
 # ... and its slip's random walk per sample once the brake has acted: the slip then follows the tire's force law,
 # which the model holds only approximately (the road, a relaxation length, a brake that lags or is late), so the
 # wheel speed moves the slip rather than the integrated speed. Free rolling keeps Q_std's 0.01: the slip is pinned
@@ -98,7 +103,8 @@ MISMATCH_NIS_MAX = 10.0  # a persistent innovation above this many gate bounds i
 MISMATCH_TREND_NIS = 0.25  # an a_x-speed filter's run may start at a passing sample of this many gate bounds (M2') [-]
 
 # ---- the EKF/RLS's wheel-speed gate (estimators.speed_reference)
-BRAKE_SETTLE_S = 0.1  # the torque a brake applies lies within its commands over this span, rule (B4) [s]
+# the torque a brake applies lies within its commands over this span: rule (B4), the EKF's torque spread [s]
+BRAKE_SETTLE_S = 0.1
 
 
 def brake_settle_samples(dt: float) -> int:

@@ -162,5 +162,5 @@ def test_told_the_rolling_radius_the_estimators_keep_the_speed_of_a_radius_error
     base = stop_metrics(nominal, run_estimator(name, [nominal])[0])["v_rms"]
     blind = stop_metrics(stop, run_estimator(name, [stop])[0])["v_rms"]
     told = stop_metrics(stop, run_estimator(name, [stop], replace(PAPER_PARAMS, r=r_eff))[0])["v_rms"]
-    assert blind > 0.4 and blind > 3 * base, (blind, base)
+    assert blind > 0.4 and blind > 2.5 * base, (blind, base)
     assert told < base + 0.05, (told, base)

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from estimators.base import Health, run
+from estimators.ekf import torque_spread_noise
 from estimators.outliers import Verdict
 from estimators.registry import make_estimator
 from estimators.tuning import A_REF
@@ -85,14 +86,12 @@ def test_a_wheel_spinning_up_keeps_the_friction_it_shows_and_the_speed():
     # 2.9 m/s off at the worst sample)
     logs = {name: simulate_log(effects, ROADS["dry"], "open-loop", seed=12)
             for name, effects in (("nominal", []), ("delay", [make_effect("brake_delay", delay=0.06)]))}
-    rms = {}
     for name, (log, truth) in logs.items():
         out = run(make_estimator("ekf"), {"t": log.t, "omega": log.omega, "T_b": log.T_b})
         settled = log.t >= 0.5
         err = out["v"][settled] - truth["v"][settled]
-        rms[name] = float(np.sqrt(np.mean(err**2)))
-        assert np.max(np.abs(err)) <= 1.5
-    assert rms["delay"] <= 2.0 * rms["nominal"] + 0.1  # the robustness target
+        assert np.max(np.abs(err)) <= 1.5  # the robustness target's bound on every sample
+        assert float(np.sqrt(np.mean(err**2))) <= 0.3
     # every posterior friction at least what the wheel showed, and the floor acted on this stop
     log, _ = logs["delay"]
     est = make_estimator("ekf")
@@ -180,3 +179,36 @@ def test_a_wheel_halved_faster_than_the_brake_can_pull_it_is_an_outlier_for_the_
     assert not np.any(np.isin(health[k + 2:k + 20], (Health.OUTLIER, Health.REINITIALISED)))
     clean = run(make_estimator("ekf-ax"), {"t": log.t, "omega": log.omega, "T_b": log.T_b, "a_x": log.a_x})
     assert not np.any(np.isin(clean["health"], (Health.OUTLIER, Health.REINITIALISED)))
+
+
+def test_the_brake_gain_leaves_a_snow_roads_low_friction_to_the_friction_state():
+    # the independent simulator's threshold ABS on snow, nominal plant: from the prior friction 0.6 a held torque
+    # was read as dry friction under a doubled brake gain (k_T at its bound 2.0, the friction state 0.11 at its
+    # median, the speed 1.45 m/s rms and 3.4 m/s off); the brake's timing is the torque spread's, its gain slow
+    from validation.estimator_mismatch import _independent_logs
+
+    (_, log, v_true), = _independent_logs("bosch-abs", "snow", 1, "high", [])
+    est = make_estimator("ekf")
+    est.reset()
+    k_T = est.model.names.index("k_T")
+    gains, err = [], []
+    for j in range(len(log.t)):
+        out = est.update([log.omega[j]], [log.T_b[j]])
+        gains.append(est.x[k_T])
+        err.append(out.values["v"] - v_true[j])
+    settled = log.t >= 0.5
+    err = np.asarray(err)[settled]
+    assert max(gains) <= 1.5
+    assert float(np.sqrt(np.mean(err**2))) <= 0.6
+
+
+@pytest.mark.parametrize("commands, spread", [((400.0, 400.0, 400.0), 0.0), ((100.0, 400.0, 250.0), 150.0),
+                                              ((250.0, 900.0, 250.0), 650.0)])
+def test_a_brake_that_lags_or_waits_spreads_the_torque_over_its_commands_of_the_span(commands, spread):
+    # the torque applied lies within the commands of the settling span: the one held is off by at most the
+    # distance to the farthest of them, and that distance is the torque's standard deviation
+    G = np.array([0.001, -0.0004, 0.0])
+    Q = torque_spread_noise(G, np.array(commands), np.array(commands[-1]))
+    np.testing.assert_allclose(Q, spread**2 * np.outer(G, G), rtol=1e-12, atol=0.0)
+    batched = torque_spread_noise(np.stack([G, 2 * G]), np.array([commands, commands]), np.array([commands[-1]] * 2))
+    np.testing.assert_allclose(batched[1], 4.0 * Q, rtol=1e-12, atol=1e-300)

@@ -13,7 +13,7 @@ from fricenv.plants import quarter_car as qc
 P = qc.PAPER_PARAMS
 DT = 0.01
 TOL = 1e-9  # the batched MHE runs the single's operations (measured: equal to the last bit); 1e-9 is the brief's
-CORRUPT_AT = 90  # sample at which sub-env 1's EKF theta variance is made negative: the next solves fail
+CORRUPT_AT = 60  # sample at which sub-env 1's EKF theta variance is made negative: the next solves fail
 
 
 def _signals(n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
