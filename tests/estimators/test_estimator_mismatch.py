@@ -86,7 +86,7 @@ def test_a_wheel_spinning_up_keeps_the_friction_it_shows_and_the_speed():
     # 2.9 m/s off at the worst sample)
     logs = {name: simulate_log(effects, ROADS["dry"], "open-loop", seed=12)
             for name, effects in (("nominal", []), ("delay", [make_effect("brake_delay", delay=0.06)]))}
-    for name, (log, truth) in logs.items():
+    for log, truth in logs.values():
         out = run(make_estimator("ekf"), {"t": log.t, "omega": log.omega, "T_b": log.T_b})
         settled = log.t >= 0.5
         err = out["v"][settled] - truth["v"][settled]
