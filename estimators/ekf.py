@@ -211,8 +211,8 @@ class QuarterCarEKF(Estimator):
         torque on, until the next reset (``ekf-ax``: the slip, whose force law the model holds only approximately
         once the tire is loaded); None: ``Q_std`` throughout.
     :param torque_spread: add the process noise of a brake that lags or waits (:func:`torque_spread_noise`) at each
-        time update; None: where the model carries the brake gain ``k_T`` and its speed follows the tire
-        (``ekf``, ``ekf-full`` and the arrival filters of ``mhe``, ``mhe-full``).
+        time update; None: where the model carries the brake gain ``k_T`` and its speed follows the tire (``ekf``
+        and the arrival filter of ``mhe``; the registry turns it off for ``ekf-full``, ``mhe-full``).
     """
 
     measurement_columns = ("omega",)

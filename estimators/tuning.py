@@ -15,7 +15,6 @@ __all__ = [
     "AB_P0_STD",
     "AB_Q_STD",
     "A_REF",
-    "A_X_KT_Q_STD",
     "A_X_SLIP_BRAKING_Q_STD",
     "A_X_SPEED_Q_STD",
     "BRAKE_SETTLE_S",
@@ -26,6 +25,7 @@ __all__ = [
     "JUMP_MU_MAX",
     "KT_P0_STD",
     "KT_Q_STD",
+    "KT_TIMING_Q_STD",
     "MAX_REJECTIONS",
     "MISMATCH_NIS_MAX",
     "MISMATCH_STATES",
@@ -43,6 +43,9 @@ __all__ = [
 # brake gain k_T: prior spread, random walk per sample [-] (slow: a brake's timing is the torque spread's,
 # estimators.ekf.torque_spread_noise; a gain fast enough to follow it takes up a snow road's low friction)
 KT_P0_STD, KT_Q_STD = 0.2, 0.03
+# ... and for the models without the torque spread (ekf-ax, mhe-ax: the speed from a_x; ekf-full, mhe-full: with
+# B, C, E estimated the spread lets the curve's shape take the brake's timing): the gain also takes that timing [-]
+KT_TIMING_Q_STD = 0.1
 AB_P0_STD, AB_Q_STD = 1.0, 0.05  # deceleration bias a_b: prior spread, random walk per sample [m/s^2]
 MISMATCH_STATES = ("k_T", "a_b")  # what the env entries of the registry carry
 
@@ -59,8 +62,6 @@ DEFAULT_EKF_TUNING = {
 # a speed that follows the measured a_x (estimators.quarter_car_model, speed_from_a_x): its random walk per sample,
 # three times the accelerometer's noise (0.1 m/s^2, the stand-in's and the env's) over a 10 ms sample [m/s]
 A_X_SPEED_Q_STD = 0.003
-# ... and its brake gain's random walk per sample: with no torque spread, the gain also takes the brake's timing [-]
-A_X_KT_Q_STD = 0.1
 # ... and its slip's random walk per sample once the brake has acted: the slip then follows the tire's force law,
 # which the model holds only approximately (the road, a relaxation length, a brake that lags or is late), so the
 # wheel speed moves the slip rather than the integrated speed. Free rolling keeps Q_std's 0.01: the slip is pinned
