@@ -90,7 +90,8 @@ class BatchedMHE:
             raise EstimatorConfigError(f"threads must be 1..{MAX_THREADS}, got {threads!r}")
         self.t = t = template
         self.n, self.nx, self.N1 = int(n), t.model.nx, t.N + 1
-        dense = [densified(f) for f in (t._fun, t.model._functions()["fF"])]
+        step = "fFG" if t.arrival_filter.torque_spread else "fF"  # the torque's Jacobian only where it is spread
+        dense = [densified(f) for f in (t._fun, t.model._functions()[step])]
         fast = [compiled(f) if compile_c else None for f in dense]
         self.compiled = all(f is not None for f in fast)  # else the virtual machine (same results)
         window, predict = (c or d for c, d in zip(fast, dense))
@@ -210,13 +211,13 @@ class BatchedMHE:
         """The EKF's time update from x(t|t) to the prior of x(t+1); P0 again where the model gives non-finite."""
         lo, hi = self.t.lower, self.t.upper
         x_post = np.clip(self.post_x, lo, hi)
-        xn, F, G = self._predict(x_post, u)
+        xn, F, *G = self._predict(x_post, u)
         xn = xn[:, :, 0]
         self.commands[active] = np.concatenate([self.commands[active, 1:], u[active, None]], axis=1)
         Q = self.t._Q
         if self.t.arrival_filter.torque_spread:  # as the single EKF's time update
             given = np.where(np.isnan(self.commands), u[:, None], self.commands)  # none yet: the one held
-            spread = torque_spread_noise(G[:, :, 0], given, u)
+            spread = torque_spread_noise(G[0][:, :, 0], given, u)
             Q = Q + spread
             rows = np.flatnonzero(active)  # the window's model errors of this sample take it too
             self.spread[rows, self.count[rows] - 1] = np.diagonal(spread, axis1=1, axis2=2)[rows, :2]

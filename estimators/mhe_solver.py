@@ -80,6 +80,7 @@ class BatchedWindowSolver:
         self.zlo, self.zhi = template._zlo, template._zhi
         self.span = np.minimum(self.zhi - self.zlo, 1.0)
         self.w_scale = template._w_scale_free  # the model errors' scales, (nz - nx,); solve() may give them per window
+        self._eye_w = np.eye(self.nz - self.nx)
 
     # ------------------------------------------------------------------ pieces
     def evaluate(self, z: np.ndarray, U: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -126,7 +127,7 @@ class BatchedWindowSolver:
         Ja = np.zeros((k, nx, self.nz))
         Ja[:, :, :nx] = Wa
         Jw = np.zeros((k, self.nz - nx, self.nz))  # of the process-noise terms z[nx:] / w_scale
-        Jw[:, :, nx:] = (1.0 / w_scale)[:, :, None] * np.eye(self.nz - nx)
+        Jw[:, :, nx:] = (1.0 / w_scale)[:, :, None] * self._eye_w
         J = [-W @ PhiZ, Ja, Jw]
         return np.concatenate(r, axis=1), np.concatenate(J, axis=1)
 
