@@ -76,6 +76,21 @@ def test_the_env_entries_carry_the_mismatch_settings():
     assert make_estimator("ekf-rls").core.cfg.K == 20.0
 
 
+@pytest.mark.parametrize("name, spread, gain_walk", [("ekf", True, 0.03), ("mhe", True, 0.03),
+                                                     ("ekf-full", False, 0.1), ("mhe-full", False, 0.1),
+                                                     ("ekf-ax", False, 0.1), ("mhe-ax", False, 0.1)])
+def test_the_brakes_timing_is_the_torque_spreads_or_the_brake_gains(name, spread, gain_walk):
+    # ekf, mhe: the torque within its commands of the last 0.1 s, a slow brake gain; the full forms and the a_x
+    # forms: no spread, the gain moving fast enough to take the brake's timing
+    est = make_estimator(name)
+    ekf = getattr(est, "arrival_filter", est)
+    k_T = ekf.model.names.index("k_T")
+    assert ekf.torque_spread is spread
+    assert np.sqrt(ekf.filter.Q[k_T, k_T]) == pytest.approx(gain_walk)
+    paper = make_estimator(name, mismatch_states=())  # the paper's model: no brake gain, no spread
+    assert getattr(paper, "arrival_filter", paper).torque_spread is False
+
+
 def test_every_entry_builds_with_its_declared_outputs_and_values():
     assert set(ESTIMATORS) == set(OLD) | {"ekf-full", "mhe-full", "ekf-ax", "mhe-ax"}
     for name, entry in ESTIMATORS.items():
