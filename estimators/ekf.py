@@ -32,7 +32,7 @@ from estimators.tuning import (
 )
 
 __all__ = ["DEFAULT_EKF_TUNING", "SLIP_PRIOR", "V_PRIOR", "ExtendedKalmanFilter", "ParameterInformation", "QuarterCarEKF",
-           "ekf_predict", "ekf_update", "innovation_covariance", "torque_spread_noise"]
+           "ekf_predict", "ekf_update", "innovation_covariance", "torque_jump_std", "torque_step_noise"]
 
 
 def _sym(P: np.ndarray) -> np.ndarray:
@@ -51,21 +51,40 @@ def ekf_predict(x_next: np.ndarray, F: np.ndarray, P: np.ndarray, Q: np.ndarray)
     return x_next, _sym(F @ P @ F.T + Q)
 
 
-def torque_spread_noise(G: np.ndarray, commands: np.ndarray, held: np.ndarray) -> np.ndarray:
-    """Process noise of a brake that lags or waits: ``s^2 G G^T``.
+def torque_jump_std(commands: np.ndarray, previous: np.ndarray, fade: float) -> np.ndarray:
+    """The standard deviation of the jump of a brake's torque error ``T_e`` over one sample [N m].
 
-    The torque a brake applies lies within its commands over ``BRAKE_SETTLE_S`` (rule (B4) of
-    :mod:`estimators.speed_reference`); ``s``, the distance from the command held to the farthest of them, is taken as
-    the standard deviation of the torque the model holds, and ``G`` maps it to the state over one sample.
+    A brake reaches its command only over its settling time ``BRAKE_SETTLE_S``. A command changed by
+    ``d = commands[-1] - previous`` reaches the wheel off by up to ``|d|`` (a step arrives late), and while the
+    commands move the torque lies anywhere within those of the span (a ramp or a modulation arrives late all along,
+    rule (B4) of :mod:`estimators.speed_reference`): the jump's variance is ``d^2 + (1 - fade^2) s^2``, ``s`` the
+    distance from the command held to the farthest of the span, so that the fading error's spread settles at ``s``.
+    A command held over the whole span gives none.
 
-    :param G: d x+ / d T_b, shape (..., n).
-    :param commands: the commands of the span, the one held included, shape (..., k) [N m].
-    :param held: the command held over the sample, shape (...) [N m].
+    :param commands: the span's commands, the one held over this sample last, shape (..., k) [N m].
+    :param previous: the command held over the sample before, shape (...) [N m].
+    :param fade: the factor by which ``T_e`` fades over a sample (``AugmentedModel.torque_fade``) [-].
+    """
+    commands = np.asarray(commands, dtype=float)
+    held = commands[..., -1]
+    span = np.max(np.abs(commands - held[..., None]), axis=-1)
+    return np.sqrt((held - previous) ** 2 + (1.0 - fade**2) * span**2)
+
+
+def torque_step_noise(F_e: np.ndarray, jump: np.ndarray) -> np.ndarray:
+    """Process noise of a brake that lags or waits: ``j^2 F_e F_e^T``.
+
+    The torque error ``T_e`` of the model (:mod:`estimators.quarter_car_model`) takes a jump of standard deviation
+    ``j`` (:func:`torque_jump_std`) before the sample's step, so ``F_e = d x+ / d T_e`` maps it to the state; between
+    jumps it fades over ``BRAKE_SETTLE_S``. A brake on time keeps ``T_e`` at 0; a lag or a delay moves it, and its
+    fading keeps the torque's average at the commands' own, so that the friction and the brake gain keep theirs.
+
+    :param F_e: d x+ / d T_e, shape (..., n).
+    :param jump: the jump's standard deviation, shape (...) [N m].
     :return: (..., n, n).
     """
-    spread = np.max(np.abs(np.asarray(commands) - np.asarray(held)[..., None]), axis=-1)
-    Gs = G * spread[..., None]
-    return Gs[..., :, None] * Gs[..., None, :]
+    Fj = F_e * np.asarray(jump, dtype=float)[..., None]
+    return Fj[..., :, None] * Fj[..., None, :]
 
 
 def innovation_covariance(P: np.ndarray, H: np.ndarray, R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -198,7 +217,9 @@ class QuarterCarEKF(Estimator):
     skipped (``Health.OUTLIER``, the state is only predicted); after ``outlier_gate.max_rejections`` in a row the
     next failing one re-initialises v from it (:func:`reinit_from_wheel_speed`, ``Health.REINITIALISED``). The
     health is ``NOT_EXCITED`` when the last N + 1 updates did not inform every estimated parameter by the MHE's
-    rule (:class:`ParameterInformation`), e.g. free rolling.
+    rule (:class:`ParameterInformation`), e.g. free rolling. A model that carries the torque error ``T_e`` takes
+    :func:`torque_step_noise` of :func:`torque_jump_std` at each time update (``ekf`` and the arrival filter of
+    ``mhe``).
 
     :param estimated: parameters augmented to the state (subset of theta, B, C, E).
     :param dt: sample time [s].
@@ -210,9 +231,6 @@ class QuarterCarEKF(Estimator):
     :param Q_braking_std: process noise per state name that replaces ``Q_std``'s from the first sample with a brake
         torque on, until the next reset (``ekf-ax``: the slip, whose force law the model holds only approximately
         once the tire is loaded); None: ``Q_std`` throughout.
-    :param torque_spread: add the process noise of a brake that lags or waits (:func:`torque_spread_noise`) at each
-        time update; None: where the model carries the brake gain ``k_T`` and its speed follows the tire (``ekf``
-        and the arrival filter of ``mhe``; the registry turns it off for ``ekf-full``, ``mhe-full``).
     """
 
     measurement_columns = ("omega",)
@@ -222,7 +240,7 @@ class QuarterCarEKF(Estimator):
     def __init__(self, estimated: tuple[str, ...] = ("theta",), dt: float = 0.01, P0_std: dict | None = None,
                  Q_std: dict | None = None, R: float = DEFAULT_EKF_TUNING["R"],
                  model: AugmentedModel | None = None, outlier_gate: GateParams | None = DEFAULT_GATE,
-                 Q_braking_std: dict | None = None, torque_spread: bool | None = None):
+                 Q_braking_std: dict | None = None):
         dt = check_dt(dt)
         try:
             self.model = model or AugmentedModel(estimated=tuple(estimated), dt=dt)
@@ -247,9 +265,8 @@ class QuarterCarEKF(Estimator):
         self.Q_braking = None if Q_braking_std is None else \
             np.diag([{**q, **Q_braking_std}[n] ** 2 for n in names])
         self.input_columns = self.model.input_names  # ("T_b",), or ("T_b", "a_x") when the speed follows a_x
-        if torque_spread is None:
-            torque_spread = "k_T" in self.model.extras and not self.model.speed_from_a_x
-        self.torque_spread = bool(torque_spread)
+        # the torque error's index, or None for a model without one
+        self.torque_error = self.model.names.index("T_e") if "T_e" in self.model.extras else None
         self.lower, self.upper = self.model.lower(), self.model.upper()
         # the model's speed can change by at most F_z theta_max / m per second (|mu| <= theta <= 1): a predicted
         # step beyond it is a numerical failure of the stiff step (slip near 1, speed near 0) and is clipped to it
@@ -279,7 +296,8 @@ class QuarterCarEKF(Estimator):
         self._brake_torque = 0.0  # torque held since the last sample [N m]
         self._braked = False  # a brake torque has acted since the reset
         self._commands = deque(maxlen=brake_settle_samples(self.model.dt))  # the torques commanded, newest last
-        self.torque_variance = np.zeros(2)  # the last time update's torque-spread variance of (v, slip)
+        self.torque_jump = 0.0  # the torque error's jump at the last time update, its standard deviation [N m]
+        self.torque_variance = np.zeros(2)  # ... and the variance of (v, slip) it adds over that update
         self.information.reset()
         return self._estimate(self.x, Health.OK)
 
@@ -307,17 +325,18 @@ class QuarterCarEKF(Estimator):
         :return: False when the step is not finite: the prior is kept and its covariance restarts at P0.
         """
         u = np.atleast_1d(np.asarray(inputs, dtype=float))
-        self._brake_torque = float(u[0])
+        previous, self._brake_torque = self._brake_torque, float(u[0])
+        self._commands.append(self._brake_torque)
         x_post = np.clip(x_post, self.lower, self.upper)
         self._braked = self._braked or self._brake_torque > 0.0
         braked = self.Q_braking is not None and self._braked
         Q = self.Q_braking if braked else self.filter.Q
-        self._commands.append(self._brake_torque)
-        if self.torque_spread:
-            x_next, F, G = self.model.f_and_jacobians(x_post, u)
-            spread = torque_spread_noise(G[:, 0], np.array(self._commands), np.array(self._brake_torque))
-            x_next, P_next = ekf_predict(x_next, F, P_post, Q + spread)
-            self.torque_variance = np.diag(spread)[:2].copy()
+        if self.torque_error is not None:
+            self.torque_jump = float(torque_jump_std(np.array(self._commands), previous, self.model.torque_fade))
+            x_next, F = self.model.f_and_jacobian(x_post, u)
+            noise = torque_step_noise(F[:, self.torque_error], self.torque_jump)
+            x_next, P_next = ekf_predict(x_next, F, P_post, Q + noise)
+            self.torque_variance = np.diag(noise)[:2].copy()
         else:
             x_next, P_next = self.filter.predict(x_post, P_post, u, Q)
         if not (np.all(np.isfinite(x_next)) and np.all(np.isfinite(P_next))):

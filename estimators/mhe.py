@@ -10,7 +10,8 @@ trajectory xbar is the previous solution's first state pushed one sample forward
 eq. (11). W_t comes from the SVD of the window Jacobian Phi_t = dH_t/dx at the a priori state, eq. (14), with the
 singular values below delta thresholded away, eqs. (15)-(16). Directions whose singular value is thresholded get
 no weight from the data and are held by the prior: that is how B, C, E stay put when the data do not excite them
-(reported as ``Health.NOT_EXCITED``).
+(reported as ``Health.NOT_EXCITED``; a brake's torque error ``T_e``, which only a moving command informs, may stay
+unexcited in an ``OK`` window).
 
 Two readings of (16) are offered (``weighting=``):
 
@@ -112,8 +113,8 @@ class RegularizedMHE(Estimator):
         keyword ``options``. ``arrival="paper"`` is the paper's prior terms beta_i ||(x_i - xbar_i)/D||^2 of (12a),
         ``"ekf"`` the arrival cost of an EKF run alongside (||x(t-N) - xbar||^2 in P^-1, beyond the paper);
         ``model_error`` the process noise in the window (``"auto"``: the EKF's Q_std of v and slip with the EKF
-        arrival cost, else none; with an arrival filter that spreads the torque, each sample's model errors take
-        that filter's torque-spread variance as well, :func:`estimators.ekf.torque_spread_noise`); ``gate``
+        arrival cost, else none; with an arrival filter that carries the torque error ``T_e``, each sample's model
+        errors take the variance of (v, slip) that its jump adds, :func:`estimators.ekf.torque_step_noise`); ``gate``
         returns the alongside EKF's estimate when the solution is further than this squared Mahalanobis distance
         from it (info ``gated``); ``outlier_gate`` gates the wheel speed on the alongside EKF's innovation (module
         docstring, "Outliers").
@@ -162,6 +163,9 @@ class RegularizedMHE(Estimator):
             self.model_error = np.sqrt(np.diag(self._Q)[:2])
             if self.arrival_filter.Q_braking is not None:
                 self._model_error_braked = np.sqrt(np.diag(self.arrival_filter.Q_braking)[:2])
+        # a window is excited when it informs every direction of the state but the torque error's, which only a
+        # moving command informs (a held one leaves it at its fading prior)
+        self.excited_rank = self.model.nx - (self.arrival_filter.torque_error is not None)
         self._build()
         self.reset()
 
@@ -242,8 +246,8 @@ class RegularizedMHE(Estimator):
         self._w_prev: np.ndarray | None = None
         self._arr_hist: deque = deque(maxlen=self.N + 1)
         self._used: list[bool] = []  # per window sample: False if the gate rejected it
-        # per sample, the arrival filter's torque-spread variance of (v, slip) over its time update
-        self._spread: deque = deque(maxlen=self.N + 1)
+        # per sample, the variance of (v, slip) the torque error's jump adds over the arrival filter's time update
+        self._torque_variance: deque = deque(maxlen=self.N + 1)
         return self._estimate(self.x_prior0, Health.OK)
 
     def _estimate(self, x: np.ndarray, health: Health, info: dict | None = None) -> Estimate:
@@ -269,7 +273,7 @@ class RegularizedMHE(Estimator):
         if verdict in (Verdict.REINIT, Verdict.START):  # the arrival filter restarted from the sample: so does the window
             self._y, self._u, self._used = [], [], []
             self._arr_hist.clear()
-            self._spread.clear()
+            self._torque_variance.clear()
             self.x_prior0, self._X_prev = f.x.copy(), None
         self._y.append(float(y[0]))
         self._u.append(u.copy())  # the window keeps it: not the caller's buffer
@@ -298,8 +302,8 @@ class RegularizedMHE(Estimator):
         Y = np.asarray(self._y)
         U = np.asarray(self._u[:N]).reshape(N, -1)
         self._w_scale = self._w_scale_braked if self.arrival_filter.braked else self._w_scale_free
-        if self.arrival_filter.torque_spread and len(self._w_scale):  # the window's model errors take it too
-            self._w_scale = np.sqrt(self._w_scale**2 + np.concatenate(list(self._spread)[-N:]))
+        if self.arrival_filter.torque_error is not None and len(self._w_scale):  # the window's model errors take it
+            self._w_scale = np.sqrt(self._w_scale**2 + np.concatenate(list(self._torque_variance)[-N:]))
         try:
             sol, health, info = self._solve(self.x_prior0, Y, U, np.asarray(self._used))
         except Exception as exc:  # noqa: BLE001 - a failed solve must never raise inside a loop
@@ -340,7 +344,7 @@ class RegularizedMHE(Estimator):
     def _ekf_predict(self, u: np.ndarray) -> None:
         """The arrival filter's time update from x(t|t) to the prior of x(t+1)."""
         self.arrival_filter.propagate(*self._ekf_post, u)
-        self._spread.append(self.arrival_filter.torque_variance)
+        self._torque_variance.append(self.arrival_filter.torque_variance)
 
     # ------------------------------------------------------------------ weights and solver
     def _masked_weights(self, Phi: np.ndarray, used: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
@@ -452,5 +456,5 @@ class RegularizedMHE(Estimator):
                 break
         if not (np.all(np.isfinite(z)) and np.all(np.isfinite(ev["X"]))):
             return None, Health.SOLVER_FAILED, {"reason": "non-finite solution"}
-        health = Health.OK if rank == nx else Health.NOT_EXCITED
+        health = Health.OK if rank >= self.excited_rank else Health.NOT_EXCITED
         return ev, health, {"singular_values": s, "rank": rank, "cost": cost, "evaluations": n_eval}

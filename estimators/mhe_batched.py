@@ -43,7 +43,7 @@ import numpy as np
 
 from estimators.base import EstimatorConfigError, Health
 from estimators.casadi_compiled import BatchCall, compiled, densified
-from estimators.ekf import torque_spread_noise
+from estimators.ekf import torque_jump_std, torque_step_noise
 from estimators.mhe import PD_JITTER, RegularizedMHE
 from estimators.mhe_solver import BatchedWindowSolver, sym
 from estimators.mismatch import WheelSpeedGuard
@@ -90,8 +90,7 @@ class BatchedMHE:
             raise EstimatorConfigError(f"threads must be 1..{MAX_THREADS}, got {threads!r}")
         self.t = t = template
         self.n, self.nx, self.N1 = int(n), t.model.nx, t.N + 1
-        step = "fFG" if t.arrival_filter.torque_spread else "fF"  # the torque's Jacobian only where it is spread
-        dense = [densified(f) for f in (t._fun, t.model._functions()[step])]
+        dense = [densified(f) for f in (t._fun, t.model._functions()["fF"])]
         fast = [compiled(f) if compile_c else None for f in dense]
         self.compiled = all(f is not None for f in fast)  # else the virtual machine (same results)
         window, predict = (c or d for c, d in zip(fast, dense))
@@ -105,7 +104,8 @@ class BatchedMHE:
         self.torque_prev = np.zeros(n)  # brake torque held since the last sample, per sub-env [N m]
         # the torques commanded over the brake's settling span, newest last, per sub-env (NaN: none yet) [N m]
         self.commands = np.full((n, brake_settle_samples(t.model.dt)), np.nan)
-        self.spread = np.zeros((n, N1, 2))  # per window sample, the torque-spread variance of (v, slip) [-]
+        # per window sample, the variance of (v, slip) the torque error's jump adds over the EKF's time update [-]
+        self.torque_variance = np.zeros((n, N1, 2))
         self.y, self.u, self.used = np.zeros((n, N1)), np.zeros((n, N1)), np.ones((n, N1), dtype=bool)
         self.hist_x, self.hist_P = np.zeros((n, N1, nx)), np.zeros((n, N1, nx, nx))
         self.count = np.zeros(n, dtype=int)  # samples in the window buffer
@@ -183,7 +183,7 @@ class BatchedMHE:
         reinit = (verdict == Verdict.REINIT) | (verdict == Verdict.START)  # the window restarts
         self.count[reinit], self.has_prev[reinit] = 0, False
         full = active & (self.count == self.N1)  # the window slides: drop the oldest sample
-        for buf in (self.y, self.u, self.used, self.hist_x, self.hist_P, self.spread):
+        for buf in (self.y, self.u, self.used, self.hist_x, self.hist_P, self.torque_variance):
             buf[full] = np.roll(buf[full], -1, axis=1)
         rows = np.flatnonzero(active)
         pos = np.minimum(self.count[rows], self.N1 - 1)
@@ -211,16 +211,17 @@ class BatchedMHE:
         """The EKF's time update from x(t|t) to the prior of x(t+1); P0 again where the model gives non-finite."""
         lo, hi = self.t.lower, self.t.upper
         x_post = np.clip(self.post_x, lo, hi)
-        xn, F, *G = self._predict(x_post, u)
+        xn, F = self._predict(x_post, u)
         xn = xn[:, :, 0]
         self.commands[active] = np.concatenate([self.commands[active, 1:], u[active, None]], axis=1)
         Q = self.t._Q
-        if self.t.arrival_filter.torque_spread:  # as the single EKF's time update
+        e = self.t.arrival_filter.torque_error
+        if e is not None:  # as the single EKF's time update
             given = np.where(np.isnan(self.commands), u[:, None], self.commands)  # none yet: the one held
-            spread = torque_spread_noise(G[0][:, :, 0], given, u)
-            Q = Q + spread
+            noise = torque_step_noise(F[:, :, e], torque_jump_std(given, self.torque_prev, self.t.model.torque_fade))
+            Q = Q + noise
             rows = np.flatnonzero(active)  # the window's model errors of this sample take it too
-            self.spread[rows, self.count[rows] - 1] = np.diagonal(spread, axis1=1, axis2=2)[rows, :2]
+            self.torque_variance[rows, self.count[rows] - 1] = np.diagonal(noise, axis1=1, axis2=2)[rows, :2]
         dv = self.t.arrival_filter.dv_max  # the single EKF's bound on a predicted speed change
         xn[:, 0] = np.clip(xn[:, 0], x_post[:, 0] - dv, x_post[:, 0] + dv)
         good = np.all(np.isfinite(xn), axis=1) & np.all(np.isfinite(F), axis=(1, 2))
@@ -241,8 +242,8 @@ class BatchedMHE:
         rows = np.flatnonzero(live)
         warm = np.where(self.has_prev[rows, None], self.w_prev[rows], np.nan)
         w_scale = None
-        if t.arrival_filter.torque_spread and self.solver.nz > nx:  # as the single MHE's window
-            w_scale = np.sqrt(t._w_scale_free**2 + self.spread[rows, :t.N].reshape(len(rows), -1))
+        if t.arrival_filter.torque_error is not None and self.solver.nz > nx:  # as the single MHE's window
+            w_scale = np.sqrt(t._w_scale_free**2 + self.torque_variance[rows, :t.N].reshape(len(rows), -1))
         sol = self.solver.solve(self.hist_x[rows, 0], self.hist_P[rows, 0], self.y[rows], self.u[rows, :t.N],
                                 self.used[rows], warm, w_scale)
         good = ~sol.failed
@@ -251,7 +252,7 @@ class BatchedMHE:
         self.has_prev[ok] = True
         self.w_prev[ok] = sol.z[good, nx:]
         self.last[ok] = sol.X[good, -1]
-        health[ok] = np.where(sol.rank[good] == nx, int(Health.OK), int(Health.NOT_EXCITED))
+        health[ok] = np.where(sol.rank[good] >= t.excited_rank, int(Health.OK), int(Health.NOT_EXCITED))
         if t.gate and ok.any():  # the EKF-consistency gate, on the solved windows only (as the single MHE)
             k = np.flatnonzero(ok)
             d = self.last[k] - self.post_x[k]

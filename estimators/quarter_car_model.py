@@ -38,6 +38,7 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 
+from estimators.tuning import BRAKE_SETTLE_S
 from fricenv.plants import sui_johansen as sj
 from fricenv.plants.namespace import with_namespace
 from fricenv.plants.quarter_car import PAPER_PARAMS, QuarterCarParams, slip_ode, slip_ode_given_accel
@@ -55,11 +56,13 @@ __all__ = [
 ]
 
 PARAM_NAMES = ("theta", "B", "C", "E")
-# Mismatch states a model may carry after the Magic Formula parameters (random walks, docs/contracts.md):
-# ``k_T`` the brake gain (the torque on the wheel is k_T T_b), ``a_b`` a deceleration of the car that the tire
-# force does not explain [m/s^2] (drag, a slope).
-EXTRA_NAMES = ("k_T", "a_b")
-EXTRA_NOMINAL = {"k_T": 1.0, "a_b": 0.0}
+# Mismatch states a model may carry after the Magic Formula parameters (docs/contracts.md): the random walks
+# ``k_T``, the brake gain, and ``a_b``, a deceleration of the car that the tire force does not explain [m/s^2] (drag,
+# a slope); and ``T_e``, a torque error of a brake that lags or waits [N m]. The torque on the wheel is
+# k_T T_b + T_e; T_e fades over BRAKE_SETTLE_S (the brake reaches its command) and jumps while the commands move
+# (the filters' noise on it, estimators.ekf.torque_jump_std).
+EXTRA_NAMES = ("k_T", "a_b", "T_e")
+EXTRA_NOMINAL = {"k_T": 1.0, "a_b": 0.0, "T_e": 0.0}
 # Sui & Johansen eq. (18): nominal values, a priori estimates or fixed values (read-only).
 NOMINAL = sj.NOMINAL_SHAPE
 # Bounds of Section IV: v >= 0, 0 <= lambda <= 1, 0 <= theta <= 1, 9 <= B <= 15.5, 0 <= C <= 3, -7.5 <= E <= 2.
@@ -72,6 +75,7 @@ BOUNDS: dict[str, tuple[float, float]] = {
     "E": (-7.5, 2.0),
     "k_T": (0.5, 2.0),
     "a_b": (0.0, 5.0),
+    "T_e": (-np.inf, np.inf),
 }
 V_FLOOR = 0.5  # smallest speed in the estimator model's 1/v (the estimators run above 3 m/s) [m/s]
 DEFAULT_SUBSTEPS = 3  # ROS2 substeps per 10 ms sample (5 ms each; see the module docstring)
@@ -138,6 +142,11 @@ class AugmentedModel:
     def nx(self) -> int:
         return 2 + len(self.estimated) + len(self.extras)
 
+    @property
+    def torque_fade(self) -> float:
+        """The factor by which the torque error ``T_e`` fades over a sample: ``exp(-dt / BRAKE_SETTLE_S)``."""
+        return float(np.exp(-self.dt / BRAKE_SETTLE_S))
+
     def extra(self, x, name: str):
         """The value of mismatch state ``name`` in a (numeric or symbolic) state, its nominal value if not carried."""
         if name not in self.extras:
@@ -170,7 +179,7 @@ class AugmentedModel:
         B, C, E, theta = self.road(x)
         v = ca.fmax(x[0], V_FLOOR)
         lam = x[1]
-        Tb = self.extra(x, "k_T") * u[0]
+        Tb = self.extra(x, "k_T") * u[0] + self.extra(x, "T_e")
         if self.speed_from_a_x:
             return u[1], _slip_given_accel_casadi(u[1], v, lam, Tb, B, C, E, theta, p.r, p.J, p.Fz)
         vdot, lamdot = _slip_ode_casadi(v, lam, Tb, B, C, E, theta, p.r, p.m, p.J, p.Fz)
@@ -210,7 +219,8 @@ class AugmentedModel:
             k2 = solve(f2 - 2.0 * k1)
             z = z + h * (1.5 * k1 + 0.5 * k2)
             z = ca.vertcat(ca.fmax(z[0], 0.0), ca.fmin(ca.fmax(z[1], 0.0), 1.0))
-        return ca.vertcat(z, *[x[i] for i in range(2, self.nx)])
+        fade = {"T_e": self.torque_fade}  # the brake's torque error fades, the other states are constant
+        return ca.vertcat(z, *[x[i] * fade.get(n, 1.0) for i, n in enumerate(self.names) if i >= 2])
 
     def measurement_sx(self, x):
         """Eq. (7): omega = v (1 - lambda) / r."""
@@ -225,8 +235,6 @@ class AugmentedModel:
             y = self.measurement_sx(x)
             self._cache["f"] = ca.Function("f", [x, u], [xn])
             self._cache["fF"] = ca.Function("fF", [x, u], [xn, ca.jacobian(xn, x)])
-            # with d x+ / d u as well, for the filters that spread the torque (about a fifth more instructions)
-            self._cache["fFG"] = ca.Function("fFG", [x, u], [xn, ca.jacobian(xn, x), ca.jacobian(xn, u)])
             self._cache["h"] = ca.Function("h", [x], [y])
             self._cache["hH"] = ca.Function("hH", [x], [y, ca.jacobian(y, x)])
         return self._cache
@@ -244,11 +252,6 @@ class AugmentedModel:
         """Numeric x+ and d x+ / d x."""
         xn, F = self._functions()["fF"](x, u)
         return np.asarray(xn).ravel(), np.asarray(F)
-
-    def f_and_jacobians(self, x, u) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Numeric x+, d x+ / d x and d x+ / d u (columns in :attr:`input_names` order)."""
-        xn, F, G = self._functions()["fFG"](x, u)
-        return np.asarray(xn).ravel(), np.asarray(F), np.asarray(G)
 
     def h(self, x) -> float:
         """Numeric measurement, eq. (7)."""

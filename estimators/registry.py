@@ -50,7 +50,13 @@ from estimators.ekf_rls import ENV_CORRECTION_GAIN, PAPER_CORRECTION_GAIN, Quart
 from estimators.mhe import RegularizedMHE
 from estimators.quarter_car_model import PARAM_NAMES, AugmentedModel
 from estimators.slope_maps import PAPER_MAP
-from estimators.tuning import A_X_SLIP_BRAKING_Q_STD, A_X_SPEED_Q_STD, KT_TIMING_Q_STD, MISMATCH_STATES
+from estimators.tuning import (
+    A_X_SLIP_BRAKING_Q_STD,
+    A_X_SPEED_Q_STD,
+    KT_TIMING_Q_STD,
+    MISMATCH_STATES,
+    TIMING_STATES,
+)
 from fricenv.errors import InvalidInputError
 from fricenv.plants import sui_johansen as sj
 from fricenv.plants.quarter_car import PAPER_PARAMS, QuarterCarParams
@@ -180,9 +186,11 @@ class EstimatorEntry:
 
 def _entries() -> tuple[EstimatorEntry, ...]:
     mhe_paper = {"arrival": "paper", "model_error": None}
-    absorb = MappingProxyType({"mismatch_states": MISMATCH_STATES})  # the env entries' brake gain and drag states
-    # the full forms take the brake's timing in their brake gain, not in a torque spread (estimators.tuning)
-    timing_in_gain = {"torque_spread": False, "Q_std": {"k_T": KT_TIMING_Q_STD}}
+    # the env entries' brake gain and drag states, and a brake's torque error (estimators.tuning)
+    absorb = MappingProxyType({"mismatch_states": TIMING_STATES})
+    # the full forms carry no torque error: they take the brake's timing in their brake gain
+    full = {"mismatch_states": MISMATCH_STATES}
+    timing_in_gain = {"Q_std": {"k_T": KT_TIMING_Q_STD}}
     # the speed from a_x: its model, and its filter's noise (the MHE's arrival filter is that EKF)
     a_x_filter = {"Q_std": {"v": A_X_SPEED_Q_STD, "k_T": KT_TIMING_Q_STD},
                   "Q_braking_std": {"slip": A_X_SLIP_BRAKING_Q_STD}}
@@ -198,9 +206,9 @@ def _entries() -> tuple[EstimatorEntry, ...]:
                        cls=QuarterCarEkfRls, values=EKF_RLS_VALUES,
                        assumed_shape=_shape_dict(DRY), observation=True),
         EstimatorEntry("ekf", "full", "augmented EKF, theta, B, C, E, brake gain, deceleration bias", _build_ekf,
-                       MappingProxyType({**absorb, **timing_in_gain}), estimated=FULL_SHAPE, observation=True),
+                       MappingProxyType({**full, **timing_in_gain}), estimated=FULL_SHAPE, observation=True),
         EstimatorEntry("mhe", "full", "regularized MHE, theta, B, C, E, brake gain, deceleration bias", _build_mhe,
-                       MappingProxyType({**absorb, "filter_options": timing_in_gain}), estimated=FULL_SHAPE,
+                       MappingProxyType({**full, "filter_options": timing_in_gain}), estimated=FULL_SHAPE,
                        cls=RegularizedMHE, observation=True),
         EstimatorEntry("ekf", "ax", "augmented EKF, the speed from a_x, theta, brake gain", _build_ekf,
                        MappingProxyType({**a_x_model, **a_x_filter}), observation=True),

@@ -35,28 +35,33 @@ __all__ = [
     "REF_MARGIN_STD",
     "SLIP_PRIOR",
     "STATE_SCALES",
+    "TIMING_STATES",
     "V_PRIOR",
     "brake_settle_samples",
 ]
 
 # ---- the mismatch states (estimators.quarter_car_model.EXTRA_NAMES) of the env estimators
-# brake gain k_T: prior spread, random walk per sample [-] (slow: a brake's timing is the torque spread's,
-# estimators.ekf.torque_spread_noise; a gain fast enough to follow it takes up a snow road's low friction)
-KT_P0_STD, KT_Q_STD = 0.2, 0.03
-# ... and for the models without the torque spread (ekf-ax, mhe-ax: the speed from a_x; ekf-full, mhe-full: with
-# B, C, E estimated the spread lets the curve's shape take the brake's timing): the gain also takes that timing [-]
+# brake gain k_T: prior spread, random walk per sample [-] (slow: a brake's timing is the torque error T_e's,
+# estimators.ekf.torque_jump_std; a gain fast enough to follow it takes up a snow road's low friction)
+KT_P0_STD, KT_Q_STD = 0.2, 0.01
+# ... and for the models without the torque error (ekf-ax, mhe-ax: the speed from a_x; ekf-full, mhe-full: with
+# B, C, E estimated, a torque noise let the curve's shape take the brake's timing): the gain takes that timing [-]
 KT_TIMING_Q_STD = 0.1
 AB_P0_STD, AB_Q_STD = 1.0, 0.05  # deceleration bias a_b: prior spread, random walk per sample [m/s^2]
-MISMATCH_STATES = ("k_T", "a_b")  # what the env entries of the registry carry
+# torque error T_e: prior spread (no command yet, so no error) [N m]; its noise comes from the commands' moves
+# alone (estimators.ekf.torque_jump_std)
+TE_P0_STD = 1.0
+MISMATCH_STATES = ("k_T", "a_b")  # the brake gain and the drag of the env entries of the registry
+TIMING_STATES = MISMATCH_STATES + ("T_e",)  # ... with a brake's torque error (ekf, mhe)
 
 # ---- the augmented EKF (estimators.ekf), also the MHE's arrival-cost filter
 DEFAULT_EKF_TUNING = {
     # initial prior spread, per state
     "P0_std": {"v": 1.0, "slip": 0.05, "theta": 0.4, "B": 3.0, "C": 0.5, "E": 3.0, "k_T": KT_P0_STD,
-               "a_b": AB_P0_STD},
+               "a_b": AB_P0_STD, "T_e": TE_P0_STD},
     # process noise per 10 ms sample: model error on v and slip, random walk on the parameters
     "Q_std": {"v": 0.01, "slip": 0.01, "theta": 0.002, "B": 0.02, "C": 0.005, "E": 0.02, "k_T": KT_Q_STD,
-              "a_b": AB_Q_STD},
+              "a_b": AB_Q_STD, "T_e": 0.0},
     "R": OMEGA_NOISE_VAR,  # wheel-speed noise variance [(rad/s)^2], Sui & Johansen Section IV
 }
 # a speed that follows the measured a_x (estimators.quarter_car_model, speed_from_a_x): its random walk per sample,
@@ -83,9 +88,9 @@ PAPER_TUNING = MappingProxyType({
 # per window state; chosen on cases 1-4 (seeds 0-2) for the RMS of v and slip after 0.5 s.
 STATE_SCALES = MappingProxyType({
     "theta-only": MappingProxyType({"v": 0.3, "slip": 0.01, "theta": 0.04, "B": 2.0, "C": 0.4, "E": 2.0,
-                                    "k_T": 0.1, "a_b": 0.5}),
+                                    "k_T": 0.1, "a_b": 0.5, "T_e": 100.0}),
     "all": MappingProxyType({"v": 0.3, "slip": 0.03, "theta": 0.03, "B": 1.0, "C": 0.2, "E": 1.0, "k_T": 0.1,
-                             "a_b": 0.5}),
+                             "a_b": 0.5, "T_e": 100.0}),
 })
 GATE_CHI2 = 25.0  # EKF-consistency gate of the arrival="ekf" MHE: squared Mahalanobis distance (estimators.mhe)
 # Default arrival cost per group: the EKF arrival cost, with process noise in the window, for both; the paper's
@@ -104,7 +109,8 @@ MISMATCH_NIS_MAX = 10.0  # a persistent innovation above this many gate bounds i
 MISMATCH_TREND_NIS = 0.25  # an a_x-speed filter's run may start at a passing sample of this many gate bounds (M2') [-]
 
 # ---- the EKF/RLS's wheel-speed gate (estimators.speed_reference)
-# the torque a brake applies lies within its commands over this span: rule (B4), the EKF's torque spread [s]
+# the torque a brake applies lies within its commands over this span: rule (B4); the time constant over which the
+# torque error T_e of the EKF and the MHE fades [s]
 BRAKE_SETTLE_S = 0.1
 
 

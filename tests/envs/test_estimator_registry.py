@@ -70,25 +70,27 @@ def test_entry_equals_the_constructor_it_replaced(name):
 
 
 def test_the_env_entries_carry_the_mismatch_settings():
-    for name in ("ekf", "mhe", "ekf-full", "mhe-full"):
+    for name in ("ekf", "mhe"):
+        assert make_estimator(name).model.extras == ("k_T", "a_b", "T_e")
+    for name in ("ekf-full", "mhe-full"):
         assert make_estimator(name).model.extras == ("k_T", "a_b")
     assert make_estimator("ekf", mismatch_states=()).model.extras == ()
     assert make_estimator("ekf-rls").core.cfg.K == 20.0
 
 
-@pytest.mark.parametrize("name, spread, gain_walk", [("ekf", True, 0.03), ("mhe", True, 0.03),
-                                                     ("ekf-full", False, 0.1), ("mhe-full", False, 0.1),
-                                                     ("ekf-ax", False, 0.1), ("mhe-ax", False, 0.1)])
-def test_the_brakes_timing_is_the_torque_spreads_or_the_brake_gains(name, spread, gain_walk):
-    # ekf, mhe: the torque within its commands of the last 0.1 s, a slow brake gain; the full forms and the a_x
-    # forms: no spread, the gain moving fast enough to take the brake's timing
+@pytest.mark.parametrize("name, torque_error, gain_walk", [("ekf", True, 0.01), ("mhe", True, 0.01),
+                                                           ("ekf-full", False, 0.1), ("mhe-full", False, 0.1),
+                                                           ("ekf-ax", False, 0.1), ("mhe-ax", False, 0.1)])
+def test_the_brakes_timing_is_the_torque_errors_or_the_brake_gains(name, torque_error, gain_walk):
+    # ekf, mhe: a torque error that jumps with the command and fades, a slow brake gain; the full forms and the
+    # a_x forms: no torque error, the gain moving fast enough to take the brake's timing
     est = make_estimator(name)
     ekf = getattr(est, "arrival_filter", est)
     k_T = ekf.model.names.index("k_T")
-    assert ekf.torque_spread is spread
+    assert (ekf.torque_error is not None) is torque_error
     assert np.sqrt(ekf.filter.Q[k_T, k_T]) == pytest.approx(gain_walk)
-    paper = make_estimator(name, mismatch_states=())  # the paper's model: no brake gain, no spread
-    assert getattr(paper, "arrival_filter", paper).torque_spread is False
+    paper = make_estimator(name, mismatch_states=())  # the paper's model: no brake gain, no torque error
+    assert getattr(paper, "arrival_filter", paper).torque_error is None
 
 
 def test_every_entry_builds_with_its_declared_outputs_and_values():
