@@ -331,14 +331,13 @@ class QuarterCarEKF(Estimator):
         self._braked = self._braked or self._brake_torque > 0.0
         braked = self.Q_braking is not None and self._braked
         Q = self.Q_braking if braked else self.filter.Q
-        if self.torque_error is not None:
+        x_next, F = self.model.f_and_jacobian(x_post, u)
+        if self.torque_error is not None:  # the torque error's jump, through the step's Jacobian column
             self.torque_jump = float(torque_jump_std(np.array(self._commands), previous, self.model.torque_fade))
-            x_next, F = self.model.f_and_jacobian(x_post, u)
             noise = torque_step_noise(F[:, self.torque_error], self.torque_jump)
-            x_next, P_next = ekf_predict(x_next, F, P_post, Q + noise)
             self.torque_variance = np.diag(noise)[:2].copy()
-        else:
-            x_next, P_next = self.filter.predict(x_post, P_post, u, Q)
+            Q = Q + noise
+        x_next, P_next = ekf_predict(x_next, F, P_post, Q)
         if not (np.all(np.isfinite(x_next)) and np.all(np.isfinite(P_next))):
             self.P = self.P0.copy()
             return False

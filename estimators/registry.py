@@ -196,10 +196,10 @@ def _entries() -> tuple[EstimatorEntry, ...]:
                   "Q_braking_std": {"slip": A_X_SLIP_BRAKING_Q_STD}}
     a_x_model = {"mismatch_states": ("k_T",), "speed_from_a_x": True}
     return (
-        EstimatorEntry("ekf", "default", "augmented EKF, theta, brake gain, deceleration bias", _build_ekf, absorb,
-                       observation=True),
+        EstimatorEntry("ekf", "default", "augmented EKF, theta, brake gain, deceleration bias, brake torque error",
+                       _build_ekf, absorb, observation=True),
         EstimatorEntry("mhe", "default", "regularized MHE (EKF arrival, process noise, gate), theta, brake gain, "
-                       "deceleration bias", _build_mhe, absorb, cls=RegularizedMHE, observation=True),
+                       "deceleration bias, brake torque error", _build_mhe, absorb, cls=RegularizedMHE, observation=True),
         EstimatorEntry("ekf-rls", "default", "EKF/RLS, torque feedforward with an a_x loop, Magic Formula family map",
                        _build_ekf_rls, MappingProxyType({"correction_gain": ENV_CORRECTION_GAIN,
                                                          "braking_reference": True}), estimated=(),
